@@ -1,0 +1,173 @@
+"""Figures: PNG output, the statistics behind Fig. 6, and argument validation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib import colormaps
+from matplotlib.colors import to_rgb
+from matplotlib.image import imread
+
+from cpmp.errors import ConfigError, DataError
+from cpmp.experiment.plots import (
+    plot_progress_curves,
+    plot_progress_field,
+    plot_strategy_map,
+    plot_sweep,
+    progress_curves,
+)
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_pixels(path: Path) -> np.ndarray:
+    """Check ``path`` is a non-trivial PNG; return its RGB pixels (H, W, 3) in [0, 1]."""
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE
+    assert len(data) > 1000
+    return imread(path, format="png")[..., :3]
+
+
+def _fraction_of_colour(pixels: np.ndarray, rgb: tuple[float, float, float]) -> float:
+    # PNG stores 8-bit channels: 2/255 absorbs rounding of the colour.
+    return float(np.mean(np.all(np.abs(pixels - np.array(rgb)) < 2 / 255, axis=-1)))
+
+
+def _trajectories() -> list[np.ndarray]:
+    s = np.linspace(0.0, 1.0, 20)
+    return [np.column_stack([s, s**2 + offset]) for offset in (0.0, 0.5)]
+
+
+@pytest.mark.parametrize("level", [0.0, 1.0])
+def test_progress_field_shows_prediction(tmp_path: Path, level: float) -> None:
+    trajectories = _trajectories()
+    path = plot_progress_field(
+        lambda points: np.full(len(points), level),
+        trajectories,
+        [t[[0, 10, 19]] for t in trajectories],
+        tmp_path / "field.png",
+        resolution=50,
+        title="synthetic",
+    )
+    pixels = _png_pixels(path)
+    colour_of = colormaps["coolwarm"]
+    shown = _fraction_of_colour(pixels, colour_of(level)[:3])
+    other = _fraction_of_colour(pixels, colour_of(1.0 - level)[:3])
+    assert shown > 0.3  # the background fills most of the figure
+    assert shown > 5 * other  # the other end only appears in the colour bar
+
+
+def test_progress_field_rejects_bad_input(tmp_path: Path) -> None:
+    target = tmp_path / "field.png"
+    with pytest.raises(DataError, match=r"predict must map \(100, 2\)"):
+        plot_progress_field(
+            lambda p: np.zeros((len(p), 2)), _trajectories(), [], target, resolution=10
+        )
+    with pytest.raises(DataError, match=r"trajectories\[0\] must have shape \(n, 2\)"):
+        plot_progress_field(lambda p: p[:, 0], [np.zeros((5, 3))], [], target)
+    with pytest.raises(ConfigError, match="bounds"):
+        plot_progress_field(lambda p: p[:, 0], [], [], target, bounds=((1, 0), (0, 1)))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_progress_curves_identity_is_diagonal() -> None:
+    activations = [(np.linspace(0, 1, n), np.linspace(0, 1, n)) for n in (11, 101, 37)]
+    curves = progress_curves(activations, n_bins=21)
+    assert curves["n_activations"] == 3
+    np.testing.assert_allclose(curves["time"], np.linspace(0, 1, 21))
+    # Linear data resample exactly; 1e-12 allows float rounding in np.interp.
+    np.testing.assert_allclose(curves["predicted_mean"], curves["time"], atol=1e-12)
+    np.testing.assert_allclose(curves["predicted_std"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(curves["expected_mean"], curves["time"], atol=1e-12)
+
+
+def test_progress_curves_offset_and_spread() -> None:
+    expected = np.linspace(0, 1, 1001)
+    curves = progress_curves([(expected, expected + 0.1), (expected, expected - 0.3)], n_bins=10)
+    np.testing.assert_allclose(curves["predicted_mean"], curves["time"] - 0.1, atol=1e-12)
+    np.testing.assert_allclose(curves["predicted_std"], 0.2, atol=1e-12)
+
+    late = progress_curves([(expected, expected + 0.1)], n_bins=10)
+    np.testing.assert_allclose(late["progress_bins"], np.arange(10) / 10 + 0.05)
+    # Each bin's samples are spread evenly, so their mean sits within half a sample
+    # spacing (5e-4) of the bin centre.
+    np.testing.assert_allclose(late["binned_mean"], late["progress_bins"] + 0.1, atol=1e-3)
+    assert late["binned_count"].sum() == 1001
+
+
+def test_progress_curves_empty_bins_are_nan() -> None:
+    curves = progress_curves([(np.array([0.0, 0.05]), np.array([0.2, 0.3]))], n_bins=4)
+    assert curves["binned_mean"][0] == pytest.approx(0.25)
+    assert np.all(np.isnan(curves["binned_mean"][1:]))
+
+
+def test_progress_curves_rejects_bad_shapes() -> None:
+    with pytest.raises(DataError, match=r"activations\[1\].*\(5,\) and \(4,\)"):
+        progress_curves([(np.zeros(3), np.zeros(3)), (np.zeros(5), np.zeros(4))])
+    with pytest.raises(DataError, match="n >= 2"):
+        progress_curves([(np.zeros((3, 2)), np.zeros((3, 2)))])
+    with pytest.raises(DataError, match="at least one"):
+        progress_curves([])
+    with pytest.raises(ConfigError, match="n_bins"):
+        progress_curves([(np.zeros(3), np.zeros(3))], n_bins=1)
+
+
+def test_plot_progress_curves(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    curves = {}
+    for demos in (3, 6, 9):
+        activations = []
+        for _ in range(5):
+            expected = np.linspace(0, 1, 40)
+            activations.append((expected, expected + rng.normal(0, 0.1 / demos, 40)))
+        curves[f"{demos} demos"] = progress_curves(activations)
+    _png_pixels(plot_progress_curves(curves, tmp_path / "curves.png", title="Fig. 6"))
+    with pytest.raises(DataError, match="lack"):
+        plot_progress_curves({"bad": {"time": np.zeros(3)}}, tmp_path / "bad.png")
+    assert not (tmp_path / "bad.png").exists()
+
+
+def test_strategy_map_colours_other_red(tmp_path: Path) -> None:
+    widths, depths = np.linspace(0.1, 0.5, 8), np.linspace(0.1, 0.4, 6)
+    correct = np.full((6, 8), "both", dtype=object)
+    correct[:, :3] = "right"
+    all_other = plot_strategy_map(
+        widths,
+        depths,
+        np.full((6, 8), "rotate"),
+        correct,
+        tmp_path / "other.png",
+        training_boxes=[(0.2, 0.2), (0.4, 0.3)],
+    )
+    all_right = plot_strategy_map(widths, depths, correct, correct, tmp_path / "right.png")
+    red = to_rgb("#e41a1c")
+    assert _fraction_of_colour(_png_pixels(all_other), red) > 0.1
+    # Only the legend's swatch for "other" is red when every choice is a known strategy.
+    assert _fraction_of_colour(_png_pixels(all_right), red) < 0.005
+
+
+def test_strategy_map_rejects_bad_shapes(tmp_path: Path) -> None:
+    widths, depths = np.linspace(0.1, 0.5, 8), np.linspace(0.1, 0.4, 6)
+    grid = np.full((6, 8), "both")
+    with pytest.raises(DataError, match=r"chosen must have shape \(D, W\) = \(6, 8\)"):
+        plot_strategy_map(widths, depths, grid.T, grid, tmp_path / "s.png")
+    with pytest.raises(DataError, match="strictly increasing"):
+        plot_strategy_map(widths[::-1], depths, grid, grid, tmp_path / "s.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_plot_sweep(tmp_path: Path) -> None:
+    table = [
+        {"n_demos": n, "model": model, "success": 0.5 + 0.05 * n, "success_std": 0.02}
+        for n in (3, 6, 9)
+        for model in ("klr", "mlp")
+    ]
+    _png_pixels(plot_sweep(table, "n_demos", "success", "model", tmp_path / "lines.png"))
+    _png_pixels(plot_sweep(table[:2], "model", "success", None, tmp_path / "bars.png"))
+    with pytest.raises(DataError, match="lacks"):
+        plot_sweep([{"n_demos": 3}], "n_demos", "success", None, tmp_path / "bad.png")
+    with pytest.raises(DataError, match="repeats"):
+        plot_sweep(table, "n_demos", "success", None, tmp_path / "bad.png")
+    assert not (tmp_path / "bad.png").exists()
