@@ -1,0 +1,143 @@
+"""Task configuration of the simulated pick-and-place evaluation (paper Sec. IV).
+
+:class:`TaskConfig` mirrors ``conf/task/default.yaml``. Every tunable number of the simulation,
+the MP controllers, the features and the scripted demonstrator lives here; nothing is baked into
+code. Units: metres, seconds, radians, kilograms.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from cpmp.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Box ranges, strategy regions, control rates, MP gains and demonstrator thresholds.
+
+    Strategy regions in the width x depth plane (see :func:`cpmp.sim.correct_strategy`):
+    ``width > both_min_width`` -> "both"; otherwise ``depth > left_min_depth`` -> "left";
+    otherwise "right". Width is the box extent along world y (across the robot), depth along x.
+    """
+
+    width_range: tuple[float, float] = (0.10, 0.30)
+    depth_range: tuple[float, float] = (0.10, 0.22)
+    box_height: float = 0.10
+    box_mass: float = 0.4
+    both_min_width: float = 0.20
+    left_min_depth: float = 0.16
+
+    control_dt: float = 0.01
+    max_time: float = 20.0
+    seed: int = 0
+
+    pos_gain: float = 3.0
+    rot_gain: float = 5.0
+    finger_gain: float = 8.0
+    max_speed: float = 0.5
+    max_joint_speed: float = 3.0
+    ik_damping: float = 0.05
+    posture_gain: float = 1.0
+    limit_margin: float = 0.15
+    limit_gain: float = 2.0
+
+    press_depth: float = 0.005
+    reach_descent_ratio: float = 0.5
+    edge_inset: float = 0.05
+    lift_height: float = 0.12
+
+    rot_sigma: float = 0.5
+    finger_sigma: float = 0.4
+
+    pos_tol: float = 0.01
+    rot_tol: float = 0.05
+    finger_tol: float = 0.02
+    preshape_distance: float = 0.15
+    rise_distance: float = 0.05
+    relax_distance: float = 0.10
+    home_tol: float = 0.03
+    deadlock_time: float = 5.0
+
+    finger_goals: dict[str, float] = field(
+        default_factory=lambda: {"relax": 0.3, "preshape": 0.6, "grasp": 1.3, "release": 0.0}
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("width_range", "depth_range"):
+            lo_hi = tuple(float(v) for v in getattr(self, name))
+            if len(lo_hi) != 2 or not (0.0 < lo_hi[0] <= lo_hi[1]):
+                raise ConfigError(f"{name} must be [min, max] with 0 < min <= max, got {lo_hi}")
+            object.__setattr__(self, name, lo_hi)
+        if self.width_range[1] > 0.34 or self.depth_range[1] > 0.28:
+            raise ConfigError(
+                f"boxes up to {self.width_range[1]} x {self.depth_range[1]} m do not fit the "
+                "container (inner 0.36 x 0.30 m); use width <= 0.34 and depth <= 0.28"
+            )
+        if self.width_range[0] < 0.10 or self.depth_range[0] < 0.10:
+            raise ConfigError(
+                "boxes must be at least 0.10 x 0.10 m (a palm is 0.09 x 0.10 m), got minima "
+                f"{self.width_range[0]}, {self.depth_range[0]}"
+            )
+        positive = (
+            "box_height box_mass control_dt max_time pos_gain rot_gain finger_gain max_speed "
+            "max_joint_speed ik_damping rot_sigma finger_sigma pos_tol rot_tol finger_tol "
+            "lift_height deadlock_time reach_descent_ratio"
+        ).split()
+        for name in positive:
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+                raise ConfigError(f"{name} must be a positive number, got {value!r}")
+        if not 0.04 <= self.box_height <= 0.16:
+            raise ConfigError(f"box_height must be in [0.04, 0.16] m, got {self.box_height}")
+        if (
+            self.control_dt < 0.002
+            or abs(self.control_dt / 0.002 - round(self.control_dt / 0.002)) > 1e-9
+        ):
+            raise ConfigError(
+                f"control_dt must be a multiple of the physics step 0.002 s, got {self.control_dt}"
+            )
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"seed must be a non-negative int, got {self.seed!r}")
+        missing = {"relax", "preshape", "grasp", "release"} - set(self.finger_goals)
+        if missing:
+            raise ConfigError(f"finger_goals lacks {sorted(missing)}")
+        object.__setattr__(
+            self, "finger_goals", {k: float(v) for k, v in dict(self.finger_goals).items()}
+        )
+
+    @classmethod
+    def from_dict(cls, cfg: Mapping[str, Any] | None) -> TaskConfig:
+        """Build from a plain or OmegaConf mapping; unknown keys raise :class:`ConfigError`."""
+        if cfg is None:
+            return cls()
+        try:
+            from omegaconf import DictConfig, OmegaConf
+
+            if isinstance(cfg, DictConfig):
+                cfg = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
+        except ImportError:  # pragma: no cover - hydra is a dependency
+            pass
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(cfg) - known)
+        if unknown:
+            raise ConfigError(f"unknown task option(s) {unknown}; known: {sorted(known)}")
+        values = dict(cfg)
+        for name in ("width_range", "depth_range"):
+            if name in values:
+                values[name] = tuple(values[name])
+        try:
+            return cls(**values)
+        except TypeError as exc:
+            raise ConfigError(f"invalid task config: {exc}") from exc
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-dict form (lists for ranges), the inverse of :meth:`from_dict`."""
+        out = dataclasses.asdict(self)
+        out["width_range"] = list(self.width_range)
+        out["depth_range"] = list(self.depth_range)
+        return out

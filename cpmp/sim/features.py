@@ -1,0 +1,90 @@
+"""The 24-D feature vector of the task (paper Sec. IV).
+
+Layout (names from :func:`feature_names`):
+
+* ``box_width, box_depth, box_height`` - box size, scaled to [0, 1] over the configured width
+  and depth ranges and over [0, 0.2] m for the height;
+* ``box_x, box_y, box_z`` - measured box centre, scaled over the workspace bounds
+  :data:`WORKSPACE_LO`..:data:`WORKSPACE_HI`;
+* ``left_ee_{x,y,z}, right_ee_{x,y,z}`` - measured end-effector site positions, same scaling;
+* ``dist.<variable>.<mp>`` for every orientation and finger MP: the goal-distance feature
+  ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``; ``D`` is the rotation angle
+  [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle difference vector
+  (``cfg.finger_sigma``). ``f`` is 0 at the goal and tends to 1 far from it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cpmp.sim.config import TaskConfig
+from cpmp.sim.control import rotation_angle
+from cpmp.sim.mps import MP
+from cpmp.sim.scene import HANDS, Box
+
+WORKSPACE_LO = np.array([0.0, -0.5, 0.6])
+"""Lower workspace bound [m] for position scaling (x, y, z)."""
+WORKSPACE_HI = np.array([0.7, 0.5, 1.2])
+"""Upper workspace bound [m] for position scaling (x, y, z)."""
+HEIGHT_SCALE = 0.2
+"""Box heights are divided by this [m]."""
+
+
+def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
+    """Names of the features, in vector order."""
+    names = ["box_width", "box_depth", "box_height", "box_x", "box_y", "box_z"]
+    for hand in HANDS:
+        names += [f"{hand}_ee_{axis}" for axis in "xyz"]
+    for variable, mps in library.items():
+        if variable.endswith(("_rot", "_fingers")):
+            names += [f"dist.{variable}.{name}" for name in mps]
+    return names
+
+
+def scale_position(pos: np.ndarray) -> np.ndarray:
+    """Workspace position(s) [m], (..., 3) -> roughly [0, 1]."""
+    return (pos - WORKSPACE_LO) / (WORKSPACE_HI - WORKSPACE_LO)
+
+
+def box_size_features(box: Box, cfg: TaskConfig) -> np.ndarray:
+    """Scaled (width, depth, height), shape (3,)."""
+    (w_lo, w_hi), (d_lo, d_hi) = cfg.width_range, cfg.depth_range
+    width = (box.width - w_lo) / max(w_hi - w_lo, 1e-6)
+    depth = (box.depth - d_lo) / max(d_hi - d_lo, 1e-6)
+    return np.array([width, depth, box.height / HEIGHT_SCALE])
+
+
+def goal_distance(delta_sq: float, sigma: float) -> float:
+    """Eq. (6) with ``S = sigma^2 I``: ``1 - exp(-delta_sq / (2 sigma^2))``."""
+    return float(1.0 - np.exp(-0.5 * delta_sq / sigma**2))
+
+
+def compute_features(
+    size_features: np.ndarray,
+    box_pos: np.ndarray,
+    ee_pos: np.ndarray,
+    ee_rot: np.ndarray,
+    fingers: dict[str, np.ndarray],
+    library: dict[str, dict[str, MP]],
+    cfg: TaskConfig,
+) -> np.ndarray:
+    """Feature vector (d,) from the measured state.
+
+    size_features (3,); box_pos (3,) [m]; ee_pos (2, 3) [m] and ee_rot (2, 3, 3), rows
+    (left, right); fingers: per hand, joint angles (k,) [rad].
+    """
+    parts = [size_features, scale_position(box_pos), scale_position(ee_pos).ravel()]
+    dists = []
+    for variable, mps in library.items():
+        hand = variable.split("_")[0]
+        if variable.endswith("_rot"):
+            rot = ee_rot[HANDS.index(hand)]
+            for mp in mps.values():
+                angle = float(rotation_angle(mp.target, rot))
+                dists.append(goal_distance(angle**2, cfg.rot_sigma))
+        elif variable.endswith("_fingers"):
+            for mp in mps.values():
+                diff = fingers[hand] - mp.target
+                dists.append(goal_distance(float(diff @ diff), cfg.finger_sigma))
+    parts.append(np.asarray(dists))
+    return np.concatenate(parts)

@@ -1,0 +1,283 @@
+"""The simulated world of one episode: MuJoCo model + MP controller + features."""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Mapping
+
+import mujoco
+import numpy as np
+
+from cpmp.errors import UnknownMPError
+from cpmp.sim.config import TaskConfig
+from cpmp.sim.control import MPController
+from cpmp.sim.features import box_size_features, compute_features, feature_names
+from cpmp.sim.kinematics import ArmKinematics
+from cpmp.sim.mps import MP, VARIABLES, build_library, container_center
+from cpmp.sim.scene import (
+    ARM_JOINTS,
+    FINGER_JOINTS,
+    HANDS,
+    Box,
+    build_spec,
+    home_posture,
+    scene_xml_text,
+)
+
+CONTAINER_INNER_HALF = np.array([0.15, 0.18])
+"""Half extents [m] (x, y) of the container's inner floor."""
+
+_GEOM_TYPES = {
+    int(mujoco.mjtGeom.mjGEOM_BOX): "box",
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule",
+    int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
+    int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
+}
+
+
+@functools.lru_cache(maxsize=1)
+def shared_kinematics() -> ArmKinematics:
+    """The arm kinematics (independent of the box), built once per process."""
+    xml = scene_xml_text()
+    model = mujoco.MjModel.from_xml_string(xml)
+    mounts = {h: model.body(f"{h}_mount").pos.copy() for h in HANDS}
+    return ArmKinematics(xml, mounts)
+
+
+class Simulation:
+    """One episode's world: the robot, the scene with ``box``, the MPs and the features.
+
+    Attributes
+    ----------
+    variables : list[str]
+        The six control variables.
+    mp_names : dict[str, list[str]]
+        MP names per variable.
+    feature_names : list[str]
+        Names of :meth:`features`, length d = 24.
+    t : float
+        Simulated time [s] since :meth:`reset`.
+    timing : dict[str, float]
+        Wall time [s] spent in ``physics`` and ``kinematics`` (IK + features) since reset.
+    """
+
+    def __init__(self, cfg: TaskConfig, box: Box) -> None:
+        self.cfg = cfg
+        self.box = box
+        self.model = build_spec(box, cfg).compile()
+        self.data = mujoco.MjData(self.model)
+        self.kin = shared_kinematics()
+        m = self.model
+        self.n_substeps = round(cfg.control_dt / m.opt.timestep)
+        self._arm_qpos = np.array(
+            [[m.joint(f"{h}_{j}").qposadr[0] for j in ARM_JOINTS] for h in HANDS]
+        )
+        self._arm_act = np.array([[m.actuator(f"{h}_{j}").id for j in ARM_JOINTS] for h in HANDS])
+        self._finger_qpos = {
+            h: np.array([m.joint(f"{h}_{j}").qposadr[0] for j in FINGER_JOINTS[h]]) for h in HANDS
+        }
+        self._finger_act = {
+            h: np.array([m.actuator(f"{h}_{j}").id for j in FINGER_JOINTS[h]]) for h in HANDS
+        }
+        self._adhesion = {h: m.actuator(f"{h}_adhesion").id for h in HANDS}
+        self._site = np.array([m.site(f"{h}_ee").id for h in HANDS])
+        self._box_body = m.body("box").id
+        self._box_geom = m.geom("box").id
+        self._palm_geom = {h: m.geom(f"{h}_palm").id for h in HANDS}
+        self._robot_dofs = np.array(
+            [m.joint(i).dofadr[0] for i in range(m.njnt) if m.joint(i).name != "box_free"]
+        )
+        self._box_qpos = m.joint("box_free").qposadr[0]
+        self.arm_limits = np.array([[m.joint(f"{h}_{j}").range for j in ARM_JOINTS] for h in HANDS])
+        self.q_home = np.stack([home_posture(h) for h in HANDS])
+        home_pos, home_rot = {}, {}
+        for i, hand in enumerate(HANDS):
+            pos, rot = self.kin.fk(hand, self.q_home[i])
+            home_pos[hand], home_rot[hand] = pos[0], rot[0]
+        self.home_pos = np.stack([home_pos[h] for h in HANDS])
+        self.library: dict[str, dict[str, MP]] = build_library(box, cfg, home_pos, home_rot)
+        self.variables: list[str] = list(VARIABLES)
+        self.mp_names: dict[str, list[str]] = {v: list(mps) for v, mps in self.library.items()}
+        self.feature_names: list[str] = feature_names(self.library)
+        self._size_features = box_size_features(box, cfg)
+        self.controller = MPController(cfg, self.kin, self.arm_limits, self.q_home)
+        self.active: dict[str, str] = {}
+        self.timing = {"physics": 0.0, "kinematics": 0.0}
+        self.reset()
+
+    def reset(self) -> None:
+        """Home posture, relaxed fingers, box at rest on the plate, ``t = 0``."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        relax = self.cfg.finger_goals["relax"]
+        fingers = {h: np.full(len(FINGER_JOINTS[h]), relax) for h in HANDS}
+        d.qpos[self._arm_qpos] = self.q_home
+        d.ctrl[self._arm_act] = self.q_home
+        for hand in HANDS:
+            d.qpos[self._finger_qpos[hand]] = fingers[hand]
+            d.ctrl[self._finger_act[hand]] = fingers[hand]
+        mujoco.mj_forward(m, d)
+        self.controller.reset(self.q_home, fingers)
+        self.active = {}
+        self.t = 0.0
+        self.timing = {"physics": 0.0, "kinematics": 0.0}
+
+    def set_active(self, active: Mapping[str, str]) -> None:
+        """Activate one MP per control variable (short names from :attr:`mp_names`)."""
+        for variable in self.variables:
+            if variable not in active:
+                raise UnknownMPError(f"no MP given for control variable {variable!r}")
+            if active[variable] not in self.library[variable]:
+                raise UnknownMPError(
+                    f"unknown MP {active[variable]!r} for {variable!r}; "
+                    f"known: {self.mp_names[variable]}"
+                )
+        unknown = sorted(set(active) - set(self.variables))
+        if unknown:
+            raise UnknownMPError(f"unknown control variable(s) {unknown}; known: {self.variables}")
+        self.active = {v: str(active[v]) for v in self.variables}
+
+    def step(self) -> bool:
+        """Run the active MPs for one control tick. Returns False if the physics diverged."""
+        if not self.active:
+            raise UnknownMPError("call set_active() before step()")
+        d = self.data
+        start = time.perf_counter()
+        mps = {v: self.library[v][name] for v, name in self.active.items()}
+        self.controller.update(mps, self.box_pos())
+        d.ctrl[self._arm_act] = self.controller.q_ref
+        for hand in HANDS:
+            d.ctrl[self._finger_act[hand]] = self.controller.fingers_ref[hand]
+            d.ctrl[self._adhesion[hand]] = 1.0 if self.active[f"{hand}_fingers"] == "grasp" else 0.0
+        middle = time.perf_counter()
+        for _ in range(self.n_substeps):
+            mujoco.mj_step(self.model, d)
+        mujoco.mj_kinematics(self.model, d)
+        self.timing["kinematics"] += middle - start
+        self.timing["physics"] += time.perf_counter() - middle
+        self.t += self.cfg.control_dt
+        return not self.diverged()
+
+    def diverged(self) -> bool:
+        """True if the state holds NaN/inf, MuJoCo flagged bad accelerations, or speeds blew up."""
+        d = self.data
+        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+            return True
+        if d.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number > 0:
+            return True
+        return bool(np.max(np.abs(d.qvel)) > 1e3)
+
+    # measured state -------------------------------------------------------------------------
+    def box_pos(self) -> np.ndarray:
+        """Measured box centre [m], shape (3,)."""
+        return self.data.xpos[self._box_body].copy()
+
+    def ee_pos(self) -> np.ndarray:
+        """Measured end-effector site positions [m], (2, 3), rows (left, right)."""
+        return self.data.site_xpos[self._site].copy()
+
+    def ee_rot(self) -> np.ndarray:
+        """Measured end-effector site rotation matrices, (2, 3, 3)."""
+        return self.data.site_xmat[self._site].reshape(2, 3, 3).copy()
+
+    def finger_angles(self) -> dict[str, np.ndarray]:
+        """Measured finger joint angles [rad] per hand."""
+        return {h: self.data.qpos[self._finger_qpos[h]].copy() for h in HANDS}
+
+    def palm_touches_box(self, hand: str) -> bool:
+        """True if ``hand``'s palm is in contact with the box."""
+        d = self.data
+        pair = {self._palm_geom[hand], self._box_geom}
+        return any({int(c.geom1), int(c.geom2)} == pair for c in d.contact[: d.ncon])
+
+    def robot_speed(self) -> float:
+        """Largest arm/finger joint speed [rad/s]."""
+        return float(np.max(np.abs(self.data.qvel[self._robot_dofs])))
+
+    def features(self) -> np.ndarray:
+        """Feature vector (24,) of the current state; see :mod:`cpmp.sim.features`."""
+        start = time.perf_counter()
+        out = compute_features(
+            self._size_features,
+            self.box_pos(),
+            self.ee_pos(),
+            self.ee_rot(),
+            self.finger_angles(),
+            self.library,
+            self.cfg,
+        )
+        self.timing["kinematics"] += time.perf_counter() - start
+        return out
+
+    def goal(self, variable: str, name: str | None = None) -> np.ndarray:
+        """Current world goal of an MP (default: the active one) - position (3,), rotation
+        (3, 3) or finger angles (k,). Held/relative goals use the controller's latched offset
+        (or the current offset if the MP has not run yet)."""
+        mp = self.library[variable][name or self.active[variable]]
+        hand = HANDS.index(variable.split("_")[0])
+        if mp.kind != "position" or mp.frame == "world":
+            return mp.target.copy()
+        if mp.frame == "box":
+            return self.box_pos() + mp.target
+        latched = self.controller._latched.get(variable)
+        if mp.frame == "held":
+            offset = latched if latched is not None else self.ee_pos()[hand] - self.box_pos()
+            return mp.target + offset
+        ref = self.controller.ref_pos
+        offset = latched if latched is not None else ref[0] - ref[1]
+        return self.ee_pos()[1] + offset
+
+    def box_in_container(self) -> bool:
+        """Box rests inside the container: footprint within the inner floor, bottom on it."""
+        pos = self.box_pos()
+        rot = self.data.xmat[self._box_body].reshape(3, 3)
+        half = np.abs(rot[:2, :2]) @ np.array([self.box.depth, self.box.width]) / 2
+        inside = np.all(
+            np.abs(pos[:2] - container_center()[:2]) + half <= CONTAINER_INNER_HALF + 1e-3
+        )
+        resting = abs(pos[2] - self.box.height / 2 - container_center()[2]) < 0.02
+        return bool(inside and resting)
+
+    def hands_home(self) -> bool:
+        """Both end-effectors within ``cfg.home_tol`` of their home positions."""
+        dist = np.linalg.norm(self.ee_pos() - self.home_pos, axis=1)
+        return bool(np.all(dist < self.cfg.home_tol))
+
+    # visualisation -------------------------------------------------------------------------
+    def body_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """World pose of every named body: name -> (pos (3,) [m], quat wxyz (4,))."""
+        m, d = self.model, self.data
+        return {
+            m.body(i).name: (d.xpos[i].copy(), d.xquat[i].copy())
+            for i in range(1, m.nbody)
+            if m.body(i).name
+        }
+
+    def geoms(self) -> list[dict]:
+        """Static description of the visual geoms (floor plane excluded).
+
+        Each dict: ``body`` (name), ``name``, ``type`` ('box' | 'capsule' | 'sphere' |
+        'cylinder'), ``size`` (MuJoCo convention: box half-extents (3,); capsule/cylinder
+        (radius, half-length along local z); sphere (radius,)), ``pos`` (3,) and ``quat`` wxyz
+        (4,) in the body frame, ``rgba`` (4,).
+        """
+        m = self.model
+        out = []
+        for i in range(m.ngeom):
+            kind = _GEOM_TYPES.get(int(m.geom_type[i]))
+            if kind is None:
+                continue
+            n_size = {"box": 3, "capsule": 2, "cylinder": 2, "sphere": 1}[kind]
+            out.append(
+                {
+                    "body": m.body(int(m.geom_bodyid[i])).name,
+                    "name": m.geom(i).name,
+                    "type": kind,
+                    "size": m.geom_size[i][:n_size].copy(),
+                    "pos": m.geom_pos[i].copy(),
+                    "quat": m.geom_quat[i].copy(),
+                    "rgba": m.geom_rgba[i].copy(),
+                }
+            )
+        return out
