@@ -33,6 +33,7 @@ class TaskConfig:
     left_min_depth: float = 0.16
 
     control_dt: float = 0.01
+    physics_dt: float = 0.002
     max_time: float = 20.0
     seed: int = 0
 
@@ -84,7 +85,7 @@ class TaskConfig:
                 f"{self.width_range[0]}, {self.depth_range[0]}"
             )
         positive = (
-            "box_height box_mass control_dt max_time pos_gain rot_gain finger_gain max_speed "
+            "box_height box_mass control_dt physics_dt max_time pos_gain rot_gain finger_gain max_speed "
             "max_joint_speed ik_damping rot_sigma finger_sigma pos_tol rot_tol finger_tol "
             "lift_height deadlock_time reach_descent_ratio"
         ).split()
@@ -94,12 +95,11 @@ class TaskConfig:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
         if not 0.04 <= self.box_height <= 0.16:
             raise ConfigError(f"box_height must be in [0.04, 0.16] m, got {self.box_height}")
-        if (
-            self.control_dt < 0.002
-            or abs(self.control_dt / 0.002 - round(self.control_dt / 0.002)) > 1e-9
-        ):
+        ratio = self.control_dt / self.physics_dt
+        if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
             raise ConfigError(
-                f"control_dt must be a multiple of the physics step 0.002 s, got {self.control_dt}"
+                f"control_dt ({self.control_dt} s) must be a whole multiple of physics_dt "
+                f"({self.physics_dt} s)"
             )
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed must be a non-negative int, got {self.seed!r}")

@@ -90,6 +90,25 @@ def _normalise(active: Mapping[str, str], variables: list[str]) -> dict[str, str
     return out
 
 
+class ReplayPolicy:
+    """Replays a demonstration's labels by time (open-loop); a reference policy for tests and
+    benchmarks. ``reset``/``step`` return the labels of the sample at or before ``t``."""
+
+    def __init__(self, demo: Demonstration) -> None:
+        self.time = np.asarray(demo.time)
+        self.labels = {v: np.asarray(lab) for v, lab in demo.labels.items()}
+
+    def _at(self, t: float) -> dict[str, str]:
+        i = int(np.clip(np.searchsorted(self.time, t + 1e-9) - 1, 0, len(self.time) - 1))
+        return {v: str(lab[i]) for v, lab in self.labels.items()}
+
+    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        return self._at(t)
+
+    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        return self._at(t)
+
+
 def record_demonstration(
     box: Box, cfg: TaskConfig | Mapping[str, Any] | None = None, name: str | None = None
 ) -> Demonstration:

@@ -66,6 +66,7 @@ class Simulation:
         self.cfg = cfg
         self.box = box
         self.model = build_spec(box, cfg).compile()
+        self.model.opt.timestep = cfg.physics_dt
         self.data = mujoco.MjData(self.model)
         self.kin = shared_kinematics()
         m = self.model
@@ -106,19 +107,24 @@ class Simulation:
         self.timing = {"physics": 0.0, "kinematics": 0.0}
         self.reset()
 
-    def reset(self) -> None:
-        """Home posture, relaxed fingers, box at rest on the plate, ``t = 0``."""
+    def reset(
+        self, arm_posture: np.ndarray | None = None, fingers: dict[str, np.ndarray] | None = None
+    ) -> None:
+        """Start posture (default: home) and finger angles (default: ``relax`` goal), box at rest
+        on the plate, ``t = 0``. arm_posture: (2, 7) [rad], rows (left, right)."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         relax = self.cfg.finger_goals["relax"]
-        fingers = {h: np.full(len(FINGER_JOINTS[h]), relax) for h in HANDS}
-        d.qpos[self._arm_qpos] = self.q_home
-        d.ctrl[self._arm_act] = self.q_home
+        if fingers is None:
+            fingers = {h: np.full(len(FINGER_JOINTS[h]), relax) for h in HANDS}
+        q = self.q_home if arm_posture is None else np.asarray(arm_posture, dtype=np.float64)
+        d.qpos[self._arm_qpos] = q
+        d.ctrl[self._arm_act] = q
         for hand in HANDS:
             d.qpos[self._finger_qpos[hand]] = fingers[hand]
             d.ctrl[self._finger_act[hand]] = fingers[hand]
         mujoco.mj_forward(m, d)
-        self.controller.reset(self.q_home, fingers)
+        self.controller.reset(q, fingers)
         self.active = {}
         self.t = 0.0
         self.timing = {"physics": 0.0, "kinematics": 0.0}
