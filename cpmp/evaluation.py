@@ -1,0 +1,168 @@
+"""Offline evaluation of a fitted sequencer on recorded demonstrations (no simulator needed).
+
+* Progress prediction (paper Fig. 6): predicted φ against expected progress (eq. 1) for every
+  MP activation of held-out demonstrations.
+* Replay: the sequencer runs open-loop over each recorded feature stream; per variable we check
+  that it reproduces the demonstrated MP sequence and measure the switch-state distance.
+
+Switch-state distance: for a variable whose replayed sequence equals the demonstrated one, the
+k-th triggered transition is paired with the k-th demonstrated switch; the distance is the
+Euclidean norm of the difference of the two feature vectors (sequencer's state when it fired
+minus the demonstration's state at its first sample under the new MP).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cpmp.errors import DataError
+from cpmp.progress import expected_progress
+
+if TYPE_CHECKING:
+    from cpmp.data import Demonstration
+    from cpmp.sequencer import ConcurrentSequencer, TransitionEvent
+
+
+@dataclass
+class ActivationProgress:
+    """Expected and predicted progress along one MP activation.
+
+    Attributes:
+        variable, mp: the node.
+        demo: demonstration name.
+        expected: (n,) expected progress (eq. 1, in the predictor's feature space).
+        predicted: (n,) predicted φ.
+    """
+
+    variable: str
+    mp: str
+    demo: str
+    expected: np.ndarray
+    predicted: np.ndarray
+
+
+def activation_progress(
+    seq: ConcurrentSequencer, demos: Sequence[Demonstration]
+) -> list[ActivationProgress]:
+    """Predicted vs expected progress for every activation of every known node in ``demos``."""
+    out = []
+    index = {key: i for i, key in enumerate(seq.node_keys)}
+    for m, demo in enumerate(demos):
+        _check_features(seq, demo)
+        phi = seq.progress(demo.features)
+        scaled = seq.predictor.scaler.transform(demo.features)
+        for v in sorted(seq.graphs):
+            for seg in demo.segments(v):
+                key = (v, seg.mp)
+                if key not in index:
+                    continue
+                sl = slice(seg.start, seg.stop)
+                out.append(
+                    ActivationProgress(
+                        variable=v,
+                        mp=seg.mp,
+                        demo=demo.name or f"demo_{m}",
+                        expected=expected_progress(scaled[sl], demo.time[sl]),
+                        predicted=phi[sl, index[key]],
+                    )
+                )
+    return out
+
+
+def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:
+    if list(demo.feature_names) != seq.feature_names:
+        raise DataError(
+            f"{demo.name or 'demonstration'} has features {list(demo.feature_names)[:4]}... but "
+            f"the sequencer was trained on {seq.feature_names[:4]}...; use matching recordings"
+        )
+
+
+def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) -> dict[str, Any]:
+    """Mean absolute progress error: overall, in the first and last ``edge`` fraction of each
+    activation (by normalised time), and per node (``"variable/mp"``)."""
+    if not records:
+        raise DataError("no activations to evaluate: the demonstrations share no MP with the model")
+    errs, first, last = [], [], []
+    per_node: dict[str, list[np.ndarray]] = {}
+    for r in records:
+        e = np.abs(r.predicted - r.expected)
+        u = np.linspace(0.0, 1.0, len(e)) if len(e) > 1 else np.zeros(1)
+        errs.append(e)
+        first.append(e[u <= edge])
+        last.append(e[u >= 1.0 - edge])
+        per_node.setdefault(f"{r.variable}/{r.mp}", []).append(e)
+    cat = np.concatenate
+    return {
+        "mae": float(cat(errs).mean()),
+        "mae_first": float(cat(first).mean()),
+        "mae_last": float(cat(last).mean()),
+        "n_activations": len(records),
+        "per_node": {k: float(cat(v).mean()) for k, v in sorted(per_node.items())},
+    }
+
+
+def demonstrated_switches(demo: Demonstration, variable: str) -> list[tuple[str, str, np.ndarray]]:
+    """``(source, target, state)`` of each switch of ``variable`` in ``demo``."""
+    segs = demo.segments(variable)
+    return [(a.mp, b.mp, demo.features[b.start]) for a, b in zip(segs[:-1], segs[1:], strict=True)]
+
+
+def switch_distances(
+    events: Sequence[TransitionEvent], demo: Demonstration, variable: str
+) -> list[float] | None:
+    """Distances between triggered and demonstrated switch states of ``variable``; ``None`` if
+    the triggered switches do not match the demonstrated ones one to one."""
+    fired = [e for e in events if e.variable == variable]
+    shown = demonstrated_switches(demo, variable)
+    if [(e.source, e.target) for e in fired] != [(s, t) for s, t, _ in shown]:
+        return None
+    return [float(np.linalg.norm(e.state - x)) for e, (_, _, x) in zip(fired, shown, strict=True)]
+
+
+def replay_demonstrations(
+    seq: ConcurrentSequencer, demos: Sequence[Demonstration]
+) -> dict[str, Any]:
+    """Replay each demo's feature stream through ``seq``; sequence match and switch distances.
+
+    Returns ``{"per_demo": [...], "sequence_match": {variable: fraction}, "all_match": fraction,
+    "distance_mean": float | None, "distance_std": float | None}``.
+    """
+    per_demo = []
+    distances: list[float] = []
+    match = {v: 0 for v in sorted(seq.graphs)}
+    all_match = 0
+    for m, demo in enumerate(demos):
+        _check_features(seq, demo)
+        seqs, events = seq.replay(demo.time, demo.features)
+        row: dict[str, Any] = {"demo": demo.name or f"demo_{m}", "variables": {}}
+        ok_all = True
+        for v in sorted(seq.graphs):
+            expected = [s.mp for s in demo.segments(v)]
+            ok = seqs[v] == expected
+            d = switch_distances(events, demo, v) if ok else None
+            row["variables"][v] = {
+                "expected": expected,
+                "replayed": seqs[v],
+                "match": ok,
+                "distances": d,
+            }
+            match[v] += ok
+            ok_all &= ok
+            if d:
+                distances.extend(d)
+        all_match += ok_all
+        row["match"] = ok_all
+        per_demo.append(row)
+    n = max(len(demos), 1)
+    return {
+        "per_demo": per_demo,
+        "sequence_match": {v: c / n for v, c in match.items()},
+        "all_match": all_match / n,
+        "distance_mean": float(np.mean(distances)) if distances else None,
+        "distance_std": float(np.std(distances)) if distances else None,
+        "n_switches": len(distances),
+    }

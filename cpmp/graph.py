@@ -1,0 +1,184 @@
+"""Sequence graphs (paper Algorithm 1): one graph per control variable.
+
+A graph has a node per movement primitive (MP) observed for its variable, a directed edge per
+observed switch ``a -> b`` and a set of initial nodes (MPs that start some demonstration).
+Every node keeps the feature segment of each of its activations; an MP may be activated several
+times, so graphs can have cycles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cpmp.errors import DataError, UnknownMPError
+
+if TYPE_CHECKING:
+    from cpmp.data import Demonstration
+
+
+@dataclass(frozen=True)
+class Activation:
+    """One activation of an MP: samples ``start:stop`` of demonstration ``demo``.
+
+    Attributes:
+        demo: index of the demonstration in the list the graph was built from.
+        start: first sample index (inclusive).
+        stop: last sample index (exclusive).
+        time: (n,) seconds.
+        features: (n, d) feature trajectory while the MP was active.
+    """
+
+    demo: int
+    start: int
+    stop: int
+    time: np.ndarray
+    features: np.ndarray
+
+    @property
+    def n_samples(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass
+class SequenceGraph:
+    """The sequence graph of one control variable.
+
+    Attributes:
+        variable: control-variable name.
+        nodes: MP names (one node each).
+        initial_nodes: MPs that start at least one demonstration.
+        edges: observed switches ``(source, target)``.
+        activations: MP name -> list of its activations (empty for a graph loaded without data).
+    """
+
+    variable: str
+    nodes: set[str] = field(default_factory=set)
+    initial_nodes: set[str] = field(default_factory=set)
+    edges: set[tuple[str, str]] = field(default_factory=set)
+    activations: dict[str, list[Activation]] = field(default_factory=dict)
+
+    def add_node(self, mp: str) -> None:
+        if mp not in self.nodes:
+            self.nodes.add(mp)
+            self.activations.setdefault(mp, [])
+
+    def successors(self, mp: str) -> list[str]:
+        """Sorted successors of ``mp``; raises :class:`UnknownMPError` for an unknown MP."""
+        self._check(mp)
+        return sorted(t for s, t in self.edges if s == mp)
+
+    def predecessors(self, mp: str) -> list[str]:
+        self._check(mp)
+        return sorted(s for s, t in self.edges if t == mp)
+
+    def ordered_nodes(self) -> list[str]:
+        """Nodes in a stable (sorted) order; the order used for batched predictors."""
+        return sorted(self.nodes)
+
+    def _check(self, mp: str) -> None:
+        if mp not in self.nodes:
+            raise UnknownMPError(
+                f"MP {mp!r} is not a node of the graph of {self.variable!r}; "
+                f"known MPs: {', '.join(self.ordered_nodes())}"
+            )
+
+    def to_text(self) -> str:
+        """A readable multi-line description: nodes (``*`` = initial), activations, edges."""
+        lines = [f"graph {self.variable}:"]
+        for mp in self.ordered_nodes():
+            mark = "*" if mp in self.initial_nodes else " "
+            n_act = len(self.activations.get(mp, []))
+            succ = ", ".join(self.successors(mp)) or "(terminal)"
+            lines.append(f"  {mark} {mp} [{n_act} activations] -> {succ}")
+        return "\n".join(lines)
+
+    def to_dot(self) -> str:
+        """Graphviz DOT source; initial nodes are drawn with thick borders as in the paper."""
+        name = _dot_id(self.variable)
+        lines = [f"digraph {name} {{", "  rankdir=LR;"]
+        for mp in self.ordered_nodes():
+            width = 3 if mp in self.initial_nodes else 1
+            n_act = len(self.activations.get(mp, []))
+            lines.append(f'  {_dot_id(mp)} [label="{mp}\\n({n_act})", penwidth={width}];')
+        for s, t in sorted(self.edges):
+            lines.append(f"  {_dot_id(s)} -> {_dot_id(t)};")
+        lines.append("}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """Structure only (no data), for checkpoints."""
+        return {
+            "variable": self.variable,
+            "nodes": self.ordered_nodes(),
+            "initial_nodes": sorted(self.initial_nodes),
+            "edges": [list(e) for e in sorted(self.edges)],
+            "n_activations": {mp: len(self.activations.get(mp, [])) for mp in self.ordered_nodes()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SequenceGraph:
+        g = cls(variable=str(d["variable"]))
+        for mp in d["nodes"]:
+            g.add_node(str(mp))
+        g.initial_nodes = {str(mp) for mp in d["initial_nodes"]}
+        g.edges = {(str(s), str(t)) for s, t in d["edges"]}
+        return g
+
+
+def _dot_id(name: str) -> str:
+    escaped = name.replace('"', '\\"')
+    return f'"{escaped}"'
+
+
+def build_graph(demos: Sequence[Demonstration], variable: str) -> SequenceGraph:
+    """Build the sequence graph of ``variable`` from labelled demonstrations (Algorithm 1).
+
+    Every switch ``y[i-1] != y[i]`` adds the edge ``(y[i-1], y[i])`` if it is new, and starts a
+    new activation of ``y[i]`` (so repeated MPs keep one activation per visit). Edges are added
+    for every observed switch, also when the target node already exists.
+    """
+    if len(demos) == 0:
+        raise DataError("cannot build a sequence graph from zero demonstrations; give at least one")
+    graph = SequenceGraph(variable=variable)
+    for m, demo in enumerate(demos):
+        if variable not in demo.labels:
+            raise UnknownMPError(
+                f"{demo.name or f'demonstration {m}'} has no labels for control variable "
+                f"{variable!r}; it labels: {', '.join(sorted(demo.labels))}"
+            )
+        labels = np.asarray(demo.labels[variable]).astype(str)
+        switches = np.flatnonzero(labels[1:] != labels[:-1]) + 1
+        starts = np.concatenate([[0], switches])
+        stops = np.concatenate([switches, [len(labels)]])
+        graph.initial_nodes.add(str(labels[0]))
+        previous: str | None = None
+        for start, stop in zip(starts.tolist(), stops.tolist(), strict=True):
+            mp = str(labels[start])
+            graph.add_node(mp)
+            if previous is not None:
+                graph.edges.add((previous, mp))
+            graph.activations[mp].append(
+                Activation(
+                    demo=m,
+                    start=start,
+                    stop=stop,
+                    time=demo.time[start:stop],
+                    features=demo.features[start:stop],
+                )
+            )
+            previous = mp
+    return graph
+
+
+def build_graphs(
+    demos: Sequence[Demonstration], variables: Sequence[str] | None = None
+) -> dict[str, SequenceGraph]:
+    """One sequence graph per control variable (all variables of the first demo by default)."""
+    if len(demos) == 0:
+        raise DataError("cannot build sequence graphs from zero demonstrations; give at least one")
+    names = sorted(demos[0].labels) if variables is None else list(variables)
+    return {v: build_graph(demos, v) for v in names}

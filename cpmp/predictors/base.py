@@ -1,0 +1,186 @@
+"""Common machinery of the progress predictors.
+
+A predictor is one :class:`torch.nn.Module` holding the progress models of *all* nodes of all
+sequence graphs (a "bank"), so that one call evaluates every node:
+``forward(x: (..., d)) -> (..., K)`` progress in [0, 1] for the K nodes in ``node_keys`` order.
+Training data comes per node as :class:`NodeData`; banks fit all nodes in one optimisation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from cpmp.errors import ConfigError, DataError
+
+NodeKey = tuple[str, str]
+"""(control variable, MP name)."""
+
+
+@dataclass
+class NodeData:
+    """Training data of one node, in the predictor's (scaled) feature space.
+
+    Attributes:
+        key: (variable, MP).
+        x: (P, d) feature samples of all activations of the node.
+        target: (P,) expected progress (eq. 1) of each sample.
+        activations: the node's activations as separate (n_j, d) trajectories.
+    """
+
+    key: NodeKey
+    x: torch.Tensor
+    target: torch.Tensor
+    activations: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass
+class PredictorConfig:
+    """Options shared by every predictor."""
+
+    feature_scaling: str = "none"
+    dtype: str = "float64"
+
+    def __post_init__(self) -> None:
+        if self.feature_scaling not in ("none", "minmax", "standard"):
+            raise ConfigError(
+                f"feature_scaling must be 'none', 'minmax' or 'standard', "
+                f"got {self.feature_scaling!r}"
+            )
+        if self.dtype not in ("float32", "float64"):
+            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+
+    def _positive(self, *names: str) -> None:
+        for name in names:
+            value = getattr(self, name)
+            if value is None or not value > 0:
+                raise ConfigError(f"predictor option {name} must be > 0, got {value!r}")
+
+    def _non_negative(self, *names: str) -> None:
+        for name in names:
+            value = getattr(self, name)
+            if value is None or value < 0:
+                raise ConfigError(f"predictor option {name} must be >= 0, got {value!r}")
+
+    @property
+    def torch_dtype(self) -> torch.dtype:
+        return torch.float64 if self.dtype == "float64" else torch.float32
+
+
+class FeatureScaler(nn.Module):
+    """Affine feature scaling ``(x - offset) / scale`` fitted on training data.
+
+    ``none`` keeps features as they are (the paper scales its features to about [0, 1] itself);
+    ``minmax`` maps each feature's training range to [0, 1]; ``standard`` to zero mean, unit std.
+    Constant features get scale 1.
+    """
+
+    def __init__(self, n_features: int, dtype: torch.dtype = torch.float64) -> None:
+        super().__init__()
+        self.register_buffer("offset", torch.zeros(n_features, dtype=dtype))
+        self.register_buffer("scale", torch.ones(n_features, dtype=dtype))
+
+    def fit(self, x: np.ndarray, mode: str) -> None:
+        """Fit on training samples ``x`` (N, d)."""
+        if mode == "none":
+            return
+        if mode == "minmax":
+            lo, hi = x.min(axis=0), x.max(axis=0)
+            offset, scale = lo, hi - lo
+        else:
+            offset, scale = x.mean(axis=0), x.std(axis=0)
+        scale = np.where(scale > 1e-12, scale, 1.0)
+        self.offset.copy_(torch.as_tensor(offset, dtype=self.offset.dtype))
+        self.scale.copy_(torch.as_tensor(scale, dtype=self.scale.dtype))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.offset) / self.scale
+
+    def transform(self, x: np.ndarray) -> np.ndarray:
+        """NumPy version of :meth:`forward`: ``(..., d) -> (..., d)``."""
+        return (x - self.offset.numpy()) / self.scale.numpy()
+
+
+class ProgressPredictor(nn.Module):
+    """A bank of per-node progress predictors evaluated together.
+
+    Subclasses implement :meth:`logits` (on scaled features), :meth:`initialize` (data-dependent
+    set-up such as support points), :meth:`training_loss` and declare their optimiser.
+    """
+
+    kind: ClassVar[str] = ""
+    config_class: ClassVar[type[PredictorConfig]] = PredictorConfig
+    optimizer: ClassVar[str] = "lbfgs"
+
+    def __init__(self, node_keys: list[NodeKey], n_features: int, config: PredictorConfig) -> None:
+        super().__init__()
+        if not node_keys:
+            raise ConfigError("a predictor needs at least one node")
+        if n_features < 1:
+            raise ConfigError(f"n_features must be >= 1, got {n_features}")
+        self.node_keys = [tuple(k) for k in node_keys]
+        self.n_features = n_features
+        self.config = config
+        self.dtype_ = config.torch_dtype
+        self.scaler = FeatureScaler(n_features, self.dtype_)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.node_keys)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Progress of every node: ``x (..., d)`` raw features -> ``(..., K)`` in [0, 1]."""
+        if x.shape[-1] != self.n_features:
+            raise DataError(
+                f"expected feature vectors with {self.n_features} entries, got shape "
+                f"{tuple(x.shape)}"
+            )
+        lead = x.shape[:-1]
+        z = self.scaler(x.to(self.dtype_).reshape(-1, self.n_features))
+        return torch.sigmoid(self.logits(z)).reshape(*lead, self.n_nodes)
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        """Logits of every node for scaled features ``z (B, d)`` -> ``(B, K)``."""
+        raise NotImplementedError
+
+    def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        """Data-dependent set-up before training (support points, initial weights)."""
+
+    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+        """Sum over nodes of the mean soft-label BCE (eq. 5) plus regularisation."""
+        raise NotImplementedError
+
+    def finalize(self, data: list[NodeData]) -> None:
+        """Post-training step (e.g. pruning); default none."""
+
+    def summary(self) -> dict[str, Any]:
+        """Per-model facts worth reporting (e.g. support-point counts)."""
+        return {"kind": self.kind, "n_nodes": self.n_nodes, "n_parameters": self.n_parameters()}
+
+    def n_parameters(self) -> int:
+        return sum(p.numel() for p in self.parameters())
+
+    def shape_spec(self) -> dict[str, Any]:
+        """Sizes needed to re-create the module before ``load_state_dict``."""
+        return {}
+
+    def spec(self) -> dict[str, Any]:
+        """Everything needed to rebuild this module (without its weights)."""
+        return {
+            "kind": self.kind,
+            "config": dataclasses.asdict(self.config),
+            "node_keys": [list(k) for k in self.node_keys],
+            "n_features": self.n_features,
+            "shapes": self.shape_spec(),
+        }
+
+
+def soft_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean soft-label binary cross-entropy of eq. 5 (numerically stable, from logits)."""
+    return F.binary_cross_entropy_with_logits(logits, target, reduction="mean")

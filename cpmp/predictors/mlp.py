@@ -1,0 +1,114 @@
+"""A small neural progress predictor trained on the same soft-label loss (eq. 5).
+
+One MLP per node, all stored as stacked weight tensors so every node is evaluated in one
+batched ``einsum`` per layer.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import torch
+from torch import nn
+
+from cpmp.errors import ConfigError
+from cpmp.predictors.base import NodeData, NodeKey, PredictorConfig, ProgressPredictor, soft_bce
+
+_ACTIVATIONS = {"tanh": torch.tanh, "relu": torch.relu, "silu": nn.functional.silu}
+
+
+@dataclass
+class MLPConfig(PredictorConfig):
+    """Options of ``mlp``.
+
+    Attributes:
+        hidden: hidden layer widths.
+        activation: ``tanh``, ``relu`` or ``silu``.
+        epochs: full-batch Adam steps.
+        lr: Adam learning rate.
+        weight_decay: L2 penalty on all weights, added to each node's mean loss.
+    """
+
+    hidden: tuple[int, ...] = (32, 32)
+    activation: str = "tanh"
+    epochs: int = 600
+    lr: float = 0.01
+    weight_decay: float = 1e-4
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.hidden = tuple(int(h) for h in self.hidden)
+        if not self.hidden or any(h < 1 for h in self.hidden):
+            raise ConfigError(f"hidden must list positive layer widths, got {self.hidden}")
+        if self.activation not in _ACTIVATIONS:
+            raise ConfigError(
+                f"activation must be one of {sorted(_ACTIVATIONS)}, got {self.activation!r}"
+            )
+        self._positive("epochs", "lr")
+        self._non_negative("weight_decay")
+
+
+class MLPPredictor(ProgressPredictor):
+    """``mlp``: per-node multilayer perceptrons ``d -> hidden... -> 1`` with a sigmoid output."""
+
+    kind: ClassVar[str] = "mlp"
+    config_class = MLPConfig
+    optimizer: ClassVar[str] = "adam"
+    config: MLPConfig
+
+    def __init__(self, node_keys: list[NodeKey], n_features: int, config: MLPConfig) -> None:
+        super().__init__(node_keys, n_features, config)
+        sizes = [n_features, *config.hidden, 1]
+        k = self.n_nodes
+        self.weights = nn.ParameterList(
+            nn.Parameter(torch.zeros(k, a, b, dtype=self.dtype_))
+            for a, b in itertools.pairwise(sizes)
+        )
+        self.biases = nn.ParameterList(
+            nn.Parameter(torch.zeros(k, b, dtype=self.dtype_)) for b in sizes[1:]
+        )
+        self._act = _ACTIVATIONS[config.activation]
+
+    def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        """Glorot-uniform weights drawn from ``generator`` (so a seed fixes the result)."""
+        with torch.no_grad():
+            for w, b in zip(self.weights, self.biases, strict=True):
+                fan_in, fan_out = w.shape[1], w.shape[2]
+                bound = math.sqrt(6.0 / (fan_in + fan_out))
+                u = torch.rand(w.shape, generator=generator, dtype=self.dtype_)
+                w.copy_((2.0 * u - 1.0) * bound)
+                b.zero_()
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        h = z[:, None, :].expand(-1, self.n_nodes, -1)
+        last = len(self.weights) - 1
+        for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = torch.einsum("bki,kio->bko", h, w) + b
+            if layer < last:
+                h = self._act(h)
+        return h[..., 0]
+
+    def _node_logits(self, i: int, x: torch.Tensor) -> torch.Tensor:
+        h = x
+        last = len(self.weights) - 1
+        for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = h @ w[i] + b[i]
+            if layer < last:
+                h = self._act(h)
+        return h[:, 0]
+
+    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+        total = torch.zeros((), dtype=self.dtype_)
+        for i, node in enumerate(data):
+            total = total + soft_bce(self._node_logits(i, node.x), node.target)
+            penalty = sum((w[i] * w[i]).sum() for w in self.weights)
+            total = total + 0.5 * self.config.weight_decay * penalty
+        return total
+
+    def summary(self) -> dict[str, Any]:
+        out = super().summary()
+        out["hidden"] = list(self.config.hidden)
+        return out

@@ -1,0 +1,427 @@
+"""The concurrent sequencer: one sequence graph per control variable, coupled by features.
+
+Transition rule (paper section III): at the start each graph activates the initial node with
+the highest entry probability ``1 - φ``. At every tick, for each successor ``s`` of the current
+node ``c`` the transition probability is ``p_s = φ_c(x) · (1 - φ_s(x))``; the sequencer switches
+to the best successor once its ``p`` exceeds ``threshold`` and has not improved by more than
+``min_improvement`` for ``patience`` seconds.
+
+The graphs are independent; they are coupled only because every node's progress is predicted
+from the same global feature vector ``x``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError, UnknownMPError
+from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.io import atomic_path
+from cpmp.predictors import (
+    NodeData,
+    ProgressPredictor,
+    make_predictor,
+    predictor_from_spec,
+    predictor_options,
+)
+from cpmp.progress import expected_progress
+from cpmp.training import TrainerConfig, fit_predictor
+
+if TYPE_CHECKING:
+    from cpmp.data import Demonstration
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "cpmp-sequencer"
+CHECKPOINT_VERSION = 1
+
+
+@dataclass
+class SequencerConfig:
+    """The transition rule's parameters.
+
+    Attributes:
+        threshold: a transition fires only when ``p > threshold`` (paper: 0.65).
+        patience: seconds ``p`` must go without improving before the switch fires (paper: 50 ms).
+        min_improvement: an increase of ``p`` smaller than this does not count as improving.
+            Attractors converge asymptotically, so ``p`` keeps creeping up by tiny amounts; with
+            a strict comparison (``0``) such a transition might never fire.
+    """
+
+    threshold: float = 0.65
+    patience: float = 0.05
+    min_improvement: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.threshold < 1.0:
+            raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
+        if self.patience < 0.0:
+            raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
+        if self.min_improvement < 0.0:
+            raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
+
+
+@dataclass(frozen=True)
+class TransitionEvent:
+    """A switch of one control variable.
+
+    Attributes:
+        t: time [s] of the tick at which the switch fired.
+        variable: control variable.
+        source: MP active before.
+        target: MP active after.
+        probability: transition probability ``p`` at that tick.
+        state: (d,) feature vector at that tick.
+    """
+
+    t: float
+    variable: str
+    source: str
+    target: str
+    probability: float
+    state: np.ndarray = field(repr=False)
+
+
+@dataclass
+class TickInfo:
+    """What the sequencer computed at the last tick (for inspection and recordings).
+
+    Attributes:
+        t: time [s].
+        progress: variable -> MP -> φ (every node).
+        transition_probs: variable -> successor -> ``p`` (successors of the active MP).
+        active: variable -> active MP after the tick.
+    """
+
+    t: float
+    progress: dict[str, dict[str, float]]
+    transition_probs: dict[str, dict[str, float]]
+    active: dict[str, str]
+
+
+@dataclass
+class _Candidate:
+    target: str
+    best: float
+    since: float
+
+
+def _split_options(options: dict[str, Any], kind: str) -> tuple[dict, dict, dict, dict]:
+    """Route ``fit`` options to the predictor, sequencer, trainer and fit itself."""
+    pred_names = set(predictor_options(kind))
+    seq_names = {f.name for f in dataclasses.fields(SequencerConfig)}
+    trainer_names = {f.name for f in dataclasses.fields(TrainerConfig)}
+    fit_names = {"seed", "variables"}
+    pred, seq, trainer, rest = {}, {}, {}, {}
+    for key, value in options.items():
+        if key in pred_names:
+            pred[key] = value
+        elif key in seq_names:
+            seq[key] = value
+        elif key in trainer_names:
+            trainer[key] = value
+        elif key in fit_names:
+            rest[key] = value
+        else:
+            valid = sorted(pred_names | seq_names | trainer_names | fit_names)
+            raise ConfigError(
+                f"unknown option {key!r} for ConcurrentSequencer.fit with predictor {kind!r}; "
+                f"valid options: {', '.join(valid)}"
+            )
+    return pred, seq, trainer, rest
+
+
+class ConcurrentSequencer:
+    """Concurrent sequence graphs with learned progress predictors.
+
+    Build one with :meth:`fit` (from demonstrations) or :meth:`load` (from a checkpoint); drive it
+    with :meth:`reset` then :meth:`step` once per control tick.
+    """
+
+    def __init__(
+        self,
+        graphs: Mapping[str, SequenceGraph],
+        predictor: ProgressPredictor,
+        feature_names: Sequence[str],
+        config: SequencerConfig | None = None,
+        fit_summary: dict[str, Any] | None = None,
+    ) -> None:
+        self.graphs = dict(graphs)
+        self.predictor = predictor.eval()
+        self.feature_names = list(feature_names)
+        self.config = config or SequencerConfig()
+        self.fit_summary = fit_summary or {}
+        if len(self.feature_names) != predictor.n_features:
+            raise ConfigError(
+                f"{len(self.feature_names)} feature names for a predictor of "
+                f"{predictor.n_features} features"
+            )
+        keys = [(v, mp) for v in sorted(self.graphs) for mp in self.graphs[v].ordered_nodes()]
+        if keys != predictor.node_keys:
+            raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
+        self._index = {key: i for i, key in enumerate(keys)}
+        self._successor_idx = {
+            (v, mp): (
+                self.graphs[v].successors(mp),
+                [self._index[(v, s)] for s in self.graphs[v].successors(mp)],
+            )
+            for v, mp in keys
+        }
+        self.active: dict[str, str] = {}
+        self.events: list[TransitionEvent] = []
+        self.last_tick: TickInfo | None = None
+        self._candidates: dict[str, _Candidate | None] = {}
+        self._last_t: float | None = None
+
+    # ----------------------------------------------------------------------------- fitting
+    @classmethod
+    def fit(
+        cls,
+        demos: Sequence[Demonstration],
+        predictor: str = "klr",
+        **options: Any,
+    ) -> ConcurrentSequencer:
+        """Build the sequence graphs and fit every node's progress predictor.
+
+        Args:
+            demos: labelled demonstrations sharing feature names and control variables.
+            predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse`` or ``mlp``.
+            **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
+                ``l2``, ``feature_scaling``), sequencer options (``threshold``, ``patience``,
+                ``min_improvement``), trainer options (``max_epochs``, ``progress_bar``,
+                ``logger``, ``log_dir``), ``seed`` and ``variables`` (subset to model).
+        """
+        pred_opts, seq_opts, trainer_opts, rest = _split_options(options, predictor)
+        seq_config = SequencerConfig(**seq_opts)
+        trainer_config = TrainerConfig(**trainer_opts)
+        seed = int(rest.get("seed", 0))
+        demos = list(demos)
+        if not demos:
+            raise DataError("ConcurrentSequencer.fit needs at least one demonstration, got none")
+        feature_names = list(demos[0].feature_names)
+        for m, demo in enumerate(demos):
+            if list(demo.feature_names) != feature_names:
+                raise DataError(
+                    f"{demo.name or f'demonstration {m}'} has features {list(demo.feature_names)}"
+                    f" but the first demonstration has {feature_names}; all must match"
+                )
+        graphs = build_graphs(demos, rest.get("variables"))
+        node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
+        model = make_predictor(predictor, node_keys, len(feature_names), **pred_opts)
+        all_x = np.concatenate([d.features for d in demos], axis=0)
+        model.scaler.fit(all_x, model.config.feature_scaling)
+        data = node_training_data(graphs, model)
+        summary = fit_predictor(model, data, trainer_config, seed=seed)
+        summary["n_demos"] = len(demos)
+        return cls(graphs, model, feature_names, seq_config, summary)
+
+    # ----------------------------------------------------------------------------- inference
+    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
+        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
+        xt = torch.as_tensor(np.asarray(x, dtype=np.float64))
+        if xt.ndim == 0 or xt.shape[-1] != len(self.feature_names):
+            raise DataError(
+                f"expected features with {len(self.feature_names)} entries "
+                f"({', '.join(self.feature_names[:4])}, ...), got shape {tuple(xt.shape)}"
+            )
+        if not torch.isfinite(xt).all():
+            raise DataError("features contain NaN or inf; the sequencer needs finite features")
+        with torch.no_grad():
+            return self.predictor(xt).numpy()
+
+    @property
+    def node_keys(self) -> list[tuple[str, str]]:
+        return list(self.predictor.node_keys)
+
+    def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
+        """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
+        phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
+        out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
+        for (v, mp), value in zip(self.node_keys, phi.tolist(), strict=True):
+            out[v][mp] = value
+        return out
+
+    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """Start every graph at its initial node of highest entry probability ``1 - φ``."""
+        phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
+        self.active = {}
+        for v in sorted(self.graphs):
+            initial = sorted(self.graphs[v].initial_nodes)
+            entry = [1.0 - phi[self._index[(v, mp)]] for mp in initial]
+            self.active[v] = initial[int(np.argmax(entry))]
+        self.events = []
+        self._candidates = {v: None for v in self.graphs}
+        self._last_t = float(t)
+        self.last_tick = TickInfo(
+            float(t), self._phi_dict(phi), {v: {} for v in self.graphs}, dict(self.active)
+        )
+        return dict(self.active)
+
+    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
+        if not self.active:
+            raise NotFittedError("call reset(t, x) before step(t, x)")
+        t = float(t)
+        if self._last_t is not None and t < self._last_t:
+            raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
+        self._last_t = t
+        state = np.asarray(x, dtype=np.float64).reshape(-1)
+        phi = self.progress(state)
+        probs: dict[str, dict[str, float]] = {}
+        c = self.config
+        for v in sorted(self.graphs):
+            current = self.active[v]
+            names, idx = self._successor_idx[(v, current)]
+            if not names:
+                probs[v] = {}
+                self._candidates[v] = None
+                continue
+            p = phi[self._index[(v, current)]] * (1.0 - phi[idx])
+            probs[v] = dict(zip(names, p.tolist(), strict=True))
+            best = int(np.argmax(p))
+            target, p_best = names[best], float(p[best])
+            cand = self._candidates.get(v)
+            if p_best <= c.threshold:
+                self._candidates[v] = None
+                continue
+            if cand is None or cand.target != target:
+                cand = _Candidate(target, p_best, t)
+            elif p_best > cand.best + c.min_improvement:
+                cand.best, cand.since = p_best, t
+            self._candidates[v] = cand
+            if t - cand.since >= c.patience - 1e-9:
+                self.events.append(TransitionEvent(t, v, current, target, p_best, state.copy()))
+                self.active[v] = target
+                self._candidates[v] = None
+        self.last_tick = TickInfo(t, self._phi_dict(phi), probs, dict(self.active))
+        return dict(self.active)
+
+    def _phi_dict(self, phi: np.ndarray) -> dict[str, dict[str, float]]:
+        out: dict[str, dict[str, float]] = {v: {} for v in self.graphs}
+        for (v, mp), value in zip(self.node_keys, phi.tolist(), strict=True):
+            out[v][mp] = value
+        return out
+
+    def replay(
+        self, time: np.ndarray, features: np.ndarray
+    ) -> tuple[dict[str, list[str]], list[TransitionEvent]]:
+        """Run the sequencer open-loop over a recorded feature stream ``(n,), (n, d)``.
+
+        Returns the MP sequence per variable and the transition events.
+        """
+        seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
+        for t, x in zip(time[1:], features[1:], strict=True):
+            before = dict(self.active)
+            after = self.step(t, x)
+            for v, mp in after.items():
+                if mp != before[v]:
+                    seqs[v].append(mp)
+        return seqs, list(self.events)
+
+    # ----------------------------------------------------------------------------- persistence
+    def save(self, path: str | Path) -> Path:
+        """Write a checkpoint (graphs, predictor weights, configs) atomically to ``path``."""
+        payload = {
+            "format": CHECKPOINT_FORMAT,
+            "version": CHECKPOINT_VERSION,
+            "feature_names": self.feature_names,
+            "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
+            "predictor": {"spec": self.predictor.spec(), "state": self.predictor.state_dict()},
+            "sequencer": dataclasses.asdict(self.config),
+            "fit_summary": _plain(self.fit_summary),
+        }
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            torch.save(payload, tmp)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> ConcurrentSequencer:
+        """Load a checkpoint written by :meth:`save`."""
+        path = Path(path)
+        if not path.is_file():
+            raise CpmpFileError(
+                f"checkpoint {path} does not exist; train one with scripts/train.py"
+            )
+        try:
+            payload = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as err:
+            raise CpmpFileError(f"{path} is not a readable cpmp checkpoint: {err}") from err
+        if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+            raise CpmpFileError(f"{path} is not a cpmp sequencer checkpoint")
+        if payload.get("version") != CHECKPOINT_VERSION:
+            raise CpmpFileError(
+                f"{path} has checkpoint version {payload.get('version')}; this cpmp reads "
+                f"version {CHECKPOINT_VERSION}"
+            )
+        graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
+        predictor = predictor_from_spec(payload["predictor"]["spec"])
+        predictor.load_state_dict(payload["predictor"]["state"])
+        return cls(
+            graphs,
+            predictor,
+            payload["feature_names"],
+            SequencerConfig(**payload["sequencer"]),
+            payload.get("fit_summary", {}),
+        )
+
+    def with_config(self, **options: Any) -> ConcurrentSequencer:
+        """A sequencer sharing graphs and predictor but with other transition-rule options."""
+        config = dataclasses.replace(self.config, **options)
+        return ConcurrentSequencer(
+            self.graphs, self.predictor, self.feature_names, config, self.fit_summary
+        )
+
+    def describe(self) -> str:
+        """All graphs as text."""
+        return "\n".join(self.graphs[v].to_text() for v in sorted(self.graphs))
+
+    def check_variable(self, variable: str) -> SequenceGraph:
+        if variable not in self.graphs:
+            raise UnknownMPError(
+                f"unknown control variable {variable!r}; known: {', '.join(sorted(self.graphs))}"
+            )
+        return self.graphs[variable]
+
+
+def node_training_data(
+    graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor
+) -> list[NodeData]:
+    """Per-node training samples (scaled features) and expected-progress targets, in the
+    predictor's node order."""
+    out = []
+    for v, mp in predictor.node_keys:
+        acts = graphs[v].activations[mp]
+        if not acts:
+            raise DataError(f"node {v}/{mp} has no activation data to train on")
+        scaled = [predictor.scaler.transform(a.features) for a in acts]
+        targets = [expected_progress(f, a.time) for f, a in zip(scaled, acts, strict=True)]
+        dt = predictor.dtype_
+        out.append(
+            NodeData(
+                key=(v, mp),
+                x=torch.as_tensor(np.concatenate(scaled), dtype=dt),
+                target=torch.as_tensor(np.concatenate(targets), dtype=dt),
+                activations=scaled,
+            )
+        )
+    return out
+
+
+def _plain(obj: Any) -> Any:
+    """Convert a summary to builtins only (checkpoints load with ``weights_only=True``)."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

@@ -1,0 +1,234 @@
+"""The concurrent sequencer: transition rule, replay, closed loop, persistence, bad input."""
+
+from typing import ClassVar
+
+import numpy as np
+import pytest
+import torch
+
+from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
+from cpmp.evaluation import replay_demonstrations
+from cpmp.graph import SequenceGraph
+from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.sequencer import ConcurrentSequencer, SequencerConfig
+from cpmp.synthetic import SyntheticTask, make_demonstrations
+
+
+class FeatureIsProgress(ProgressPredictor):
+    """Test double with known outputs: node k's progress is feature k."""
+
+    kind: ClassVar[str] = "feature_is_progress"
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        return torch.logit(z.clamp(1e-9, 1 - 1e-9))
+
+
+def _chain_sequencer(**config):
+    """One variable with nodes A -> B, B -> C; features are (φ_A, φ_B, φ_C)."""
+    g = SequenceGraph("v")
+    for mp in "ABC":
+        g.add_node(mp)
+    g.initial_nodes = {"A", "B"}
+    g.edges = {("A", "B"), ("B", "C")}
+    model = FeatureIsProgress([("v", "A"), ("v", "B"), ("v", "C")], 3, PredictorConfig())
+    return ConcurrentSequencer({"v": g}, model, ["pa", "pb", "pc"], SequencerConfig(**config))
+
+
+def test_initial_node_is_highest_entry_probability():
+    seq = _chain_sequencer()
+    assert seq.reset(0.0, [0.3, 0.1, 0.0]) == {"v": "B"}  # entry 0.9 > 0.7
+    assert seq.reset(0.0, [0.05, 0.1, 0.0]) == {"v": "A"}
+    # C has the highest entry probability but is not an initial node
+    assert seq.reset(0.0, [0.5, 0.6, 0.0]) == {"v": "A"}
+
+
+def test_switch_after_patience_without_improvement():
+    seq = _chain_sequencer(threshold=0.65, patience=0.05, min_improvement=1e-3)
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant
+    for k in range(1, 5):
+        assert seq.step(0.01 * k, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.01 .. 0.04 s: waiting
+    assert seq.step(0.05, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.04 s since first above threshold
+    assert seq.step(0.06, [0.7, 0.0, 0.0]) == {"v": "B"}  # 50 ms without improvement
+    (event,) = seq.events
+    assert (event.t, event.source, event.target) == (0.06, "A", "B")
+    assert event.probability == pytest.approx(0.7)
+    np.testing.assert_allclose(event.state, [0.7, 0.0, 0.0])
+
+
+def test_improving_probability_delays_switch():
+    seq = _chain_sequencer(patience=0.05, min_improvement=1e-3)
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    t, p = 0.0, 0.66
+    while p < 0.95:  # rises 0.01 per tick: always improving, so no switch
+        t = round(t + 0.01, 10)
+        assert seq.step(t, [p, 0.0, 0.0]) == {"v": "A"}
+        p += 0.01
+    flat = p - 0.01  # the last value stepped
+    for _ in range(4):  # then flat: no switch before 50 ms passed since the last improvement
+        t = round(t + 0.01, 10)
+        assert seq.step(t, [flat, 0.0, 0.0]) == {"v": "A"}
+    assert seq.step(round(t + 0.01, 10), [flat, 0.0, 0.0]) == {"v": "B"}
+
+
+def test_creeping_improvement_below_tolerance_does_not_block():
+    creeping = [0.7 + 1e-4 * k for k in range(20)]
+    strict = _chain_sequencer(min_improvement=0.0)
+    tolerant = _chain_sequencer(min_improvement=1e-3)
+    for seq in (strict, tolerant):
+        seq.reset(0.0, [0.0, 0.0, 0.0])
+        for k, p in enumerate(creeping, start=1):
+            seq.step(0.01 * k, [p, 0.0, 0.0])
+    assert strict.active == {"v": "A"}  # strict comparison never fires on an asymptote
+    assert tolerant.active == {"v": "B"}
+
+
+def test_below_threshold_never_switches_and_dip_resets():
+    seq = _chain_sequencer(threshold=0.65, patience=0.05)
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    for k in range(1, 30):
+        seq.step(0.01 * k, [0.64, 0.0, 0.0])
+    assert seq.active == {"v": "A"}
+    for k, p in enumerate([0.7, 0.7, 0.7, 0.5, 0.7, 0.7, 0.7], start=30):
+        seq.step(0.01 * k, [p, 0.0, 0.0])
+    assert seq.active == {"v": "A"}  # the dip below threshold restarted the 50 ms
+
+
+def test_terminal_node_stays():
+    seq = _chain_sequencer(patience=0.0)
+    seq.reset(0.0, [0.95, 0.0, 0.0])
+    assert seq.active == {"v": "B"}
+    seq.step(0.01, [0.0, 0.9, 0.0])
+    assert seq.active == {"v": "C"}
+    for k in range(2, 10):
+        assert seq.step(0.01 * k, [1.0, 1.0, 1.0]) == {"v": "C"}
+    assert seq.last_tick.transition_probs == {"v": {}}
+
+
+def test_replay_reproduces_held_out_sequences(fitted_klr, test_demos):
+    result = replay_demonstrations(fitted_klr, test_demos)
+    assert result["all_match"] == 1.0, result["per_demo"]
+    # measured mean 0.035, std 0.012 (features span ~[0, 1]); a switch more than 0.1 away from
+    # the demonstrated state would be a visibly early or late transition
+    assert result["distance_mean"] < 0.1
+    assert result["n_switches"] == sum(
+        len(d.switch_indices(v)) for d in test_demos for v in d.variables
+    )
+
+
+def test_predict_progress_and_tick_info(fitted_klr, test_demos):
+    x = test_demos[0].features[0]
+    phi = fitted_klr.predict_progress(x)
+    assert set(phi) == {"a", "b"}
+    assert set(phi["b"]) == {"b_wait", "b_go", "b_back"}
+    assert phi["a"]["a_go"] < 0.2  # an activation's start has low progress
+    fitted_klr.reset(0.0, x)
+    fitted_klr.step(0.01, test_demos[0].features[1])
+    info = fitted_klr.last_tick
+    assert info.active == fitted_klr.active and set(info.transition_probs) == {"a", "b"}
+
+
+def test_closed_loop_synthetic_task(fitted_klr):
+    task, rng = SyntheticTask(), np.random.default_rng(5)
+    done = [task.rollout(task.sample_episode(rng), fitted_klr)[1] for _ in range(20)]
+    assert sum(done) >= 18  # measured 20/20; allow two misses of an honest closed loop
+
+
+def test_fit_is_reproducible(train_demos):
+    a = ConcurrentSequencer.fit(train_demos, "mlp", seed=3, logger=None, epochs=20)
+    b = ConcurrentSequencer.fit(train_demos, "mlp", seed=3, logger=None, epochs=20)
+    c = ConcurrentSequencer.fit(train_demos, "mlp", seed=4, logger=None, epochs=20)
+    x = train_demos[0].features
+    assert np.array_equal(a.progress(x), b.progress(x))
+    assert not np.array_equal(a.progress(x), c.progress(x))
+
+
+def test_save_load_bit_exact(fitted_klr, test_demos, tmp_path):
+    path = fitted_klr.save(tmp_path / "model.pt")
+    loaded = ConcurrentSequencer.load(path)
+    x = test_demos[2].features
+    assert np.array_equal(loaded.progress(x), fitted_klr.progress(x))
+    for v, g in fitted_klr.graphs.items():
+        h = loaded.graphs[v]
+        assert (h.nodes, h.initial_nodes, h.edges) == (g.nodes, g.initial_nodes, g.edges)
+    assert loaded.config == fitted_klr.config
+    assert loaded.feature_names == fitted_klr.feature_names
+    assert (
+        replay_demonstrations(loaded, test_demos[:2])["per_demo"]
+        == replay_demonstrations(fitted_klr, test_demos[:2])["per_demo"]
+    )
+
+
+@pytest.mark.parametrize("kind", ["klr_sparse", "mlp"])
+def test_save_load_other_predictors(train_demos, tmp_path, kind):
+    seq = ConcurrentSequencer.fit(train_demos, kind, seed=0, logger=None, epochs=30)
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    x = train_demos[1].features
+    assert np.array_equal(loaded.progress(x), seq.progress(x))
+
+
+def test_failed_save_leaves_no_partial_file(fitted_klr, tmp_path, monkeypatch):
+    path = tmp_path / "model.pt"
+    fitted_klr.save(path)
+    before = path.read_bytes()
+
+    def broken(obj, f, *args, **kwargs):
+        with open(f, "wb") as fh:
+            fh.write(b"partial")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(torch, "save", broken)
+    with pytest.raises(OSError, match="disk full"):
+        fitted_klr.save(path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["model.pt"]
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(CpmpFileError, match="does not exist"):
+        ConcurrentSequencer.load(tmp_path / "missing.pt")
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"not a checkpoint")
+    with pytest.raises(CpmpFileError, match="not a readable cpmp checkpoint"):
+        ConcurrentSequencer.load(garbage)
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else"}, other)
+    with pytest.raises(CpmpFileError, match="not a cpmp sequencer checkpoint"):
+        ConcurrentSequencer.load(other)
+
+
+def test_bad_inputs(fitted_klr, train_demos):
+    with pytest.raises(ConfigError, match="unknown predictor"):
+        ConcurrentSequencer.fit(train_demos, predictor="forest")
+    with pytest.raises(ConfigError, match="unknown option 'treshold'"):
+        ConcurrentSequencer.fit(train_demos, treshold=0.5)
+    with pytest.raises(ConfigError, match="threshold must be in"):
+        ConcurrentSequencer.fit(train_demos, threshold=1.5)
+    with pytest.raises(ConfigError, match="patience"):
+        SequencerConfig(patience=-0.1)
+    with pytest.raises(DataError, match="at least one demonstration"):
+        ConcurrentSequencer.fit([])
+    with pytest.raises(DataError, match="3 entries"):
+        fitted_klr.predict_progress(np.zeros(4))
+    with pytest.raises(DataError, match="NaN"):
+        fitted_klr.reset(0.0, np.array([0.0, np.nan, 0.0]))
+    fresh = ConcurrentSequencer(fitted_klr.graphs, fitted_klr.predictor, fitted_klr.feature_names)
+    with pytest.raises(NotFittedError, match="reset"):
+        fresh.step(0.0, np.zeros(3))
+    fresh.reset(1.0, np.zeros(3))
+    with pytest.raises(DataError, match="time went backwards"):
+        fresh.step(0.5, np.zeros(3))
+
+
+def test_mismatched_feature_names_rejected(train_demos):
+    from cpmp.data import Demonstration
+
+    d = train_demos[0]
+    renamed = Demonstration(d.time, d.features, d.labels, ["x", "y", "z"], "demo_x")
+    with pytest.raises(DataError, match="all must match"):
+        ConcurrentSequencer.fit([train_demos[1], renamed])
+
+
+def test_synthetic_demos_are_reproducible():
+    a, b = make_demonstrations(2, seed=7), make_demonstrations(2, seed=7)
+    assert all(np.array_equal(x.features, y.features) for x, y in zip(a, b, strict=True))
