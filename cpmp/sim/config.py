@@ -85,7 +85,8 @@ class TaskConfig:
                 f"{self.width_range[0]}, {self.depth_range[0]}"
             )
         positive = (
-            "box_height box_mass control_dt physics_dt max_time pos_gain rot_gain finger_gain max_speed "
+            "box_height box_mass control_dt physics_dt max_time pos_gain rot_gain finger_gain "
+            "max_speed "
             "max_joint_speed ik_damping rot_sigma finger_sigma pos_tol rot_tol finger_tol "
             "lift_height deadlock_time reach_descent_ratio"
         ).split()

@@ -8,9 +8,9 @@ bimanual, else the single hand):
   ``carry`` -> ``lower`` -> ``home``; bimanually the left hand switches ``reach_edge`` ->
   ``follow_right`` together with the right hand's ``lift`` and goes ``home`` with it;
 * ``H_rot``: ``down`` -> ``home`` once the hand has risen ``rise_distance`` after releasing;
-* ``H_fingers``: ``relax`` -> ``preshape`` (palm within ``preshape_distance`` of its grasp goal)
-  -> ``grasp`` (palm touches the box, at the goal and oriented) -> ``release`` (box lowered) -> ``relax`` (hand
-  within ``relax_distance`` of home).
+* ``H_fingers``: ``relax`` -> ``preshape`` (palm within ``preshape_distance`` of its grasp
+  goal) -> ``grasp`` (palm touches the box, at the goal and oriented) -> ``release`` (box
+  lowered) -> ``relax`` (hand within ``relax_distance`` of home).
 
 Synchronisation points: lifting starts only when *every* grasping hand's fingers have closed;
 returning home starts only when every grasping hand has released. An idle hand keeps ``home``,

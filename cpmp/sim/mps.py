@@ -118,14 +118,18 @@ def build_library(
             "reach_edge": MP(
                 var, "reach_edge", "position", "box", np.array([0.0, side * edge, top]), descend
             ),
-            "lift": MP(var, "lift", "position", "held", plate_center() + [0.0, 0.0, lifted]),
-            "carry": MP(var, "carry", "position", "held", container_center() + [0, 0, lifted]),
+            "lift": MP(
+                var, "lift", "position", "held", plate_center() + np.array([0.0, 0.0, lifted])
+            ),
+            "carry": MP(
+                var, "carry", "position", "held", container_center() + np.array([0.0, 0.0, lifted])
+            ),
             "lower": MP(
                 var,
                 "lower",
                 "position",
                 "held",
-                container_center() + [0.0, 0.0, box.height / 2 - cfg.press_depth],
+                container_center() + np.array([0.0, 0.0, box.height / 2 - cfg.press_depth]),
             ),
         }
         if hand == "left":

@@ -245,10 +245,11 @@ def run_episode(
             n = len(sequences[variable])
             if sequences[variable] != want[variable][:n]:
                 sim.set_active(new)
+                should = want[variable][n - 1] if n <= len(want[variable]) else "no switch"
                 return result(
                     "incomplete",
                     f"wrong transition {variable}: {active[variable]} -> {new[variable]} at "
-                    f"t={t:.2f} s (expected {want[variable][n - 1] if n <= len(want[variable]) else 'none'})",
+                    f"t={t:.2f} s (expected {should})",
                 )
         active = new
         if sequences == want and sim.box_in_container() and sim.hands_home():

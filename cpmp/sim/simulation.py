@@ -36,6 +36,14 @@ _GEOM_TYPES = {
 }
 
 
+_INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+"""MuJoCo warnings that mean the integration blew up (MuJoCo then resets the state itself)."""
+
+
 @functools.lru_cache(maxsize=1)
 def shared_kinematics() -> ArmKinematics:
     """The arm kinematics (independent of the box), built once per process."""
@@ -170,7 +178,7 @@ class Simulation:
         d = self.data
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             return True
-        if d.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number > 0:
+        if any(d.warning[int(w)].number > 0 for w in _INSTABILITY_WARNINGS):
             return True
         return bool(np.max(np.abs(d.qvel)) > 1e3)
 
