@@ -202,8 +202,9 @@ class Simulation:
     def palm_touches_box(self, hand: str) -> bool:
         """True if ``hand``'s palm is in contact with the box."""
         d = self.data
-        pair = {self._palm_geom[hand], self._box_geom}
-        return any({int(c.geom1), int(c.geom2)} == pair for c in d.contact[: d.ncon])
+        pairs = np.sort(d.contact.geom[: d.ncon], axis=1)
+        want = sorted((self._palm_geom[hand], self._box_geom))
+        return bool(np.any((pairs[:, 0] == want[0]) & (pairs[:, 1] == want[1])))
 
     def robot_speed(self) -> float:
         """Largest arm/finger joint speed [rad/s]."""
