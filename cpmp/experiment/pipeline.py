@@ -1,0 +1,389 @@
+"""The paper's evaluation as composable functions: collect → split → train → evaluate.
+
+``run_experiment`` ties them together with the simulator in front; ``train_from_file`` and
+``evaluate_checkpoint`` serve users who bring their own demonstrations (no simulator).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import defaultdict
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cpmp.errors import ConfigError, DataError
+from cpmp.evaluation import (
+    activation_progress,
+    progress_errors,
+    replay_demonstrations,
+    switch_distances,
+)
+from cpmp.experiment.config import predictor_options, to_dict
+
+if TYPE_CHECKING:
+    from cpmp.data import Demonstration
+    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.sim import Box, TaskConfig
+
+log = logging.getLogger(__name__)
+
+OTHER = "other"
+"""Strategy label of an initial MP set that matches no demonstrated strategy."""
+
+
+@contextmanager
+def stage(name: str) -> Iterator[None]:
+    """Log the start and the duration of a pipeline stage."""
+    log.info("stage %s: start", name)
+    start = time.perf_counter()
+    yield
+    log.info("stage %s: done in %.1f s", name, time.perf_counter() - start)
+
+
+@dataclass
+class ExperimentSettings:
+    """Sizes of the evaluation (``experiment`` config group).
+
+    Attributes:
+        name: label of the settings (``quick``, ``full``, ...).
+        seeds: each seed repeats collection, training and reproduction.
+        demos_per_strategy: demonstrations collected per strategy (paper: 5, so 15 in all).
+        train_per_strategy: of those, used for training (paper: 3, so 9 train / 6 test).
+        train_sizes: training-set sizes D to compare (paper: 3, 6, 9), balanced over strategies.
+        n_boxes: random boxes reproduced per D and seed (paper: 20).
+        box_seed_offset: boxes for reproduction are drawn from ``seed + box_seed_offset``.
+        strategy_grid: (widths, depths) cells of the strategy map (Fig. 7).
+        record: which reproduction episodes write an ``.rrd``: ``all``, ``first`` or ``none``.
+        record_demos: also write the collected demonstrations as ``.rrd``.
+        max_time: episode time limit [s] (``None``: the task's ``max_time``).
+    """
+
+    name: str = "quick"
+    seeds: list[int] = field(default_factory=lambda: [0])
+    demos_per_strategy: int = 3
+    train_per_strategy: int = 2
+    train_sizes: list[int] = field(default_factory=lambda: [3, 6])
+    n_boxes: int = 6
+    box_seed_offset: int = 1000
+    strategy_grid: list[int] = field(default_factory=lambda: [8, 6])
+    record: str = "all"
+    record_demos: bool = False
+    max_time: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.seeds or any(not isinstance(s, int) or s < 0 for s in self.seeds):
+            raise ConfigError(f"experiment.seeds must be non-negative integers, got {self.seeds}")
+        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"experiment.{name} must be >= 1, got {getattr(self, name)}")
+        if self.train_per_strategy >= self.demos_per_strategy:
+            raise ConfigError(
+                f"experiment.train_per_strategy ({self.train_per_strategy}) must be smaller than "
+                f"demos_per_strategy ({self.demos_per_strategy}) to leave test demos"
+            )
+        n_train = 3 * self.train_per_strategy
+        if not self.train_sizes or any(d < 1 or d > n_train for d in self.train_sizes):
+            raise ConfigError(
+                f"experiment.train_sizes must lie in 1..{n_train} (3 strategies x "
+                f"train_per_strategy), got {self.train_sizes}"
+            )
+        if len(self.strategy_grid) != 2 or min(self.strategy_grid) < 2:
+            raise ConfigError(
+                f"experiment.strategy_grid must be [n_widths, n_depths] >= 2, "
+                f"got {self.strategy_grid}"
+            )
+        if self.record not in ("all", "first", "none"):
+            raise ConfigError(f"experiment.record must be all, first or none, got {self.record!r}")
+        if self.max_time is not None and self.max_time <= 0:
+            raise ConfigError(f"experiment.max_time must be > 0, got {self.max_time}")
+
+    @classmethod
+    def from_cfg(cls, cfg: Any) -> ExperimentSettings:
+        options = to_dict(cfg)
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown experiment option(s) {', '.join(unknown)}; "
+                f"valid: {', '.join(sorted(known))}"
+            )
+        return cls(**options)
+
+
+# ------------------------------------------------------------------------------------ data
+def strategy_of(demo: Demonstration) -> str:
+    """The strategy a demonstration used (``metadata["strategy"]``)."""
+    strategy = (demo.metadata or {}).get("strategy")
+    if not strategy:
+        raise DataError(f"{demo.name}: metadata has no 'strategy'; cannot balance by strategy")
+    return str(strategy)
+
+
+def by_strategy(demos: Sequence[Demonstration]) -> dict[str, list[Demonstration]]:
+    """Demonstrations grouped by strategy, each group in the given order."""
+    groups: dict[str, list[Demonstration]] = defaultdict(list)
+    for demo in demos:
+        groups[strategy_of(demo)].append(demo)
+    return dict(sorted(groups.items()))
+
+
+def split_by_strategy(
+    demos: Sequence[Demonstration], train_per_strategy: int
+) -> tuple[list[Demonstration], list[Demonstration]]:
+    """First ``train_per_strategy`` demos of each strategy train, the rest test."""
+    train, test = [], []
+    for strategy, group in by_strategy(demos).items():
+        if len(group) <= train_per_strategy:
+            raise DataError(
+                f"strategy {strategy!r} has {len(group)} demos; need more than "
+                f"{train_per_strategy} to keep some for testing"
+            )
+        train += group[:train_per_strategy]
+        test += group[train_per_strategy:]
+    return train, test
+
+
+def balanced_subset(demos: Sequence[Demonstration], size: int) -> list[Demonstration]:
+    """``size`` demos taken round-robin over strategies (so 3 = one per strategy)."""
+    groups = list(by_strategy(demos).values())
+    out: list[Demonstration] = []
+    k = 0
+    while len(out) < size:
+        if all(k >= len(g) for g in groups):
+            raise DataError(f"asked for {size} training demos, only {len(out)} available")
+        out += [g[k] for g in groups if k < len(g)][: size - len(out)]
+        k += 1
+    return out
+
+
+def strategy_signatures(demos: Sequence[Demonstration]) -> dict[str, dict[str, str]]:
+    """Initial MP per variable of each demonstrated strategy."""
+    out: dict[str, dict[str, str]] = {}
+    for demo in demos:
+        out.setdefault(strategy_of(demo), {v: str(demo.labels[v][0]) for v in demo.variables})
+    return out
+
+
+def classify_start(initial: Mapping[str, str], signatures: Mapping[str, Mapping[str, str]]) -> str:
+    """The strategy whose initial MPs equal ``initial``, else :data:`OTHER`."""
+    for strategy, sig in signatures.items():
+        if all(initial.get(v) == mp for v, mp in sig.items()):
+            return strategy
+    return OTHER
+
+
+# ------------------------------------------------------------------------------- training
+def fit_sequencer(
+    demos: Sequence[Demonstration],
+    predictor_cfg: Any,
+    sequencer_cfg: Any = None,
+    trainer_cfg: Any = None,
+    seed: int = 0,
+    log_dir: str | Path | None = None,
+) -> ConcurrentSequencer:
+    """Fit a :class:`ConcurrentSequencer` from config groups (``predictor``, ``sequencer``,
+    ``trainer``)."""
+    from cpmp.sequencer import ConcurrentSequencer
+
+    kind, options = predictor_options(predictor_cfg)
+    trainer = to_dict(trainer_cfg)
+    if log_dir is not None:
+        trainer["log_dir"] = str(log_dir)
+    return ConcurrentSequencer.fit(
+        list(demos), predictor=kind, seed=seed, **options, **to_dict(sequencer_cfg), **trainer
+    )
+
+
+# ----------------------------------------------------------------------------- evaluation
+def evaluate_offline(
+    seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
+) -> dict[str, Any]:
+    """Progress MAE (overall, first/last 10 %, per node), Fig. 6 curves and a replay of the
+    recorded feature streams (per-variable sequence match, switch-state distance)."""
+    from cpmp.experiment.plots import progress_curves
+
+    records = activation_progress(seq, demos)
+    errors = progress_errors(records)
+    curves = progress_curves([(r.expected, r.predicted) for r in records], n_bins=n_bins)
+    replay = replay_demonstrations(seq, demos)
+    return {"progress": errors, "curves": curves, "replay": replay}
+
+
+@dataclass
+class EpisodeRecord:
+    """One reproduction episode, summarised for the report."""
+
+    box: tuple[float, float]
+    correct: str
+    chosen: str
+    outcome: str
+    reason: str
+    duration: float
+    distances: list[float]
+    rrd: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+class EpisodeLogger:
+    """``on_tick`` callback that writes a rerun recording of a sequencer-driven episode."""
+
+    def __init__(self, recorder: Any, seq: ConcurrentSequencer) -> None:
+        self.recorder = recorder
+        self.seq = seq
+        self._n_events = 0
+
+    def __call__(self, info: Any) -> None:
+        tick = self.seq.last_tick
+        self.recorder.log_tick(
+            info.t,
+            info.features,
+            tick.progress if tick else {},
+            info.active,
+            tick.transition_probs if tick else None,
+            info.body_poses,
+        )
+        for event in self.seq.events[self._n_events :]:
+            self.recorder.log_transition(
+                event.t, event.variable, event.source, event.target, event.probability
+            )
+        self._n_events = len(self.seq.events)
+
+
+def reproduce(
+    seq: ConcurrentSequencer,
+    boxes: Sequence[Box],
+    expected: Sequence[Demonstration],
+    task: TaskConfig,
+    signatures: Mapping[str, Mapping[str, str]],
+    *,
+    record_dir: Path | None = None,
+    record: str = "all",
+    max_time: float | None = None,
+    label: str = "",
+) -> list[EpisodeRecord]:
+    """Run ``seq`` closed-loop on every box; classify outcomes and measure switch distances.
+
+    ``expected[i]`` is the demonstrator's recording of ``boxes[i]``: its switch states are the
+    "desired states" of Table Ib.
+    """
+    from cpmp.experiment.recording import EpisodeRecorder
+    from cpmp.sim import Simulation, correct_strategy, run_episode
+
+    out = []
+    if record_dir is not None and record != "none":
+        record_dir.mkdir(parents=True, exist_ok=True)
+    for i, (box, demo) in enumerate(zip(boxes, expected, strict=True)):
+        rrd = None
+        recorder = None
+        callback = None
+        if record_dir is not None and (record == "all" or (record == "first" and i == 0)):
+            sim = Simulation(task, box)
+            rrd = record_dir / f"{label}episode_{i:03d}.rrd"
+            recorder = EpisodeRecorder(
+                rrd,
+                feature_names=seq.feature_names,
+                mp_names={v: g.ordered_nodes() for v, g in seq.graphs.items()},
+                episode=f"{label}episode_{i:03d}",
+                geoms=sim.geoms(),
+                metadata={"box_width": box.width, "box_depth": box.depth},
+            )
+            callback = EpisodeLogger(recorder, seq)
+        try:
+            result = run_episode(box, seq, task, max_time=max_time, expected=demo, on_tick=callback)
+        except BaseException:
+            if recorder is not None:
+                recorder.abort()
+            raise
+        if recorder is not None:
+            recorder.log_outcome(result.duration, result.outcome, result.reason)
+            recorder.close()
+        distances: list[float] = []
+        if result.outcome == "complete":
+            for v in seq.graphs:
+                d = switch_distances([_as_event(tr) for tr in result.transitions], demo, v)
+                distances += d or []
+        out.append(
+            EpisodeRecord(
+                box=(box.width, box.depth),
+                correct=correct_strategy(box, task),
+                chosen=classify_start(result.initial, signatures),
+                outcome=result.outcome,
+                reason=result.reason,
+                duration=result.duration,
+                distances=distances,
+                rrd=str(rrd) if rrd else None,
+            )
+        )
+        log.info("%sepisode %d: %s (%s)", label, i, result.outcome, result.reason)
+    return out
+
+
+def _as_event(transition: Any) -> Any:
+    from cpmp.sequencer import TransitionEvent
+
+    return TransitionEvent(
+        transition.t,
+        transition.variable,
+        transition.source,
+        transition.target,
+        float("nan"),
+        transition.features,
+    )
+
+
+def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    """Table I for one set of episodes: counts W/I/C (diverged counted apart, also in I) and
+    the mean/std switch-state distance over all complete episodes."""
+    counts = {k: 0 for k in ("W", "I", "C", "diverged")}
+    for e in episodes:
+        if e.outcome == "wrong_start":
+            counts["W"] += 1
+        elif e.outcome == "complete":
+            counts["C"] += 1
+        else:
+            counts["I"] += 1
+            counts["diverged"] += e.outcome == "diverged"
+    distances = [d for e in episodes if e.outcome == "complete" for d in e.distances]
+    return {
+        **counts,
+        "n": len(episodes),
+        "distance_mean": float(np.mean(distances)) if distances else None,
+        "distance_std": float(np.std(distances)) if distances else None,
+        "n_distances": len(distances),
+    }
+
+
+def strategy_map(
+    seq: ConcurrentSequencer,
+    task: TaskConfig,
+    signatures: Mapping[str, Mapping[str, str]],
+    grid: Sequence[int],
+) -> dict[str, Any]:
+    """Fig. 7: the initial strategy chosen over a width x depth grid against the correct one."""
+    from cpmp.sim import Box, Simulation, correct_strategy
+
+    widths = np.linspace(*task.width_range, grid[0])
+    depths = np.linspace(*task.depth_range, grid[1])
+    chosen = np.empty((len(depths), len(widths)), dtype=object)
+    correct = np.empty_like(chosen)
+    for j, depth in enumerate(depths):
+        for i, width in enumerate(widths):
+            box = Box(float(width), float(depth), task.box_height)
+            x0 = Simulation(task, box).features()
+            chosen[j, i] = classify_start(seq.reset(0.0, x0), signatures)
+            correct[j, i] = correct_strategy(box, task)
+    return {
+        "widths": widths,
+        "depths": depths,
+        "chosen": chosen.astype(str),
+        "correct": correct.astype(str),
+        "accuracy": float(np.mean(chosen == correct)),
+    }

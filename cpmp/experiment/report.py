@@ -1,0 +1,124 @@
+"""Report files of the main job: ``report.json`` (machine-readable) and ``report.md``."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cpmp.io import atomic_write_text
+
+PAPER_TABLE_I: dict[str, dict[str, float]] = {
+    "3": {"W": 3, "I": 4, "C": 13, "distance_mean": 0.13, "distance_std": 0.08},
+    "6": {"W": 3, "I": 2, "C": 15, "distance_mean": 0.07, "distance_std": 0.04},
+    "9": {"W": 2, "I": 2, "C": 16, "distance_mean": 0.06, "distance_std": 0.03},
+}
+"""The paper's Table I (20 random boxes per D)."""
+
+
+def jsonable(obj: Any) -> Any:
+    """Recursively convert numpy values and tuples to JSON types (NaN -> None)."""
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path: str | Path, obj: Any) -> Path:
+    """Write ``obj`` as indented JSON, atomically."""
+    atomic_write_text(path, json.dumps(jsonable(obj), indent=2) + "\n")
+    return Path(path)
+
+
+def mean_std(values: list[float | None]) -> tuple[float | None, float | None]:
+    """Mean and (population) std of the non-missing values."""
+    xs = [v for v in values if v is not None]
+    if not xs:
+        return None, None
+    return float(np.mean(xs)), float(np.std(xs))
+
+
+def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
+    if mean is None:
+        return "–"
+    if std is None:
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+
+
+def render_markdown(report: Mapping[str, Any]) -> str:
+    """The human-readable report: Table I beside the paper's, progress errors, strategy map."""
+    exp = report["experiment"]
+    lines = [
+        f"# cpmp experiment `{exp['name']}`",
+        "",
+        f"Predictor `{report['predictor']['kind']}`, seeds {exp['seeds']}, "
+        f"{exp['n_boxes']} random boxes per training size and seed; counts are mean ± std over "
+        "seeds.",
+        "",
+        "## Reproduction (Table I)",
+        "",
+        "| D | W (ours) | I (ours) | C (ours) | W / I / C (paper) | distance (ours) "
+        "| distance (paper) |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for d, row in report["reproduction"].items():
+        paper = PAPER_TABLE_I.get(d)
+        paper_counts = f"{paper['W']} / {paper['I']} / {paper['C']}" if paper else "–"
+        paper_dist = _fmt(paper["distance_mean"], paper["distance_std"]) if paper else "–"
+        lines.append(
+            f"| {d} | {_fmt(row['W'], row['W_std'], 1)} | {_fmt(row['I'], row['I_std'], 1)} | "
+            f"{_fmt(row['C'], row['C_std'], 1)} | {paper_counts} | "
+            f"{_fmt(row['distance_mean'], row['distance_std'])} | {paper_dist} |"
+        )
+    lines += [
+        "",
+        f"Of {exp['n_boxes']} boxes: W = wrong start, I = incomplete (wrong transition, deadlock, "
+        "time-out or diverged physics), C = complete. The paper's counts are of 20 boxes.",
+        "Distance: Euclidean feature-space distance between the state at which the sequencer "
+        "triggered a transition and the state at which the scripted demonstrator switched on "
+        "the same box (k-th switch of each variable paired with the k-th), pooled over all "
+        "complete episodes.",
+        "",
+        "## Progress prediction (Fig. 6)",
+        "",
+        "| D | MAE | MAE first 10 % | MAE last 10 % |",
+        "| --- | --- | --- | --- |",
+    ]
+    for d, row in report["progress"]["by_train_size"].items():
+        lines.append(
+            f"| {d} | {_fmt(row['mae'], row['mae_std'], 3)} | {_fmt(row['mae_first'], None, 3)} "
+            f"| {_fmt(row['mae_last'], None, 3)} |"
+        )
+    smap = report.get("strategy_map")
+    if smap:
+        lines += [
+            "",
+            "## Strategy map (Fig. 7)",
+            "",
+            f"Initial strategy correct on {_fmt(100 * smap['accuracy'], None, 1)} % of a "
+            f"{smap['grid'][0]} x {smap['grid'][1]} width x depth grid (D = {smap['train_size']},"
+            f" mean over seeds).",
+        ]
+    lines += ["", "## Files", ""]
+    lines += [f"- `{name}`: {what}" for name, what in report.get("files", {}).items()]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(report: Mapping[str, Any], run_dir: str | Path) -> Path:
+    """Write ``report.json`` and ``report.md`` into ``run_dir``; returns the JSON path."""
+    run_dir = Path(run_dir)
+    write_json(run_dir / "report.json", report)
+    atomic_write_text(run_dir / "report.md", render_markdown(jsonable(report)))
+    return run_dir / "report.json"
