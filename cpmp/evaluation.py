@@ -13,6 +13,7 @@ minus the demonstration's state at its first sample under the new MP).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -108,7 +109,7 @@ def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) ->
 def demonstrated_switches(demo: Demonstration, variable: str) -> list[tuple[str, str, np.ndarray]]:
     """``(source, target, state)`` of each switch of ``variable`` in ``demo``."""
     segs = demo.segments(variable)
-    return [(a.mp, b.mp, demo.features[b.start]) for a, b in zip(segs[:-1], segs[1:], strict=True)]
+    return [(a.mp, b.mp, demo.features[b.start]) for a, b in itertools.pairwise(segs)]
 
 
 def switch_distances(
