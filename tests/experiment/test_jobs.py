@@ -1,0 +1,288 @@
+"""End to end: the main job on ``experiment=tiny`` (in-process and as a script, run side by side
+and compared), replaying a demonstration into an ``.rrd``, and training/evaluating from your
+own HDF5 file (no simulator)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from cpmp.data import load_demonstrations, save_demonstrations
+from cpmp.experiment.jobs import evaluate_checkpoint, run_experiment, train_from_file
+from cpmp.experiment.recording import read_recording
+from cpmp.synthetic import make_demonstrations
+
+# One thread: a second busy process on a 2-core machine slows torch's default two threads
+# down many times over; the script below runs with one thread too (cli.run_job).
+torch.set_num_threads(1)
+
+ROOT = Path(__file__).resolve().parents[2]
+CONF = ROOT / "conf"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def compose_cfg(config_name: str, overrides: list[str]) -> Any:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose(config_name, overrides=overrides)
+
+
+def load_inspect_rrd() -> Any:
+    spec = importlib.util.spec_from_file_location("inspect_rrd", ROOT / "scripts/inspect_rrd.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def without_timings(obj: Any) -> Any:
+    """``obj`` without wall-clock fields (``seconds``) and paths (``files``, ``rrd``)."""
+    if isinstance(obj, dict):
+        return {
+            k: without_timings(v) for k, v in obj.items() if k not in ("seconds", "files", "rrd")
+        }
+    if isinstance(obj, list):
+        return [without_timings(v) for v in obj]
+    return obj
+
+
+# ------------------------------------------------------------------- experiment=tiny, twice
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """Run ``experiment=tiny`` in-process and, at the same time, as ``scripts/experiment.py``
+    in a subprocess (two cores, ~20 s for both). Yields the two run dirs and the script's
+    stdout."""
+    base = tmp_path_factory.mktemp("tiny")
+    direct, script = base / "direct", base / "script"
+    direct.mkdir()
+    with open(base / "stdout.txt", "w") as out, open(base / "stderr.txt", "w") as err:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "scripts/experiment.py",
+                "experiment=tiny",
+                f"hydra.run.dir={script}",
+            ],
+            cwd=ROOT,
+            stdout=out,
+            stderr=err,
+            text=True,
+        )
+        try:
+            cfg = compose_cfg("experiment", ["experiment=tiny"])
+            report_path = run_experiment(cfg, direct)
+        finally:
+            rc = proc.wait(timeout=300)
+    assert rc == 0, (base / "stderr.txt").read_text()[-3000:]
+    return {
+        "cfg": cfg,
+        "direct": direct,
+        "script": script,
+        "report_path": report_path,
+        "stdout": (base / "stdout.txt").read_text(),
+    }
+
+
+def test_report_fields_and_ranges(tiny):
+    assert tiny["report_path"] == tiny["direct"] / "report.json"
+    report = json.loads(tiny["report_path"].read_text())
+    exp = report["experiment"]
+    assert exp["name"] == "tiny"
+    assert report["predictor"]["kind"] == "klr"
+    assert 0.0 <= report["progress"]["mae"] <= 1.0
+    assert report["progress"]["train_size"] == 3
+    rep = report["reproduction"]["3"]
+    for key in ("W", "I", "C"):
+        assert rep[key] >= 0
+        assert all(v >= 0 for v in rep["per_seed"][key])
+    for w, i, c in zip(*(rep["per_seed"][k] for k in ("W", "I", "C")), strict=True):
+        assert w + i + c == exp["n_boxes"]
+    assert rep["W"] + rep["I"] + rep["C"] == pytest.approx(exp["n_boxes"])
+    assert rep["distance_mean"] is None or rep["distance_mean"] >= 0
+    assert rep["paper"] == {"W": 3, "I": 4, "C": 13, "distance_mean": 0.13, "distance_std": 0.08}
+    assert 0.0 <= report["strategy_map"]["accuracy"] <= 1.0
+    assert report["seconds"] > 0
+
+
+def test_report_markdown_has_papers_column(tiny):
+    text = (tiny["direct"] / "report.md").read_text()
+    assert "W / I / C (paper)" in text
+    assert "| 3 / 4 / 13 |" in text
+    assert "0.13 ± 0.08" in text
+
+
+def test_files_written(tiny):
+    run = tiny["direct"]
+    for name in ("fig6_progress.png", "fig7_strategy_map.png"):
+        assert (run / name).read_bytes()[:8] == PNG_SIGNATURE
+    demos_h5 = run / "seed_0" / "demos.h5"
+    # tiny: 2 demos per strategy, 1 of each for training
+    assert len(load_demonstrations(demos_h5, split="train")) == 3
+    assert len(load_demonstrations(demos_h5, split="test")) == 3
+    from cpmp.sequencer import ConcurrentSequencer
+
+    seq = ConcurrentSequencer.load(run / "seed_0" / "model_D3.pt")
+    assert set(seq.graphs) == set(load_demonstrations(demos_h5)[0].variables)
+    assert len(list((run / "seed_0" / "recordings").glob("*.rrd"))) == 2
+
+
+def test_recordings_agree_with_episodes_json(tiny):
+    episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
+    assert len(episodes) == 2  # 1 seed x 1 training size x 2 boxes
+    for episode in episodes:
+        summary = read_recording(episode["rrd"])
+        assert summary.outcome == episode["outcome"]
+        assert summary.reason == episode["reason"]
+        if episode["outcome"] != "wrong_start":
+            assert summary.duration == pytest.approx(episode["duration"], abs=0.011)
+
+
+def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
+    episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
+    paths = [e["rrd"] for e in episodes] + [str(demo_rrd)]
+    summaries = {path: read_recording(path) for path in paths}
+    # the demo replay always switches MPs; the sequencer's episodes may not (wrong start)
+    assert summaries[str(demo_rrd)].transitions
+    assert load_inspect_rrd().main(paths) == 0
+    out = capsys.readouterr().out
+    blocks = out.split("== ")[1:]
+    assert len(blocks) == len(paths)
+    for path, block in zip(paths, blocks, strict=True):
+        summary = summaries[path]
+        assert block.startswith(path)
+        assert f"transitions ({len(summary.transitions)}):" in block
+        lines = [line for line in block.splitlines() if " -> " in line]
+        assert len(lines) == len(summary.transitions)
+        for line, event in zip(lines, summary.transitions, strict=True):
+            assert f"{event.variable}: {event.source} -> {event.target}" in line
+        assert f"outcome: {summary.outcome}" in block
+
+
+def test_script_prints_report_path_last_and_same_numbers(tiny):
+    script_report = tiny["script"] / "report.json"
+    assert tiny["stdout"].strip().splitlines()[-1] == str(script_report)
+    direct = json.loads((tiny["direct"] / "report.json").read_text())
+    again = json.loads(script_report.read_text())
+    assert without_timings(again) == without_timings(direct)
+    episodes = [json.loads((tiny[k] / "episodes.json").read_text()) for k in ("direct", "script")]
+    assert without_timings(episodes[0]) == without_timings(episodes[1])
+
+
+@pytest.fixture(scope="module")
+def demo_rrd(tiny) -> Path:
+    """The first collected demonstration of the tiny run, replayed into an ``.rrd``."""
+    from cpmp.experiment.demo_recording import record_demo_rrd
+    from cpmp.sim import Box, TaskConfig
+
+    demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
+    meta = demo.metadata
+    box = Box(meta["box_width"], meta["box_depth"], meta["box_height"])
+    path = tiny["direct"] / "demo_000.rrd"
+    assert record_demo_rrd(demo, box, TaskConfig.from_dict(tiny["cfg"].task), path) == path
+    return path
+
+
+def test_demo_replayed_into_rrd(tiny, demo_rrd):
+    from cpmp.experiment.demo_recording import label_switches
+
+    demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
+    meta = demo.metadata
+    path = demo_rrd
+    summary = read_recording(path)
+    assert summary.episodes == [demo.name]
+    assert summary.outcome == "complete"
+    expected = [(e.variable, e.source, e.target) for e in label_switches(demo)]
+    assert expected, "a demonstration switches MPs"
+    assert [(e.variable, e.source, e.target) for e in summary.transitions] == expected
+    assert all(e.probability == 1.0 for e in summary.transitions)
+    switch_times = [e.t for e in label_switches(demo)]
+    # times are stored as integer nanoseconds
+    assert [e.t for e in summary.transitions] == pytest.approx(switch_times, abs=1e-8)
+    assert summary.metadata["kind"] == "demonstration"
+    assert summary.metadata["strategy"] == meta["strategy"]
+    assert not any(p.startswith("progress") for p in summary.entity_paths)
+    assert any(p.startswith("world/") for p in summary.entity_paths)
+    assert f"features/{demo.feature_names[0]}" in summary.entity_paths
+    # the replay reproduces the demonstration up to its last switch (the demonstrator keeps
+    # recording until it is done; the replay stops once the episode is complete)
+    assert switch_times[-1] <= summary.duration <= demo.duration + 1e-9
+
+
+def test_demo_rrd_rejects_non_simulator_demos(tiny, tmp_path):
+    from cpmp.errors import DataError
+    from cpmp.experiment.demo_recording import record_demo_rrd
+    from cpmp.sim import Box, TaskConfig
+
+    synthetic = make_demonstrations(1, seed=0)[0]
+    task = TaskConfig.from_dict(tiny["cfg"].task)
+    with pytest.raises(DataError, match="feature names"):
+        record_demo_rrd(synthetic, Box(0.2, 0.15, 0.1), task, tmp_path / "bad.rrd")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------- your own demonstrations (no sim)
+@pytest.fixture(scope="module")
+def demo_file(tmp_path_factory) -> Path:
+    """Six synthetic demos (alternating strategies): demo_0..3 train, demo_4..5 test."""
+    demos = make_demonstrations(6, seed=0)
+    path = tmp_path_factory.mktemp("byod") / "demos.h5"
+    names = [d.name for d in demos]
+    save_demonstrations(path, demos, splits={"train": names[:4], "test": names[4:]})
+    return path
+
+
+def train(demo_file: Path, run_dir: Path, *overrides: str) -> Path:
+    run_dir.mkdir()
+    cfg = compose_cfg("train", [f"data.path={demo_file}", *overrides])
+    return train_from_file(cfg, run_dir)
+
+
+@pytest.fixture(scope="module")
+def checkpoint(demo_file, tmp_path_factory) -> Path:
+    return train(demo_file, tmp_path_factory.mktemp("train") / "run")
+
+
+def test_train_from_file_writes_checkpoint(checkpoint):
+    assert checkpoint.name == "model.pt"
+    assert checkpoint.is_file()
+    summary = json.loads((checkpoint.parent / "train_summary.json").read_text())
+    assert summary["split"] == "train"
+    assert summary["n_demos"] == 4
+
+
+def test_evaluate_checkpoint_on_test_split(checkpoint, demo_file, tmp_path):
+    cfg = compose_cfg("evaluate", [f"data.path={demo_file}", f"checkpoint={checkpoint}"])
+    out = evaluate_checkpoint(cfg, tmp_path)
+    assert out == tmp_path / "evaluation.json"
+    result = json.loads(out.read_text())
+    assert result["split"] == "test"
+    assert result["n_demos"] == 2
+    # Synthetic attractor demos are easy: the KLR predictor's progress error is ~0.08.
+    assert 0.0 <= result["progress"]["mae"] < 0.1
+    assert set(result["progress"]["per_node"]) == {
+        f"{v}/{v}_{mp}" for v in ("a", "b") for mp in ("go", "wait", "back")
+    }
+    assert 0.0 <= result["replay"]["all_match"] <= 1.0
+    assert "Progress MAE" in (tmp_path / "evaluation.md").read_text()
+    assert (tmp_path / "fig6_progress.png").read_bytes()[:8] == PNG_SIGNATURE
+
+
+def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
+    from cpmp.evaluation import activation_progress
+    from cpmp.sequencer import ConcurrentSequencer
+
+    again = train(demo_file, tmp_path / "again")
+    test = load_demonstrations(demo_file, split="test")
+    first, second = (
+        activation_progress(ConcurrentSequencer.load(p), test) for p in (checkpoint, again)
+    )
+    assert len(first) == len(second) > 0
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a.predicted, b.predicted)
