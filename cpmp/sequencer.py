@@ -119,7 +119,7 @@ def _split_options(options: dict[str, Any], kind: str) -> tuple[dict, dict, dict
     pred_names = set(predictor_options(kind))
     seq_names = {f.name for f in dataclasses.fields(SequencerConfig)}
     trainer_names = {f.name for f in dataclasses.fields(TrainerConfig)}
-    fit_names = {"seed", "variables"}
+    fit_names = {"seed", "variables", "subsample"}
     pred, seq, trainer, rest = {}, {}, {}, {}
     for key, value in options.items():
         if key in pred_names:
@@ -197,7 +197,9 @@ class ConcurrentSequencer:
             **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
                 ``l2``, ``feature_scaling``), sequencer options (``threshold``, ``patience``,
                 ``min_improvement``), trainer options (``max_epochs``, ``progress_bar``,
-                ``logger``, ``log_dir``), ``seed`` and ``variables`` (subset to model).
+                ``logger``, ``log_dir``), ``seed``, ``variables`` (subset to model) and
+                ``subsample`` (train on every k-th sample of each activation, its last sample
+                always kept; expected progress is computed on the full trajectory first).
         """
         pred_opts, seq_opts, trainer_opts, rest = _split_options(options, predictor)
         seq_config = SequencerConfig(**seq_opts)
@@ -218,7 +220,10 @@ class ConcurrentSequencer:
         model = make_predictor(predictor, node_keys, len(feature_names), **pred_opts)
         all_x = np.concatenate([d.features for d in demos], axis=0)
         model.scaler.fit(all_x, model.config.feature_scaling)
-        data = node_training_data(graphs, model)
+        subsample = int(rest.get("subsample", 1))
+        if subsample < 1:
+            raise ConfigError(f"subsample must be >= 1, got {subsample}")
+        data = node_training_data(graphs, model, subsample)
         summary = fit_predictor(model, data, trainer_config, seed=seed)
         summary["n_demos"] = len(demos)
         return cls(graphs, model, feature_names, seq_config, summary)
@@ -393,10 +398,10 @@ class ConcurrentSequencer:
 
 
 def node_training_data(
-    graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor
+    graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
 ) -> list[NodeData]:
     """Per-node training samples (scaled features) and expected-progress targets, in the
-    predictor's node order."""
+    predictor's node order; ``subsample`` keeps every k-th sample (and the last) for the loss."""
     out = []
     for v, mp in predictor.node_keys:
         acts = graphs[v].activations[mp]
@@ -404,16 +409,25 @@ def node_training_data(
             raise DataError(f"node {v}/{mp} has no activation data to train on")
         scaled = [predictor.scaler.transform(a.features) for a in acts]
         targets = [expected_progress(f, a.time) for f, a in zip(scaled, acts, strict=True)]
+        keep = [_stride(len(f), subsample) for f in scaled]
+        x = np.concatenate([f[k] for f, k in zip(scaled, keep, strict=True)])
+        y = np.concatenate([y[k] for y, k in zip(targets, keep, strict=True)])
         dt = predictor.dtype_
         out.append(
             NodeData(
                 key=(v, mp),
-                x=torch.as_tensor(np.concatenate(scaled), dtype=dt),
-                target=torch.as_tensor(np.concatenate(targets), dtype=dt),
+                x=torch.as_tensor(x, dtype=dt),
+                target=torch.as_tensor(y, dtype=dt),
                 activations=scaled,
             )
         )
     return out
+
+
+def _stride(n: int, k: int) -> np.ndarray:
+    """Indices ``0, k, 2k, ...`` of ``n`` samples, always including the last one."""
+    idx = np.arange(0, n, k)
+    return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
 
 
 def _plain(obj: Any) -> Any:

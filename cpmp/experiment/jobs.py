@@ -285,10 +285,13 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
 
     if not cfg.get("checkpoint"):
         raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
-    seq = ConcurrentSequencer.load(str(cfg.checkpoint))
+    checkpoint = Path(str(cfg.checkpoint))
+    if not checkpoint.is_file():
+        raise CpmpFileError(f"checkpoint {checkpoint} does not exist; train one with train.py")
     path = Path(str(cfg.data.path)) if cfg.data.get("path") else None
     if path is None or not path.is_file():
         raise CpmpFileError(f"demonstration file {path} does not exist (set data.path)")
+    seq = ConcurrentSequencer.load(checkpoint)
     split = cfg.data.get("split", "auto")
     if split == "auto":
         split = "test" if "test" in list_splits(path) else None

@@ -77,7 +77,19 @@ class ExperimentSettings:
     max_time: float | None = None
 
     def __post_init__(self) -> None:
-        if not self.seeds or any(not isinstance(s, int) or s < 0 for s in self.seeds):
+        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"experiment.{name} must be an integer, got {value!r}")
+        for name in ("seeds", "train_sizes", "strategy_grid"):
+            values = list(getattr(self, name))
+            if any(isinstance(v, bool) or not isinstance(v, int) for v in values):
+                raise ConfigError(f"experiment.{name} must be integers, got {values}")
+        for name in ("seeds", "train_sizes"):
+            values = list(getattr(self, name))
+            if len(set(values)) != len(values):
+                raise ConfigError(f"experiment.{name} has duplicates: {values}")
+        if not self.seeds or any(s < 0 for s in self.seeds):
             raise ConfigError(f"experiment.seeds must be non-negative integers, got {self.seeds}")
         for name in ("demos_per_strategy", "train_per_strategy", "n_boxes"):
             if getattr(self, name) < 1:

@@ -13,8 +13,8 @@ bimanual, else the single hand):
   lowered) -> ``relax`` (hand within ``relax_distance`` of home).
 
 Synchronisation points: lifting starts only when *every* grasping hand's fingers have closed;
-returning home starts only when every grasping hand has released. An idle hand keeps ``home``,
-``home``, ``relax`` throughout. Guards read the measured state, so the switches happen at
+returning home starts only when every grasping hand has released. An idle hand keeps ``idle``,
+``idle``, ``relax`` throughout. Guards read the measured state, so the switches happen at
 different times per variable.
 """
 
@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.sim.control import rotation_angle
+from cpmp.sim.mps import IDLE
 from cpmp.sim.features import goal_distance
 from cpmp.sim.scene import HANDS, correct_strategy
 from cpmp.sim.simulation import Simulation
@@ -51,8 +52,8 @@ class ScriptedDemonstrator:
         """Initial MPs for the strategy."""
         active = {}
         for hand in HANDS:
-            active[f"{hand}_pos"] = "home"
-            active[f"{hand}_rot"] = "home"
+            active[f"{hand}_pos"] = IDLE
+            active[f"{hand}_rot"] = IDLE
             active[f"{hand}_fingers"] = "relax"
         reach = "reach_edge" if self.strategy == "both" else "reach_top"
         for hand in self.hands:
@@ -128,11 +129,8 @@ class ScriptedDemonstrator:
     def _finished(self, a: dict[str, str]) -> bool:
         """All variables in their final MP and at its goal."""
         for hand in HANDS:
-            if (a[f"{hand}_pos"], a[f"{hand}_rot"], a[f"{hand}_fingers"]) != (
-                "home",
-                "home",
-                "relax",
-            ):
+            final = ("home", "home") if hand in self.hands else (IDLE, IDLE)
+            if (a[f"{hand}_pos"], a[f"{hand}_rot"], a[f"{hand}_fingers"]) != (*final, "relax"):
                 return False
             if self._pos_error(hand) > self.cfg.pos_tol or not self._rot_done(hand):
                 return False

@@ -7,7 +7,7 @@ Layout (names from :func:`feature_names`):
 * ``box_x, box_y, box_z`` - measured box centre, scaled over the workspace bounds
   :data:`WORKSPACE_LO`..:data:`WORKSPACE_HI`;
 * ``left_ee_{x,y,z}, right_ee_{x,y,z}`` - measured end-effector site positions, same scaling;
-* ``dist.<variable>.<mp>`` for every orientation and finger MP: the goal-distance feature
+* ``dist.<variable>.<mp>`` for every orientation and finger MP (except ``idle``): the goal-distance feature
   ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``; ``D`` is the rotation angle
   [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle difference vector
   (``cfg.finger_sigma``). ``f`` is 0 at the goal and tends to 1 far from it.
@@ -19,7 +19,7 @@ import numpy as np
 
 from cpmp.sim.config import TaskConfig
 from cpmp.sim.control import rotation_angle
-from cpmp.sim.mps import MP
+from cpmp.sim.mps import IDLE, MP
 from cpmp.sim.scene import HANDS, Box
 
 WORKSPACE_LO = np.array([0.0, -0.5, 0.6])
@@ -37,7 +37,7 @@ def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
         names += [f"{hand}_ee_{axis}" for axis in "xyz"]
     for variable, mps in library.items():
         if variable.endswith(("_rot", "_fingers")):
-            names += [f"dist.{variable}.{name}" for name in mps]
+            names += [f"dist.{variable}.{name}" for name in mps if name != IDLE]
     return names
 
 
@@ -80,6 +80,8 @@ def compute_features(
         if variable.endswith("_rot"):
             rot = ee_rot[HANDS.index(hand)]
             for mp in mps.values():
+                if mp.name == IDLE:
+                    continue
                 angle = float(rotation_angle(mp.target, rot))
                 dists.append(goal_distance(angle**2, cfg.rot_sigma))
         elif variable.endswith("_fingers"):

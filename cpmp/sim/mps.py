@@ -21,8 +21,9 @@ Goal frames of position MPs:
 Differences from the paper's 20 MPs: each variable has its own MP set, so the world-frame
 motions exist once per hand, and single-hand (top centre) and bimanual (top edge) grasps are
 separate reach MPs, giving 13 position MPs (12 world/box/held + 1 relative) instead of 7 + 1.
-Orientation (2 per hand: ``home``, ``down``) and finger MPs (4 per hand: ``relax``,
-``preshape``, ``grasp``, ``release``) match the paper. The ``grasp`` finger MP also switches the
+Orientation (``home``, ``down``) and finger MPs (4 per hand: ``relax``, ``preshape``,
+``grasp``, ``release``) match the paper. Position and orientation have an extra ``idle`` MP per
+hand for the hand a strategy leaves unused (see :data:`IDLE`). The ``grasp`` finger MP also switches the
 palm's adhesion actuator on. The reach MPs use a smaller vertical gain
 (``cfg.reach_descent_ratio``) so the palm is above its grasp point before it touches the box.
 """
@@ -44,8 +45,22 @@ VARIABLES: tuple[str, ...] = (
     "right_rot",
     "right_fingers",
 )
-POSITION_MPS: tuple[str, ...] = ("home", "reach_top", "reach_edge", "lift", "carry", "lower")
-ROTATION_MPS: tuple[str, ...] = ("home", "down")
+POSITION_MPS: tuple[str, ...] = (
+    "idle",
+    "home",
+    "reach_top",
+    "reach_edge",
+    "lift",
+    "carry",
+    "lower",
+)
+ROTATION_MPS: tuple[str, ...] = ("idle", "home", "down")
+IDLE = "idle"
+"""The MP of a hand the strategy does not use: hold the home pose for the whole episode. Same
+attractor as ``home`` but a different MP: ``home`` *returns* a hand after the task. Keeping them
+apart keeps the idle hand's start (box on the plate) and the final return (box in the
+container) in different nodes, so an idle hand's progress is not confused with the end of the
+task. Idle MPs add no goal-distance feature (it would duplicate ``home``'s)."""
 FINGER_MPS: tuple[str, ...] = ("relax", "preshape", "grasp", "release")
 HELD_MPS: frozenset[str] = frozenset({"lift", "carry", "lower", "follow_right"})
 
@@ -111,6 +126,7 @@ def build_library(
         side = 1.0 if hand == "left" else -1.0
         var = f"{hand}_pos"
         pos = {
+            "idle": MP(var, "idle", "position", "world", home_pos[hand].copy()),
             "home": MP(var, "home", "position", "world", home_pos[hand].copy()),
             "reach_top": MP(
                 var, "reach_top", "position", "box", np.array([0.0, 0.0, top]), descend
@@ -137,6 +153,7 @@ def build_library(
         lib[var] = pos
         var = f"{hand}_rot"
         lib[var] = {
+            "idle": MP(var, "idle", "orientation", "world", home_rot[hand].copy()),
             "home": MP(var, "home", "orientation", "world", home_rot[hand].copy()),
             "down": MP(var, "down", "orientation", "world", R_DOWN.copy()),
         }

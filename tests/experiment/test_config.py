@@ -172,25 +172,10 @@ def test_unknown_predictor_option_is_a_config_error():
         ("experiment.record=some", "record"),
         ("experiment.max_time=0", "max_time"),
         ("+experiment.n_box=3", "unknown experiment option.*n_box"),
-        pytest.param(
-            "experiment.n_boxes=2.5",
-            "n_boxes",
-            marks=pytest.mark.xfail(
-                strict=True, reason="ExperimentSettings does not check integer types yet"
-            ),
-        ),
-        pytest.param(
-            "experiment.seeds=[0,0]",
-            "seeds",
-            marks=pytest.mark.xfail(strict=True, reason="duplicate seeds are not rejected yet"),
-        ),
-        pytest.param(
-            "experiment.train_sizes=[3,3]",
-            "train_sizes",
-            marks=pytest.mark.xfail(
-                strict=True, reason="duplicate train_sizes are not rejected yet"
-            ),
-        ),
+        ("experiment.n_boxes=2.5", "n_boxes must be an integer"),
+        ("experiment.seeds=[0,0]", "seeds has duplicates"),
+        ("experiment.train_sizes=[3,3]", "train_sizes has duplicates"),
+        ("experiment.seeds=[true]", "seeds must be integers"),
     ],
 )
 def test_bad_experiment_values_raise_config_error(override, match):
