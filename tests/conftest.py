@@ -7,7 +7,6 @@ import torch
 
 from cpmp.synthetic import make_demonstrations
 
-
 # One thread: on 2 cores, torch's default thread pool fights with other processes and makes
 # the small fits of the tests many times slower.
 torch.set_num_threads(1)

@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.sim.control import rotation_angle
-from cpmp.sim.mps import IDLE
 from cpmp.sim.features import goal_distance
+from cpmp.sim.mps import IDLE
 from cpmp.sim.scene import HANDS, correct_strategy
 from cpmp.sim.simulation import Simulation
 

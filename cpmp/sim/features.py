@@ -7,10 +7,10 @@ Layout (names from :func:`feature_names`):
 * ``box_x, box_y, box_z`` - measured box centre, scaled over the workspace bounds
   :data:`WORKSPACE_LO`..:data:`WORKSPACE_HI`;
 * ``left_ee_{x,y,z}, right_ee_{x,y,z}`` - measured end-effector site positions, same scaling;
-* ``dist.<variable>.<mp>`` for every orientation and finger MP (except ``idle``): the goal-distance feature
-  ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``; ``D`` is the rotation angle
-  [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle difference vector
-  (``cfg.finger_sigma``). ``f`` is 0 at the goal and tends to 1 far from it.
+* ``dist.<variable>.<mp>`` for every orientation and finger MP (except ``idle``): the
+  goal-distance feature ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``;
+  ``D`` is the rotation angle [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle
+  difference vector (``cfg.finger_sigma``). ``f`` is 0 at the goal and tends to 1 far from it.
 """
 
 from __future__ import annotations

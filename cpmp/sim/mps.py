@@ -23,8 +23,8 @@ motions exist once per hand, and single-hand (top centre) and bimanual (top edge
 separate reach MPs, giving 13 position MPs (12 world/box/held + 1 relative) instead of 7 + 1.
 Orientation (``home``, ``down``) and finger MPs (4 per hand: ``relax``, ``preshape``,
 ``grasp``, ``release``) match the paper. Position and orientation have an extra ``idle`` MP per
-hand for the hand a strategy leaves unused (see :data:`IDLE`). The ``grasp`` finger MP also switches the
-palm's adhesion actuator on. The reach MPs use a smaller vertical gain
+hand for the hand a strategy leaves unused (see :data:`IDLE`). The ``grasp`` finger MP also
+switches the palm's adhesion actuator on. The reach MPs use a smaller vertical gain
 (``cfg.reach_descent_ratio``) so the palm is above its grasp point before it touches the box.
 """
 
