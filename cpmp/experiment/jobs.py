@@ -75,6 +75,12 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
             failed = [d.name for d in demos if not d.metadata.get("success")]
             if failed:
                 raise RuntimeError(f"the scripted demonstrator failed on {failed}")
+            if settings.record_demos:
+                from cpmp.experiment.demo_recording import record_demo_rrd
+
+                (seed_dir / "recordings").mkdir(exist_ok=True)
+                for demo, box in zip(demos, boxes, strict=True):
+                    record_demo_rrd(demo, box, task, seed_dir / "recordings" / f"{demo.name}.rrd")
             train, test = split_by_strategy(demos, settings.train_per_strategy)
             save_demonstrations(
                 seed_dir / "demos.h5",

@@ -93,11 +93,6 @@ def test_full_experiment_has_the_papers_sizes():
 )
 def test_launcher_options_compose(name, target):
     assert sorted(options("launcher")) == ["joblib", "local", "slurm"]
-    if name == "slurm":
-        pytest.importorskip(
-            "hydra_plugins.hydra_submitit_launcher",
-            reason="launcher=slurm needs the submitit plugin: pip install -e '.[slurm]'",
-        )
     cfg = compose_cfg("experiment", ["experiment=tiny", f"launcher={name}"], hydra=True)
     assert cfg.hydra.launcher._target_.endswith(target)
     if name == "joblib":
