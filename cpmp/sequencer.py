@@ -54,11 +54,17 @@ class SequencerConfig:
         min_improvement: an increase of ``p`` smaller than this does not count as improving.
             Attractors converge asymptotically, so ``p`` keeps creeping up by tiny amounts; with
             a strict comparison (``0``) such a transition might never fire.
+        start_rule: ``independent`` (paper): each graph starts at its own initial node of
+            highest entry probability. ``joint``: choose among the combinations of initial MPs
+            seen together in a demonstration the one with the highest summed log entry
+            probability, so graphs cannot start in a mixture of strategies that was never
+            demonstrated (the coupling the paper's discussion proposes).
     """
 
     threshold: float = 0.65
     patience: float = 0.05
     min_improvement: float = 1e-3
+    start_rule: str = "independent"
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.threshold < 1.0:
@@ -67,6 +73,10 @@ class SequencerConfig:
             raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
         if self.min_improvement < 0.0:
             raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
+        if self.start_rule not in ("independent", "joint"):
+            raise ConfigError(
+                f"start_rule must be 'independent' or 'joint', got {self.start_rule!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -153,12 +163,15 @@ class ConcurrentSequencer:
         feature_names: Sequence[str],
         config: SequencerConfig | None = None,
         fit_summary: dict[str, Any] | None = None,
+        initial_combinations: Sequence[Mapping[str, str]] | None = None,
     ) -> None:
         self.graphs = dict(graphs)
         self.predictor = predictor.eval()
         self.feature_names = list(feature_names)
         self.config = config or SequencerConfig()
         self.fit_summary = fit_summary or {}
+        self.initial_combinations = [dict(c) for c in initial_combinations or []]
+        """Initial MP per variable of each demonstration (distinct; for ``start_rule=joint``)."""
         if len(self.feature_names) != predictor.n_features:
             raise ConfigError(
                 f"{len(self.feature_names)} feature names for a predictor of "
@@ -226,7 +239,12 @@ class ConcurrentSequencer:
         data = node_training_data(graphs, model, subsample)
         summary = fit_predictor(model, data, trainer_config, seed=seed)
         summary["n_demos"] = len(demos)
-        return cls(graphs, model, feature_names, seq_config, summary)
+        combos: list[dict[str, str]] = []
+        for demo in demos:
+            combo = {v: str(demo.labels[v][0]) for v in sorted(graphs)}
+            if combo not in combos:
+                combos.append(combo)
+        return cls(graphs, model, feature_names, seq_config, summary, combos)
 
     # ----------------------------------------------------------------------------- inference
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
@@ -255,13 +273,23 @@ class ConcurrentSequencer:
         return out
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """Start every graph at its initial node of highest entry probability ``1 - φ``."""
+        """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
+        demonstrated combination of initial nodes with the highest summed log entry probability
+        when ``start_rule="joint"``)."""
         phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
-        self.active = {}
-        for v in sorted(self.graphs):
-            initial = sorted(self.graphs[v].initial_nodes)
-            entry = [1.0 - phi[self._index[(v, mp)]] for mp in initial]
-            self.active[v] = initial[int(np.argmax(entry))]
+        if self.config.start_rule == "joint" and self.initial_combinations:
+            entry = np.clip(1.0 - phi, 1e-12, 1.0)
+            scores = [
+                sum(np.log(entry[self._index[(v, mp)]]) for v, mp in combo.items())
+                for combo in self.initial_combinations
+            ]
+            self.active = dict(self.initial_combinations[int(np.argmax(scores))])
+        else:
+            self.active = {}
+            for v in sorted(self.graphs):
+                initial = sorted(self.graphs[v].initial_nodes)
+                entry_v = [1.0 - phi[self._index[(v, mp)]] for mp in initial]
+                self.active[v] = initial[int(np.argmax(entry_v))]
         self.events = []
         self._candidates = {v: None for v in self.graphs}
         self._last_t = float(t)
@@ -342,6 +370,7 @@ class ConcurrentSequencer:
             "predictor": {"spec": self.predictor.spec(), "state": self.predictor.state_dict()},
             "sequencer": dataclasses.asdict(self.config),
             "fit_summary": _plain(self.fit_summary),
+            "initial_combinations": self.initial_combinations,
         }
         path = Path(path)
         with atomic_path(path) as tmp:
@@ -376,13 +405,19 @@ class ConcurrentSequencer:
             payload["feature_names"],
             SequencerConfig(**payload["sequencer"]),
             payload.get("fit_summary", {}),
+            payload.get("initial_combinations", []),
         )
 
     def with_config(self, **options: Any) -> ConcurrentSequencer:
         """A sequencer sharing graphs and predictor but with other transition-rule options."""
         config = dataclasses.replace(self.config, **options)
         return ConcurrentSequencer(
-            self.graphs, self.predictor, self.feature_names, config, self.fit_summary
+            self.graphs,
+            self.predictor,
+            self.feature_names,
+            config,
+            self.fit_summary,
+            self.initial_combinations,
         )
 
     def describe(self) -> str:

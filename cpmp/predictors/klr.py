@@ -33,8 +33,15 @@ class KLRConfig(PredictorConfig):
         min_support: minimum support points per activation (the paper uses 3).
         max_support: optional cap per activation.
         l2: weight of the ``½ l2 ||w||²`` penalty added to each node's mean loss.
-        bias: learn a per-node intercept (``False`` gives exactly eq. 4).
+        bias: learn a per-node intercept (``False`` gives exactly eq. 4: far from every support
+            point φ tends to 0.5, so no transition is predicted into unexplored states).
         max_iter: LBFGS iterations per optimiser step.
+        feature_weighting: ``none`` (isotropic kernel, the paper) or ``path``: per node, weight
+            each feature in the kernel by its share of the node's L1 path length (eq. 1 splits
+            into one term per feature), so features that drive the node's progress count and
+            features that stay constant while it runs (e.g. box size, the other arm) count
+            little. Weights are ``max(d * share_j, weight_floor)``.
+        weight_floor: smallest feature weight under ``path`` weighting.
     """
 
     gamma: float = 4.0
@@ -42,13 +49,19 @@ class KLRConfig(PredictorConfig):
     min_support: int = 3
     max_support: int | None = None
     l2: float = 1e-4
-    bias: bool = True
+    bias: bool = False
     max_iter: int = 500
+    feature_weighting: str = "none"
+    weight_floor: float = 0.1
 
     def __post_init__(self) -> None:
         super().__post_init__()
         self._positive("gamma", "max_iter", "min_support")
-        self._non_negative("support_scale", "l2")
+        self._non_negative("support_scale", "l2", "weight_floor")
+        if self.feature_weighting not in ("none", "path"):
+            raise ConfigError(
+                f"feature_weighting must be 'none' or 'path', got {self.feature_weighting!r}"
+            )
         if self.max_support is not None and self.max_support < self.min_support:
             raise ConfigError(
                 f"max_support ({self.max_support}) must be >= min_support ({self.min_support})"
@@ -103,6 +116,7 @@ class KLRPredictor(ProgressPredictor):
         self.register_buffer("support", torch.zeros(k, n_support, d, dtype=dt))
         self.register_buffer("support_mask", torch.zeros(k, n_support, dtype=torch.bool))
         self.register_buffer("gamma", torch.tensor(float(config.gamma), dtype=dt))
+        self.register_buffer("feature_scale", torch.ones(k, d, dtype=dt))
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
@@ -111,8 +125,9 @@ class KLRPredictor(ProgressPredictor):
         return {"n_support": int(self.support.shape[1])}
 
     def feature_weights(self) -> torch.Tensor:
-        """Per-node, per-feature kernel weights ``(K, d)``: γ for the isotropic kernel."""
-        return self.gamma.expand(self.n_nodes, self.n_features)
+        """Per-node, per-feature kernel weights ``(K, d)``: γ times the feature scale (all ones
+        for the isotropic kernel)."""
+        return self.gamma * self.feature_scale
 
     def kernel(self, z: torch.Tensor) -> torch.Tensor:
         """RBF kernel of scaled features ``z (B, d)`` with every node's supports: ``(B, K, S)``."""
@@ -138,6 +153,17 @@ class KLRPredictor(ProgressPredictor):
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         per_node = [self._supports_for(node) for node in data]
         self._set_supports(per_node)
+        if self.config.feature_weighting == "path":
+            self.feature_scale = torch.stack([self._path_weights(node) for node in data])
+
+    def _path_weights(self, node: NodeData) -> torch.Tensor:
+        """``(d,)`` kernel weights from each feature's share of the node's L1 path length."""
+        per_feature = sum(np.abs(np.diff(a, axis=0)).sum(axis=0) for a in node.activations)
+        total = float(np.sum(per_feature))
+        d = self.n_features
+        share = per_feature / total if total > 0 else np.full(d, 1.0 / d)
+        weights = np.maximum(d * share, self.config.weight_floor)
+        return torch.as_tensor(weights, dtype=self.dtype_)
 
     def _set_supports(self, per_node: list[np.ndarray]) -> None:
         s_max = max(len(p) for p in per_node)

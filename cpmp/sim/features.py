@@ -1,4 +1,4 @@
-"""The 24-D feature vector of the task (paper Sec. IV).
+"""The 30-D feature vector of the task (paper Sec. IV).
 
 Layout (names from :func:`feature_names`):
 
@@ -7,6 +7,12 @@ Layout (names from :func:`feature_names`):
 * ``box_x, box_y, box_z`` - measured box centre, scaled over the workspace bounds
   :data:`WORKSPACE_LO`..:data:`WORKSPACE_HI`;
 * ``left_ee_{x,y,z}, right_ee_{x,y,z}`` - measured end-effector site positions, same scaling;
+* ``left_to_box_{x,y,z}, right_to_box_{x,y,z}`` - end-effector position relative to the box
+  centre ``Δ``, squashed to (0, 1) as ``0.5 + 0.5 tanh(Δ / RELATIVE_SCALE)``: sensitive within a
+  few centimetres of the box, saturated far from it (like eq. 6's goal distances).
+  The paper's feature set has no such term; without it the last centimetres of an approach (the
+  ones that decide a grasp) barely move any feature, so progress along a reach saturates before
+  the hand arrives;
 * ``dist.<variable>.<mp>`` for every orientation and finger MP (except ``idle``): the
   goal-distance feature ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``;
   ``D`` is the rotation angle [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle
@@ -28,6 +34,8 @@ WORKSPACE_HI = np.array([0.7, 0.5, 1.2])
 """Upper workspace bound [m] for position scaling (x, y, z)."""
 HEIGHT_SCALE = 0.2
 """Box heights are divided by this [m]."""
+RELATIVE_SCALE = 0.15
+"""Length scale [m] of the squashed hand-to-box offsets."""
 
 
 def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
@@ -35,6 +43,8 @@ def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
     names = ["box_width", "box_depth", "box_height", "box_x", "box_y", "box_z"]
     for hand in HANDS:
         names += [f"{hand}_ee_{axis}" for axis in "xyz"]
+    for hand in HANDS:
+        names += [f"{hand}_to_box_{axis}" for axis in "xyz"]
     for variable, mps in library.items():
         if variable.endswith(("_rot", "_fingers")):
             names += [f"dist.{variable}.{name}" for name in mps if name != IDLE]
@@ -73,7 +83,12 @@ def compute_features(
     size_features (3,); box_pos (3,) [m]; ee_pos (2, 3) [m] and ee_rot (2, 3, 3), rows
     (left, right); fingers: per hand, joint angles (k,) [rad].
     """
-    parts = [size_features, scale_position(box_pos), scale_position(ee_pos).ravel()]
+    parts = [
+        size_features,
+        scale_position(box_pos),
+        scale_position(ee_pos).ravel(),
+        (0.5 + 0.5 * np.tanh((ee_pos - box_pos) / RELATIVE_SCALE)).ravel(),
+    ]
     dists = []
     for variable, mps in library.items():
         hand = variable.split("_")[0]

@@ -63,7 +63,7 @@ class Simulation:
     mp_names : dict[str, list[str]]
         MP names per variable.
     feature_names : list[str]
-        Names of :meth:`features`, length d = 24.
+        Names of :meth:`features`, length d = 30.
     t : float
         Simulated time [s] since :meth:`reset`.
     timing : dict[str, float]
@@ -211,7 +211,7 @@ class Simulation:
         return float(np.max(np.abs(self.data.qvel[self._robot_dofs])))
 
     def features(self) -> np.ndarray:
-        """Feature vector (24,) of the current state; see :mod:`cpmp.sim.features`."""
+        """Feature vector (30,) of the current state; see :mod:`cpmp.sim.features`."""
         start = time.perf_counter()
         out = compute_features(
             self._size_features,
