@@ -134,3 +134,41 @@ def test_bad_options():
     model = make_predictor("klr", [("v", "m")], 2)
     with pytest.raises(DataError, match="2 entries"):
         model(torch.zeros(4, 3))
+
+
+def test_path_feature_weighting(train_demos, test_demos):
+    from cpmp.data import Demonstration
+
+    # add a nuisance feature, constant within each demo and different across demos
+    rng = np.random.default_rng(0)
+    noisy = [
+        Demonstration(
+            d.time,
+            np.column_stack([d.features, np.full(d.n_samples, rng.uniform())]),
+            d.labels,
+            [*d.feature_names, "nuisance"],
+            d.name,
+        )
+        for d in train_demos
+    ]
+    seq = ConcurrentSequencer.fit(
+        noisy, "klr", seed=0, logger=None, feature_weighting="path", weight_floor=0.1
+    )
+    scale = seq.predictor.feature_scale
+    a_go = seq.node_keys.index(("a", "a_go"))
+    assert scale[a_go, 3] == pytest.approx(0.1)  # the nuisance never moves: floor weight
+    assert scale[a_go, 2] == pytest.approx(0.1)  # nor does the context
+    assert scale[a_go, 0] > 1.0  # p_a drives a_go's progress
+    held_out = [
+        Demonstration(
+            d.time,
+            np.column_stack([d.features, np.full(d.n_samples, 0.5)]),
+            d.labels,
+            [*d.feature_names, "nuisance"],
+            d.name,
+        )
+        for d in test_demos
+    ]
+    assert progress_errors(activation_progress(seq, held_out))["mae"] < MAE_BOUND
+    with pytest.raises(ConfigError, match="feature_weighting"):
+        make_predictor("klr", [("v", "m")], 2, feature_weighting="auto")

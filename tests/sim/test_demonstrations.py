@@ -29,8 +29,8 @@ def test_demonstrator_completes_each_strategy(demos, cfg):
         assert meta["success"], strategy
         # moderate episodes: the recordings stay short enough to learn from quickly
         assert 5.0 < demo.duration < 15.0
-        assert demo.features.shape == (demo.n_samples, 30)
-        assert len(demo.feature_names) == 30 == len(set(demo.feature_names))
+        assert demo.features.shape == (demo.n_samples, 33)
+        assert len(demo.feature_names) == 33 == len(set(demo.feature_names))
         assert np.all(demo.features > -0.05) and np.all(demo.features < 1.05)
         assert sorted(demo.variables) == sorted(Simulation(cfg, Box(0.2, 0.2, 0.1)).variables)
 
@@ -100,7 +100,7 @@ def test_replayed_demo_completes(demos, boxes, cfg):
     assert result.box_in_container and result.hands_home
     assert result.sequences == mp_sequences(demos["left"])
     assert len(result.transitions) == sum(len(s) - 1 for s in result.sequences.values())
-    assert result.transitions[0].features.shape == (30,)
+    assert result.transitions[0].features.shape == (33,)
 
 
 def test_wrong_start_and_wrong_transition(demos, boxes, cfg):
