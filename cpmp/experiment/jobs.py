@@ -18,6 +18,7 @@ from cpmp.experiment.pipeline import (
     balanced_subset,
     evaluate_offline,
     fit_sequencer,
+    progress_bar,
     reproduce,
     split_by_strategy,
     stage,
@@ -70,7 +71,7 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
             boxes = sample_boxes(rng, task, 3 * settings.demos_per_strategy, balanced=True)
             demos = [
                 record_demonstration(b, task, name=f"demo_{i:03d}")
-                for i, b in enumerate(_progress(boxes, f"seed {seed} demos"))
+                for i, b in enumerate(progress_bar(boxes, f"seed {seed} demos"))
             ]
             failed = [d.name for d in demos if not d.metadata.get("success")]
             if failed:
@@ -90,7 +91,9 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
         with stage(f"seed {seed}: demonstrator on {settings.n_boxes} reproduction boxes"):
             box_rng = np.random.default_rng(seed + settings.box_seed_offset)
             repro_boxes = [sample_box(box_rng, task) for _ in range(settings.n_boxes)]
-            expected = [record_demonstration(b, task) for b in _progress(repro_boxes, "expected")]
+            expected = [
+                record_demonstration(b, task) for b in progress_bar(repro_boxes, "expected")
+            ]
         signatures = strategy_signatures(train)
         seed_row: dict[str, Any] = {"seed": seed, "by_train_size": {}}
         for d in settings.train_sizes:
@@ -107,9 +110,7 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
                 seq.save(seed_dir / f"model_D{d}.pt")
             with stage(f"seed {seed}: evaluate progress (D={d})"):
                 offline = evaluate_offline(seq, test)
-                from cpmp.evaluation import activation_progress
-
-                pairs_by_d[d] += [(r.expected, r.predicted) for r in activation_progress(seq, test)]
+                pairs_by_d[d] += offline["pairs"]
             with stage(f"seed {seed}: reproduce {settings.n_boxes} boxes (D={d})"):
                 episodes = reproduce(
                     seq,
@@ -239,13 +240,6 @@ def _aggregate(
             "per_seed": per_seed,
         }
     )
-
-
-def _progress(items: list, desc: str) -> Any:
-    """A tqdm progress bar over ``items`` (on stderr)."""
-    from tqdm import tqdm
-
-    return tqdm(items, desc=desc, leave=False, dynamic_ncols=True)
 
 
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:

@@ -37,6 +37,13 @@ OTHER = "other"
 """Strategy label of an initial MP set that matches no demonstrated strategy."""
 
 
+def progress_bar(items: list, desc: str) -> Any:
+    """A tqdm progress bar over ``items`` on stderr (cleared when done)."""
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, leave=False, dynamic_ncols=True)
+
+
 @contextmanager
 def stage(name: str) -> Iterator[None]:
     """Log the start and the duration of a pipeline stage."""
@@ -216,15 +223,17 @@ def fit_sequencer(
 def evaluate_offline(
     seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
 ) -> dict[str, Any]:
-    """Progress MAE (overall, first/last 10 %, per node), Fig. 6 curves and a replay of the
-    recorded feature streams (per-variable sequence match, switch-state distance)."""
+    """Progress MAE (overall, first/last 10 %, per node), Fig. 6 curves (and the raw
+    ``(expected, predicted)`` pairs per activation) and a replay of the recorded feature streams
+    (per-variable sequence match, switch-state distance)."""
     from cpmp.experiment.plots import progress_curves
 
     records = activation_progress(seq, demos)
     errors = progress_errors(records)
     curves = progress_curves([(r.expected, r.predicted) for r in records], n_bins=n_bins)
     replay = replay_demonstrations(seq, demos)
-    return {"progress": errors, "curves": curves, "replay": replay}
+    pairs = [(r.expected, r.predicted) for r in records]
+    return {"progress": errors, "curves": curves, "replay": replay, "pairs": pairs}
 
 
 @dataclass
@@ -292,7 +301,8 @@ def reproduce(
     out = []
     if record_dir is not None and record != "none":
         record_dir.mkdir(parents=True, exist_ok=True)
-    for i, (box, demo) in enumerate(zip(boxes, expected, strict=True)):
+    pairs = list(zip(boxes, expected, strict=True))
+    for i, (box, demo) in enumerate(progress_bar(pairs, f"{label}episodes")):
         rrd = None
         recorder = None
         callback = None
@@ -386,7 +396,7 @@ def strategy_map(
     depths = np.linspace(*task.depth_range, grid[1])
     chosen = np.empty((len(depths), len(widths)), dtype=object)
     correct = np.empty_like(chosen)
-    for j, depth in enumerate(depths):
+    for j, depth in enumerate(progress_bar(list(depths), "strategy map rows")):
         for i, width in enumerate(widths):
             box = Box(float(width), float(depth), task.box_height)
             x0 = Simulation(task, box).features()
