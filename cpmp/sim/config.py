@@ -61,6 +61,7 @@ class TaskConfig:
     preshape_distance: float = 0.15
     rise_distance: float = 0.05
     relax_distance: float = 0.10
+    settle_time: float = 0.2
     home_tol: float = 0.03
     deadlock_time: float = 5.0
 
@@ -94,6 +95,8 @@ class TaskConfig:
             value = getattr(self, name)
             if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
+        if not isinstance(self.settle_time, int | float) or not self.settle_time >= 0:
+            raise ConfigError(f"settle_time must be >= 0 seconds, got {self.settle_time!r}")
         if not 0.04 <= self.box_height <= 0.16:
             raise ConfigError(f"box_height must be in [0.04, 0.16] m, got {self.box_height}")
         ratio = self.control_dt / self.physics_dt

@@ -10,12 +10,21 @@ bimanual, else the single hand):
 * ``H_rot``: ``down`` -> ``home`` once the hand has risen ``rise_distance`` after releasing;
 * ``H_fingers``: ``relax`` -> ``preshape`` (palm within ``preshape_distance`` of its grasp
   goal) -> ``grasp`` (palm touches the box, at the goal and oriented) -> ``release`` (box
-  lowered) -> ``relax`` (hand within ``relax_distance`` of home).
+  lowered and resting on the container floor) -> ``relax`` (hand within ``relax_distance`` of
+  home).
 
 Synchronisation points: lifting starts only when *every* grasping hand's fingers have closed;
 returning home starts only when every grasping hand has released. An idle hand keeps ``idle``,
 ``idle``, ``relax`` throughout. Guards read the measured state, so the switches happen at
 different times per variable.
+
+Settling: a switch fires only after its guard has held continuously for ``cfg.settle_time``.
+The sample on which a guard first holds is labelled with the *new* MP, so without settling the
+state that triggers a switch (e.g. the box touching the container floor) never occurs in the
+old MP's activation: its learned progress is undefined there and the learned sequencer cannot
+reproduce the switch. With settling, every activation ends on a short plateau in the guard's
+state, which is also where the sequencer's plateau rule (switch once the transition probability
+stops improving) fires. It also debounces contact guards.
 """
 
 from __future__ import annotations
@@ -47,6 +56,7 @@ class ScriptedDemonstrator:
         self.done = False
         self.active: dict[str, str] = {}
         self._release_z: dict[str, float] = {}
+        self._pending: dict[str, tuple[str, float]] = {}
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Initial MPs for the strategy."""
@@ -62,6 +72,7 @@ class ScriptedDemonstrator:
         self.active = active
         self.done = False
         self._release_z = {}
+        self._pending = {}
         return dict(active)
 
     # guards --------------------------------------------------------------------------------
@@ -80,7 +91,33 @@ class ScriptedDemonstrator:
         return goal_distance(float(diff @ diff), self.cfg.finger_sigma) < self.cfg.finger_tol
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """Evaluate every guard on the current state; return the (possibly new) MPs."""
+        """Evaluate every guard on the current state; return the (possibly new) MPs.
+
+        A switch whose guard holds is applied once the guard has held (proposing the same MP)
+        for ``cfg.settle_time``.
+        """
+        wanted = self._guards()
+        new = dict(self.active)
+        for variable, mp in wanted.items():
+            if mp == self.active[variable]:
+                self._pending.pop(variable, None)
+                continue
+            pending = self._pending.get(variable)
+            if pending is None or pending[0] != mp:
+                self._pending[variable] = pending = (mp, t)
+            if t - pending[1] >= self.cfg.settle_time - 1e-9:
+                new[variable] = mp
+                del self._pending[variable]
+        ee = self.sim.ee_pos()
+        for hand in self.hands:
+            if new[f"{hand}_pos"] == "home" and self.active[f"{hand}_pos"] != "home":
+                self._release_z[hand] = float(ee[HANDS.index(hand)][2])
+        self.done = self._finished(self.active)
+        self.active = new
+        return dict(new)
+
+    def _guards(self) -> dict[str, str]:
+        """The MPs the finite-state machine's guards ask for in the current state."""
         cfg, a = self.cfg, self.active
         new = dict(a)
         for hand in self.hands:
@@ -105,11 +142,14 @@ class ScriptedDemonstrator:
         elif a[carrier] == "carry" and self._pos_error(self.carrier) < cfg.pos_tol:
             new[carrier] = "lower"
         elif a[carrier] == "lower" and released:
-            ee = self.sim.ee_pos()
             for hand in self.hands:
                 new[f"{hand}_pos"] = "home"
-                self._release_z[hand] = float(ee[HANDS.index(hand)][2])
-        elif a[carrier] == "lower" and holding and self._pos_error(self.carrier) < cfg.pos_tol:
+        elif (
+            a[carrier] == "lower"
+            and holding
+            and self._pos_error(self.carrier) < cfg.pos_tol
+            and self.sim.box_supported()
+        ):
             for hand in self.hands:
                 new[f"{hand}_fingers"] = "release"
 
@@ -121,10 +161,7 @@ class ScriptedDemonstrator:
                 new[f"{hand}_rot"] = "home"
             if a[f"{hand}_fingers"] == "release" and self._pos_error(hand) < cfg.relax_distance:
                 new[f"{hand}_fingers"] = "relax"
-
-        self.done = self._finished(a)
-        self.active = new
-        return dict(new)
+        return new
 
     def _finished(self, a: dict[str, str]) -> bool:
         """All variables in their final MP and at its goal."""

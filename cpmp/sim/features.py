@@ -1,4 +1,4 @@
-"""The 30-D feature vector of the task (paper Sec. IV).
+"""The 33-D feature vector of the task (paper Sec. IV).
 
 Layout (names from :func:`feature_names`):
 
@@ -13,6 +13,15 @@ Layout (names from :func:`feature_names`):
   The paper's feature set has no such term; without it the last centimetres of an approach (the
   ones that decide a grasp) barely move any feature, so progress along a reach saturates before
   the hand arrives;
+* ``left_palm_contact, right_palm_contact, box_supported`` - binary touch signals (1 = in
+  contact): the palm touches the box; the box touches a support surface (plate, table,
+  container). Realistic sensor information (a palm tactile/force switch; the object resting on
+  a surface, as a wrist force sensor or vision would report) and not in the paper's feature set.
+  They make the demonstrator's contact guards observable: a grasp starts when the palm touches
+  the box, and releasing starts when the box rests on the container floor. Without them the
+  states just before and after these events are a few millimetres apart in feature space, so
+  the learned progress cannot tell "about to touch" from "touching" (premature grasps), nor the
+  end of ``carry`` (box in the air above the container) from the start of ``release``;
 * ``dist.<variable>.<mp>`` for every orientation and finger MP (except ``idle``): the
   goal-distance feature ``f = 1 - exp(-1/2 D^T S^-1 D)`` (eq. 6) with ``S = sigma^2 I``;
   ``D`` is the rotation angle [rad] to the MP's goal (``cfg.rot_sigma``) or the finger-angle
@@ -45,6 +54,7 @@ def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
         names += [f"{hand}_ee_{axis}" for axis in "xyz"]
     for hand in HANDS:
         names += [f"{hand}_to_box_{axis}" for axis in "xyz"]
+    names += [f"{hand}_palm_contact" for hand in HANDS] + ["box_supported"]
     for variable, mps in library.items():
         if variable.endswith(("_rot", "_fingers")):
             names += [f"dist.{variable}.{name}" for name in mps if name != IDLE]
@@ -75,19 +85,22 @@ def compute_features(
     ee_pos: np.ndarray,
     ee_rot: np.ndarray,
     fingers: dict[str, np.ndarray],
+    contacts: np.ndarray,
     library: dict[str, dict[str, MP]],
     cfg: TaskConfig,
 ) -> np.ndarray:
     """Feature vector (d,) from the measured state.
 
     size_features (3,); box_pos (3,) [m]; ee_pos (2, 3) [m] and ee_rot (2, 3, 3), rows
-    (left, right); fingers: per hand, joint angles (k,) [rad].
+    (left, right); fingers: per hand, joint angles (k,) [rad]; contacts (3,): left palm-box,
+    right palm-box, box-support contact (0 or 1).
     """
     parts = [
         size_features,
         scale_position(box_pos),
         scale_position(ee_pos).ravel(),
         (0.5 + 0.5 * np.tanh((ee_pos - box_pos) / RELATIVE_SCALE)).ravel(),
+        np.asarray(contacts, dtype=np.float64),
     ]
     dists = []
     for variable, mps in library.items():

@@ -114,7 +114,7 @@ def record_demonstration(
 ) -> Demonstration:
     """Run the scripted demonstrator on ``box`` and record it at the control rate.
 
-    Returns a :class:`~cpmp.data.Demonstration` with ``time`` (n,) [s], ``features`` (n, 30),
+    Returns a :class:`~cpmp.data.Demonstration` with ``time`` (n,) [s], ``features`` (n, 33),
     the active MP per variable at each tick, the feature names and metadata (box size,
     strategy, success, duration). Deterministic: the same box and config give identical data.
     """

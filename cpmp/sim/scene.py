@@ -42,6 +42,10 @@ PLATE_TOP_Z = 0.71
 """Height [m] of the plate's top surface (the box rests on it)."""
 CONTAINER_FLOOR_Z = 0.71
 """Height [m] of the container floor's top surface."""
+RESTING_PENETRATION = 1e-4
+"""Depth [m] the box sinks into the plate at rest (MuJoCo's soft contact). The box starts at
+this depth, already in contact, so the ``box_supported`` feature is 1 from the first sample
+instead of switching on at the first tick."""
 
 
 def home_posture(hand: str) -> np.ndarray:
@@ -108,7 +112,7 @@ def build_spec(box: Box, cfg: TaskConfig) -> mujoco.MjSpec:
     geom.mass = cfg.box_mass
     body = spec.body("box")
     plate = spec.body("plate")
-    body.pos = [plate.pos[0], plate.pos[1], PLATE_TOP_Z + box.height / 2]
+    body.pos = [plate.pos[0], plate.pos[1], PLATE_TOP_Z + box.height / 2 - RESTING_PENETRATION]
     return spec
 
 

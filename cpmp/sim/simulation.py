@@ -63,7 +63,7 @@ class Simulation:
     mp_names : dict[str, list[str]]
         MP names per variable.
     feature_names : list[str]
-        Names of :meth:`features`, length d = 30.
+        Names of :meth:`features`, length d = 33.
     t : float
         Simulated time [s] since :meth:`reset`.
     timing : dict[str, float]
@@ -94,6 +94,10 @@ class Simulation:
         self._box_body = m.body("box").id
         self._box_geom = m.geom("box").id
         self._palm_geom = {h: m.geom(f"{h}_palm").id for h in HANDS}
+        support_bodies = {m.body(name).id for name in ("world", "table", "plate", "container")}
+        self._support_geoms = np.array(
+            [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in support_bodies]
+        )
         self._robot_dofs = np.array(
             [m.joint(i).dofadr[0] for i in range(m.njnt) if m.joint(i).name != "box_free"]
         )
@@ -199,19 +203,35 @@ class Simulation:
         """Measured finger joint angles [rad] per hand."""
         return {h: self.data.qpos[self._finger_qpos[h]].copy() for h in HANDS}
 
+    def _box_partners(self) -> np.ndarray:
+        """Geom ids currently in contact with the box."""
+        pairs = self.data.contact.geom[: self.data.ncon]
+        return np.concatenate(
+            [pairs[pairs[:, 0] == self._box_geom, 1], pairs[pairs[:, 1] == self._box_geom, 0]]
+        )
+
     def palm_touches_box(self, hand: str) -> bool:
         """True if ``hand``'s palm is in contact with the box."""
-        d = self.data
-        pairs = np.sort(d.contact.geom[: d.ncon], axis=1)
-        want = sorted((self._palm_geom[hand], self._box_geom))
-        return bool(np.any((pairs[:, 0] == want[0]) & (pairs[:, 1] == want[1])))
+        return bool(np.any(self._box_partners() == self._palm_geom[hand]))
+
+    def box_supported(self) -> bool:
+        """True if the box touches a static surface (table, plate or container)."""
+        return bool(np.any(np.isin(self._box_partners(), self._support_geoms)))
+
+    def contacts(self) -> np.ndarray:
+        """Touch signals (3,): left palm-box, right palm-box, box-support (0 or 1)."""
+        partners = self._box_partners()
+        return np.array(
+            [float(np.any(partners == self._palm_geom[h])) for h in HANDS]
+            + [float(np.any(np.isin(partners, self._support_geoms)))]
+        )
 
     def robot_speed(self) -> float:
         """Largest arm/finger joint speed [rad/s]."""
         return float(np.max(np.abs(self.data.qvel[self._robot_dofs])))
 
     def features(self) -> np.ndarray:
-        """Feature vector (30,) of the current state; see :mod:`cpmp.sim.features`."""
+        """Feature vector (33,) of the current state; see :mod:`cpmp.sim.features`."""
         start = time.perf_counter()
         out = compute_features(
             self._size_features,
@@ -219,6 +239,7 @@ class Simulation:
             self.ee_pos(),
             self.ee_rot(),
             self.finger_angles(),
+            self.contacts(),
             self.library,
             self.cfg,
         )
