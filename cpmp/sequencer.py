@@ -54,6 +54,11 @@ class SequencerConfig:
         min_improvement: an increase of ``p`` smaller than this does not count as improving.
             Attractors converge asymptotically, so ``p`` keeps creeping up by tiny amounts; with
             a strict comparison (``0``) such a transition might never fire.
+        min_exit: a transition also needs the current node's exit probability ``φ`` above this
+            (0 = the paper's rule). ``p = φ (1 - φ_next)`` can pass the threshold with ``φ``
+            well below 1 when the successor's entry probability is near 1, e.g. a grasp that
+            lasts through lift, carry and lower is left at the end of carry; the gate keeps an
+            MP active until it has (nearly) run its course.
         start_rule: ``independent`` (paper): each graph starts at its own initial node of
             highest entry probability. ``joint``: choose among the combinations of initial MPs
             seen together in a demonstration the one with the highest summed log entry
@@ -64,6 +69,7 @@ class SequencerConfig:
     threshold: float = 0.65
     patience: float = 0.05
     min_improvement: float = 1e-3
+    min_exit: float = 0.0
     start_rule: str = "independent"
 
     def __post_init__(self) -> None:
@@ -73,6 +79,8 @@ class SequencerConfig:
             raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
         if self.min_improvement < 0.0:
             raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
+        if not 0.0 <= self.min_exit < 1.0:
+            raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
         if self.start_rule not in ("independent", "joint"):
             raise ConfigError(
                 f"start_rule must be 'independent' or 'joint', got {self.start_rule!r}"
@@ -317,12 +325,13 @@ class ConcurrentSequencer:
                 probs[v] = {}
                 self._candidates[v] = None
                 continue
-            p = phi[self._index[(v, current)]] * (1.0 - phi[idx])
+            exit_p = phi[self._index[(v, current)]]
+            p = exit_p * (1.0 - phi[idx])
             probs[v] = dict(zip(names, p.tolist(), strict=True))
             best = int(np.argmax(p))
             target, p_best = names[best], float(p[best])
             cand = self._candidates.get(v)
-            if p_best <= c.threshold:
+            if p_best <= c.threshold or exit_p <= c.min_exit:
                 self._candidates[v] = None
                 continue
             if cand is None or cand.target != target:

@@ -288,3 +288,18 @@ def test_subsample_keeps_every_kth_and_last(train_demos, test_demos):
     assert progress_errors(activation_progress(sub, test_demos))["mae"] < 0.06
     with pytest.raises(ConfigError, match="subsample"):
         ConcurrentSequencer.fit(train_demos, "klr", subsample=0)
+
+
+def test_min_exit_gate_keeps_unfinished_mp():
+    # p = 0.7 * (1 - 0.0) = 0.7 > 0.65, but the current MP is only 70 % done
+    gated = _chain_sequencer(min_exit=0.9, patience=0.0)
+    free = _chain_sequencer(min_exit=0.0, patience=0.0)
+    for seq in (gated, free):
+        seq.reset(0.0, [0.0, 0.0, 0.0])
+        seq.step(0.01, [0.7, 0.0, 0.0])
+    assert free.active == {"v": "B"}
+    assert gated.active == {"v": "A"}
+    gated.step(0.02, [0.95, 0.0, 0.0])
+    assert gated.active == {"v": "B"}
+    with pytest.raises(ConfigError, match="min_exit"):
+        SequencerConfig(min_exit=1.0)
