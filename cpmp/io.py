@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from cpmp.errors import CpmpFileError
 
@@ -52,3 +56,19 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
+
+
+def to_builtin(obj: Any) -> Any:
+    """Recursively convert numpy arrays/scalars, tuples and mappings to plain Python (JSON and
+    ``torch.load(weights_only=True)`` safe); non-finite floats become ``None``."""
+    if isinstance(obj, Mapping):
+        return {str(k): to_builtin(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [to_builtin(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_builtin(obj.tolist())
+    if isinstance(obj, np.generic):
+        return to_builtin(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -24,7 +24,7 @@ import torch
 
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError, UnknownMPError
 from cpmp.graph import SequenceGraph, build_graphs
-from cpmp.io import atomic_path
+from cpmp.io import atomic_path, to_builtin
 from cpmp.predictors import (
     NodeData,
     ProgressPredictor,
@@ -378,7 +378,7 @@ class ConcurrentSequencer:
             "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
             "predictor": {"spec": self.predictor.spec(), "state": self.predictor.state_dict()},
             "sequencer": dataclasses.asdict(self.config),
-            "fit_summary": _plain(self.fit_summary),
+            "fit_summary": to_builtin(self.fit_summary),
             "initial_combinations": self.initial_combinations,
         }
         path = Path(path)
@@ -472,14 +472,3 @@ def _stride(n: int, k: int) -> np.ndarray:
     """Indices ``0, k, 2k, ...`` of ``n`` samples, always including the last one."""
     idx = np.arange(0, n, k)
     return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
-
-
-def _plain(obj: Any) -> Any:
-    """Convert a summary to builtins only (checkpoints load with ``weights_only=True``)."""
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cpmp.io import atomic_write_text
+from cpmp.io import atomic_write_text, to_builtin
 
 PAPER_TABLE_I: dict[str, dict[str, float]] = {
     "3": {"W": 3, "I": 4, "C": 13, "distance_mean": 0.13, "distance_std": 0.08},
@@ -20,19 +19,8 @@ PAPER_TABLE_I: dict[str, dict[str, float]] = {
 """The paper's Table I (20 random boxes per D)."""
 
 
-def jsonable(obj: Any) -> Any:
-    """Recursively convert numpy values and tuples to JSON types (NaN -> None)."""
-    if isinstance(obj, Mapping):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+jsonable = to_builtin
+"""Recursively convert numpy values and tuples to JSON types (NaN -> None)."""
 
 
 def write_json(path: str | Path, obj: Any) -> Path:
