@@ -26,6 +26,7 @@ from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError, U
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, to_builtin
 from cpmp.predictors import (
+    START_PREFIX,
     NodeData,
     ProgressPredictor,
     make_predictor,
@@ -59,6 +60,11 @@ class SequencerConfig:
             well below 1 when the successor's entry probability is near 1, e.g. a grasp that
             lasts through lift, carry and lower is left at the end of carry; the gate keeps an
             MP active until it has (nearly) run its course.
+        start_kernel: ``shared`` (paper): the initial node is chosen with the nodes' progress
+            predictors. ``isotropic``: with extra heads for the initial nodes, fitted in the same
+            run on the same data but always with the isotropic kernel. Meant for
+            ``feature_weighting=path``, which de-weights features that stay constant along an
+            activation, such as box size; those are exactly what decides the strategy.
         start_rule: ``independent`` (paper): each graph starts at its own initial node of
             highest entry probability. ``joint``: choose among the combinations of initial MPs
             seen together in a demonstration the one with the highest summed log entry
@@ -70,6 +76,7 @@ class SequencerConfig:
     patience: float = 0.05
     min_improvement: float = 1e-3
     min_exit: float = 0.0
+    start_kernel: str = "shared"
     start_rule: str = "independent"
 
     def __post_init__(self) -> None:
@@ -81,6 +88,10 @@ class SequencerConfig:
             raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
         if not 0.0 <= self.min_exit < 1.0:
             raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
+        if self.start_kernel not in ("shared", "isotropic"):
+            raise ConfigError(
+                f"start_kernel must be 'shared' or 'isotropic', got {self.start_kernel!r}"
+            )
         if self.start_rule not in ("independent", "joint"):
             raise ConfigError(
                 f"start_rule must be 'independent' or 'joint', got {self.start_rule!r}"
@@ -186,9 +197,14 @@ class ConcurrentSequencer:
                 f"{predictor.n_features} features"
             )
         keys = [(v, mp) for v in sorted(self.graphs) for mp in self.graphs[v].ordered_nodes()]
-        if keys != predictor.node_keys:
+        extra = predictor.node_keys[len(keys) :]
+        if predictor.node_keys[: len(keys)] != keys or extra not in ([], start_keys(self.graphs)):
             raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
+        self._keys = keys
         self._index = {key: i for i, key in enumerate(keys)}
+        self._start_index = {
+            (v, mp[len(START_PREFIX) :]): len(keys) + i for i, (v, mp) in enumerate(extra)
+        } or self._index
         self._successor_idx = {
             (v, mp): (
                 self.graphs[v].successors(mp),
@@ -238,6 +254,8 @@ class ConcurrentSequencer:
                 )
         graphs = build_graphs(demos, rest.get("variables"))
         node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
+        if seq_config.start_kernel == "isotropic":
+            node_keys += start_keys(graphs)
         model = make_predictor(predictor, node_keys, len(feature_names), **pred_opts)
         all_x = np.concatenate([d.features for d in demos], axis=0)
         model.scaler.fit(all_x, model.config.feature_scaling)
@@ -270,13 +288,15 @@ class ConcurrentSequencer:
 
     @property
     def node_keys(self) -> list[tuple[str, str]]:
-        return list(self.predictor.node_keys)
+        """(variable, MP) of every node, in the order of :meth:`progress`'s first columns
+        (start heads, if any, follow them)."""
+        return list(self._keys)
 
     def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
         """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
         phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
         out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
-        for (v, mp), value in zip(self.node_keys, phi.tolist(), strict=True):
+        for (v, mp), value in zip(self._keys, phi[: len(self._keys)].tolist(), strict=True):
             out[v][mp] = value
         return out
 
@@ -288,7 +308,7 @@ class ConcurrentSequencer:
         if self.config.start_rule == "joint" and self.initial_combinations:
             entry = np.clip(1.0 - phi, 1e-12, 1.0)
             scores = [
-                sum(np.log(entry[self._index[(v, mp)]]) for v, mp in combo.items())
+                sum(np.log(entry[self._start_index[(v, mp)]]) for v, mp in combo.items())
                 for combo in self.initial_combinations
             ]
             self.active = dict(self.initial_combinations[int(np.argmax(scores))])
@@ -296,7 +316,7 @@ class ConcurrentSequencer:
             self.active = {}
             for v in sorted(self.graphs):
                 initial = sorted(self.graphs[v].initial_nodes)
-                entry_v = [1.0 - phi[self._index[(v, mp)]] for mp in initial]
+                entry_v = [1.0 - phi[self._start_index[(v, mp)]] for mp in initial]
                 self.active[v] = initial[int(np.argmax(entry_v))]
         self.events = []
         self._candidates = {v: None for v in self.graphs}
@@ -348,7 +368,7 @@ class ConcurrentSequencer:
 
     def _phi_dict(self, phi: np.ndarray) -> dict[str, dict[str, float]]:
         out: dict[str, dict[str, float]] = {v: {} for v in self.graphs}
-        for (v, mp), value in zip(self.node_keys, phi.tolist(), strict=True):
+        for (v, mp), value in zip(self._keys, phi[: len(self._keys)].tolist(), strict=True):
             out[v][mp] = value
         return out
 
@@ -441,13 +461,21 @@ class ConcurrentSequencer:
         return self.graphs[variable]
 
 
+def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
+    """Keys of the start heads: ``(variable, START_PREFIX + mp)`` per initial node."""
+    return [
+        (v, START_PREFIX + mp) for v in sorted(graphs) for mp in sorted(graphs[v].initial_nodes)
+    ]
+
+
 def node_training_data(
     graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
 ) -> list[NodeData]:
     """Per-node training samples (scaled features) and expected-progress targets, in the
     predictor's node order; ``subsample`` keeps every k-th sample (and the last) for the loss."""
     out = []
-    for v, mp in predictor.node_keys:
+    for v, key_mp in predictor.node_keys:
+        mp = key_mp.removeprefix(START_PREFIX)
         acts = graphs[v].activations[mp]
         if not acts:
             raise DataError(f"node {v}/{mp} has no activation data to train on")
@@ -459,7 +487,7 @@ def node_training_data(
         dt = predictor.dtype_
         out.append(
             NodeData(
-                key=(v, mp),
+                key=(v, key_mp),
                 x=torch.as_tensor(x, dtype=dt),
                 target=torch.as_tensor(y, dtype=dt),
                 activations=scaled,

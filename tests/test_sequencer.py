@@ -303,3 +303,27 @@ def test_min_exit_gate_keeps_unfinished_mp():
     assert gated.active == {"v": "B"}
     with pytest.raises(ConfigError, match="min_exit"):
         SequencerConfig(min_exit=1.0)
+
+
+def test_isotropic_start_heads(train_demos, tmp_path):
+    seq = ConcurrentSequencer.fit(
+        train_demos,
+        "klr",
+        seed=0,
+        logger=None,
+        feature_weighting="path",
+        start_kernel="isotropic",
+    )
+    n = len(seq.node_keys)
+    heads = seq.predictor.node_keys[n:]
+    assert heads == [("a", "start:a_go"), ("b", "start:b_go"), ("b", "start:b_wait")]
+    scale = seq.predictor.feature_scale
+    assert torch.all(scale[n:] == 1.0)  # start heads keep the isotropic kernel
+    assert not torch.all(scale[:n] == 1.0)  # the nodes' own heads are path-weighted
+    x0 = train_demos[1].features[0]
+    assert seq.progress(x0).shape == (n + 3,)
+    assert set(seq.predict_progress(x0)["b"]) == {"b_go", "b_wait", "b_back"}
+    assert seq.reset(0.0, x0) == {"a": "a_go", "b": "b_go"}  # demo 1 is a parallel demo
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    assert np.array_equal(loaded.progress(x0), seq.progress(x0))
+    assert loaded.reset(0.0, x0) == seq.reset(0.0, x0)

@@ -11,6 +11,7 @@ from typing import Any
 
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
+    START_PREFIX,
     FeatureScaler,
     NodeData,
     NodeKey,
@@ -76,6 +77,7 @@ def predictor_from_spec(spec: dict[str, Any]) -> ProgressPredictor:
 
 __all__ = [
     "PREDICTORS",
+    "START_PREFIX",
     "FeatureScaler",
     "FullKLRPredictor",
     "KLRConfig",

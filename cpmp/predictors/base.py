@@ -22,6 +22,10 @@ from cpmp.errors import ConfigError, DataError
 NodeKey = tuple[str, str]
 """(control variable, MP name)."""
 
+START_PREFIX = "start:"
+"""MP-name prefix of the extra heads a sequencer may add to decide its initial nodes
+(``start_kernel="isotropic"``): same data as the node, but never feature-weighted."""
+
 
 @dataclass
 class NodeData:

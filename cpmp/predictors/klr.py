@@ -19,7 +19,14 @@ import torch
 from torch import nn
 
 from cpmp.errors import ConfigError
-from cpmp.predictors.base import NodeData, NodeKey, PredictorConfig, ProgressPredictor, soft_bce
+from cpmp.predictors.base import (
+    START_PREFIX,
+    NodeData,
+    NodeKey,
+    PredictorConfig,
+    ProgressPredictor,
+    soft_bce,
+)
 from cpmp.progress import support_points
 
 
@@ -156,7 +163,13 @@ class KLRPredictor(ProgressPredictor):
         per_node = [self._supports_for(node) for node in data]
         self._set_supports(per_node)
         if self.config.feature_weighting == "path":
-            self.feature_scale = torch.stack([self._path_weights(node) for node in data])
+            ones = torch.ones(self.n_features, dtype=self.dtype_)
+            self.feature_scale = torch.stack(
+                [
+                    ones if node.key[1].startswith(START_PREFIX) else self._path_weights(node)
+                    for node in data
+                ]
+            )
 
     def _path_weights(self, node: NodeData) -> torch.Tensor:
         """``(d,)`` kernel weights from each feature's share of the node's L1 path length."""
