@@ -43,17 +43,26 @@ def compose_cfg(config_name: str, overrides: list[str] | None = None, hydra: boo
         return compose(config_name, overrides=overrides or [], return_hydra_config=hydra)
 
 
-def test_every_predictor_option_has_a_config_file():
-    assert options("predictor") == sorted(PREDICTORS)
+# config files that are variants of a predictor kind rather than a kind of their own
+VARIANTS = {"klr_path": "klr"}
+
+
+def test_every_predictor_kind_has_a_config_file():
+    assert sorted(set(options("predictor")) - set(VARIANTS)) == sorted(PREDICTORS)
 
 
 @pytest.mark.parametrize("name", options("predictor"))
 def test_predictor_options_compose_and_validate(name):
     cfg = compose_cfg("experiment", [f"predictor={name}"])
     kind, opts = predictor_options(cfg.predictor)
-    assert kind == name
+    assert kind == VARIANTS.get(name, name)
     assert "kind" not in opts
     validate_common(cfg)
+
+
+def test_klr_path_variant_sets_path_weighting():
+    kind, opts = predictor_options(compose_cfg("experiment", ["predictor=klr_path"]).predictor)
+    assert (kind, opts["feature_weighting"]) == ("klr", "path")
 
 
 @pytest.mark.parametrize("name", options("experiment"))
