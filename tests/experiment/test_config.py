@@ -79,8 +79,20 @@ def test_other_groups_compose_and_validate(group):
 
     for name in options(group):
         cfg = compose_cfg("experiment", [f"{group}={name}"])
-        validate_common(cfg)
-        TaskConfig.from_dict(cfg.task)
+        kind, _ = validate_common(cfg)
+        assert kind in PREDICTORS
+        assert to_dict(cfg[group]), f"{group}={name} composed to nothing"
+        assert isinstance(TaskConfig.from_dict(cfg.task), TaskConfig)
+
+
+def test_sequencer_configs_mean_what_they_say():
+    from cpmp.sequencer import SequencerConfig
+
+    paper = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=paper"]).sequencer))
+    assert (paper.threshold, paper.patience, paper.start_rule) == (0.65, 0.05, "independent")
+    coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
+    assert (coupled.start_rule, coupled.start_kernel) == ("joint", "isotropic")
+    assert coupled.threshold == paper.threshold
 
 
 def test_quick_is_the_default_experiment():
