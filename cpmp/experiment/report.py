@@ -51,14 +51,15 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     lines = [
         f"# cpmp experiment `{exp['name']}`",
         "",
-        f"Predictor `{report['predictor']['kind']}`, seeds {exp['seeds']}, "
+        f"Predictor `{report['predictor']['kind']}` (feature weighting "
+        f"`{report['predictor'].get('feature_weighting', 'none')}`), start rule "
+        f"`{report.get('sequencer', {}).get('start_rule', 'independent')}`, seeds {exp['seeds']}, "
         f"{exp['n_boxes']} random boxes per training size and seed; counts are mean ± std over "
         "seeds.",
         "",
         "## Reproduction (Table I)",
         "",
-        "| D | W (ours) | I (ours) | C (ours) | W / I / C (paper) | distance (ours) "
-        "| distance (paper) |",
+        "| D | W | I | C | W / I / C (paper) | distance | distance (paper) |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for d, row in report["reproduction"].items():

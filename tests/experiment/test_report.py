@@ -85,7 +85,10 @@ def test_mean_std_skips_missing_values():
 def test_render_markdown_formats_numbers_and_paper_column():
     text = render_markdown(jsonable(make_report()))
     assert text.startswith("# cpmp experiment `handmade`")
-    assert "Predictor `klr_sparse`, seeds [0, 1], 20 random boxes" in text
+    assert (
+        "Predictor `klr_sparse` (feature weighting `none`), start rule `independent`, "
+        "seeds [0, 1], 20 random boxes" in text
+    )
     assert "| W / I / C (paper) |" in text
     paper = PAPER_TABLE_I["3"]
     assert (
