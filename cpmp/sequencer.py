@@ -294,11 +294,7 @@ class ConcurrentSequencer:
 
     def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
         """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
-        phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
-        out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
-        for (v, mp), value in zip(self._keys, phi[: len(self._keys)].tolist(), strict=True):
-            out[v][mp] = value
-        return out
+        return self._phi_dict(self.progress(np.asarray(x, dtype=np.float64).reshape(-1)))
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
@@ -367,7 +363,8 @@ class ConcurrentSequencer:
         return dict(self.active)
 
     def _phi_dict(self, phi: np.ndarray) -> dict[str, dict[str, float]]:
-        out: dict[str, dict[str, float]] = {v: {} for v in self.graphs}
+        """Per-node φ ``(K,)`` as variable -> MP -> φ (start heads left out)."""
+        out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
         for (v, mp), value in zip(self._keys, phi[: len(self._keys)].tolist(), strict=True):
             out[v][mp] = value
         return out

@@ -242,20 +242,29 @@ def _aggregate(
     )
 
 
+def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
+    """The ``data`` group's file (checked to exist) and split; ``split: auto`` means
+    ``auto_split`` when the file has that mask, else every demonstration."""
+    from cpmp.data import list_splits
+
+    if not cfg.data.get("path"):
+        raise ConfigError("data.path is required: give an HDF5 file of demonstrations")
+    path = Path(str(cfg.data.path))
+    if not path.is_file():
+        raise CpmpFileError(f"demonstration file {path} does not exist (set data.path)")
+    split = cfg.data.get("split", "auto")
+    if split == "auto":
+        split = auto_split if auto_split in list_splits(path) else None
+    return path, split
+
+
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
     save ``model.pt`` into ``run_dir``; returns the checkpoint path."""
     validate_common(cfg)
-    from cpmp.data import list_splits, load_demonstrations
+    from cpmp.data import load_demonstrations
 
-    path = Path(str(cfg.data.path)) if cfg.data.get("path") else None
-    if path is None:
-        raise ConfigError("data.path is required: give an HDF5 file of demonstrations")
-    if not path.is_file():
-        raise CpmpFileError(f"demonstration file {path} does not exist")
-    split = cfg.data.get("split", "auto")
-    if split == "auto":
-        split = "train" if "train" in list_splits(path) else None
+    path, split = _demo_file(cfg, "train")
     demos = load_demonstrations(path, split=split)
     run_dir = Path(run_dir)
     with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'})"):
@@ -279,7 +288,7 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
 def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     """Evaluate a checkpoint offline on a file's test split: progress MAE per node, replay of the
     recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON."""
-    from cpmp.data import list_splits, load_demonstrations
+    from cpmp.data import load_demonstrations
     from cpmp.experiment.plots import plot_progress_curves
     from cpmp.sequencer import ConcurrentSequencer
 
@@ -288,13 +297,8 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     checkpoint = Path(str(cfg.checkpoint))
     if not checkpoint.is_file():
         raise CpmpFileError(f"checkpoint {checkpoint} does not exist; train one with train.py")
-    path = Path(str(cfg.data.path)) if cfg.data.get("path") else None
-    if path is None or not path.is_file():
-        raise CpmpFileError(f"demonstration file {path} does not exist (set data.path)")
+    path, split = _demo_file(cfg, "test")
     seq = ConcurrentSequencer.load(checkpoint)
-    split = cfg.data.get("split", "auto")
-    if split == "auto":
-        split = "test" if "test" in list_splits(path) else None
     demos = load_demonstrations(path, split=split)
     run_dir = Path(run_dir)
     with stage(f"evaluate on {len(demos)} demos"):

@@ -208,12 +208,20 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-(a * diff * diff).sum(-1)) * self.support_mask[i]
 
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        kernels = self._node_kernels(data)
+        return self._penalised_loss(data, self._node_kernels(data))
+
+    def _penalised_loss(
+        self, data: list[NodeData], kernels: list[torch.Tensor], l1: float = 0.0
+    ) -> torch.Tensor:
+        """Sum over nodes of the mean soft BCE (eq. 5) given each node's kernel matrix
+        ``(P_i, S)``, plus ``½ l2 ||w||²`` and, if ``l1 > 0``, ``l1 · mean |w|`` per node."""
         total = torch.zeros((), dtype=self.dtype_)
         for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
             w = self.weight[i] * self.support_mask[i]
             total = total + soft_bce(kern @ w + self.bias[i], node.target)
             total = total + 0.5 * self.config.l2 * (w * w).sum()
+            if l1 > 0.0:
+                total = total + l1 * w.abs().sum() / self.support_mask[i].sum().clamp_min(1)
         return total
 
     def support_counts(self) -> dict[str, int]:
@@ -284,14 +292,7 @@ class SparseKLRPredictor(KLRPredictor):
             kernels = [self._node_kernel(i, node.x) for i, node in enumerate(data)]
         else:
             kernels = self._node_kernels(data)
-        total = torch.zeros((), dtype=self.dtype_)
-        for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
-            w = self.weight[i] * self.support_mask[i]
-            n_active = self.support_mask[i].sum().clamp_min(1)
-            total = total + soft_bce(kern @ w + self.bias[i], node.target)
-            total = total + 0.5 * self.config.l2 * (w * w).sum()
-            total = total + self.config.l1 * w.abs().sum() / n_active
-        return total
+        return self._penalised_loss(data, kernels, self.config.l1)
 
     def finalize(self, data: list[NodeData]) -> None:
         """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights."""
@@ -334,11 +335,7 @@ class SparseKLRPredictor(KLRPredictor):
 
         def closure() -> torch.Tensor:
             opt.zero_grad()
-            total = torch.zeros((), dtype=self.dtype_)
-            for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
-                w = self.weight[i] * self.support_mask[i]
-                total = total + soft_bce(kern @ w + self.bias[i], node.target)
-                total = total + 0.5 * self.config.l2 * (w * w).sum()
+            total = self._penalised_loss(data, kernels)
             total.backward()
             return total
 
