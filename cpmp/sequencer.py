@@ -275,16 +275,18 @@ class ConcurrentSequencer:
     # ----------------------------------------------------------------------------- inference
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
         """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
-        xt = torch.as_tensor(np.asarray(x, dtype=np.float64))
-        if xt.ndim == 0 or xt.shape[-1] != len(self.feature_names):
+        if isinstance(x, torch.Tensor):
+            x = x.detach().cpu().numpy()
+        xn = np.asarray(x, dtype=np.float64)
+        if xn.ndim == 0 or xn.shape[-1] != len(self.feature_names):
             raise DataError(
                 f"expected features with {len(self.feature_names)} entries "
-                f"({', '.join(self.feature_names[:4])}, ...), got shape {tuple(xt.shape)}"
+                f"({', '.join(self.feature_names[:4])}, ...), got shape {tuple(xn.shape)}"
             )
-        if not torch.isfinite(xt).all():
+        if not np.isfinite(xn).all():
             raise DataError("features contain NaN or inf; the sequencer needs finite features")
         with torch.no_grad():
-            return self.predictor(xt).numpy()
+            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
 
     @property
     def node_keys(self) -> list[tuple[str, str]]:

@@ -86,6 +86,46 @@ def test_batched_equals_single_and_shapes(fitted, test_demos):
     assert np.all((batch >= 0) & (batch <= 1))
 
 
+def _padded_logits(model, z):
+    """Reference: logits from the dense padded kernel ``(B, K, S)``."""
+    return torch.einsum("bks,ks->bk", model.kernel(z), model.weight) + model.bias
+
+
+@pytest.mark.parametrize("kind", ["klr", "klr_full", "klr_sparse"])
+def test_packed_logits_equal_padded_kernel(fitted, test_demos, kind):
+    model = fitted[kind].predictor
+    z = torch.as_tensor(test_demos[0].features)
+    with torch.no_grad():
+        np.testing.assert_allclose(model.logits(z), _padded_logits(model, z), atol=1e-10)
+
+
+def test_packed_cache_follows_parameter_changes(train_demos, test_demos):
+    seq = ConcurrentSequencer.fit(
+        train_demos, "klr_sparse", seed=0, logger=None, learn_lengthscales=True, epochs=20
+    )
+    model = seq.predictor
+    z = torch.as_tensor(test_demos[0].features[:5])
+    before = seq.progress(z.numpy())
+    with torch.no_grad():
+        model.weight.mul_(-1.0)
+        model.log_feature_scale.add_(0.3)
+        np.testing.assert_allclose(model.logits(z), _padded_logits(model, z), atol=1e-10)
+    assert not np.allclose(seq.progress(z.numpy()), before)
+    clone = predictor_from_spec(model.spec())
+    clone.load_state_dict(model.state_dict())
+    with torch.no_grad():
+        np.testing.assert_allclose(clone.logits(z), model.logits(z), atol=1e-12)
+
+
+def test_klr_gradients_flow_through_packed_logits(fitted, test_demos):
+    model = fitted["klr"].predictor
+    x = torch.as_tensor(test_demos[0].features[:4]).requires_grad_(True)
+    model(x).sum().backward()
+    assert model.weight.grad is not None and torch.isfinite(x.grad).all()
+    assert x.grad.abs().sum() > 0
+    model.zero_grad()
+
+
 def test_klr_mlp_gradients_flow():
     model = make_predictor("mlp", [("v", "m")], 2)
     model.initialize([], torch.Generator().manual_seed(0))

@@ -146,7 +146,9 @@ class ProgressPredictor(nn.Module):
                 f"{tuple(x.shape)}"
             )
         lead = x.shape[:-1]
-        z = self.scaler(x.to(self.dtype_).reshape(-1, self.n_features))
+        z = x.to(self.dtype_).reshape(-1, self.n_features)
+        if self.config.feature_scaling != "none":
+            z = self.scaler(z)
         return torch.sigmoid(self.logits(z)).reshape(*lead, self.n_nodes)
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:

@@ -17,6 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
@@ -129,6 +130,7 @@ class KLRPredictor(ProgressPredictor):
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
+        self._packed_cache: tuple[tuple, tuple[torch.Tensor, ...]] | None = None
 
     def shape_spec(self) -> dict[str, Any]:
         return {"n_support": int(self.support.shape[1])}
@@ -139,7 +141,8 @@ class KLRPredictor(ProgressPredictor):
         return self.gamma * self.feature_scale
 
     def kernel(self, z: torch.Tensor) -> torch.Tensor:
-        """RBF kernel of scaled features ``z (B, d)`` with every node's supports: ``(B, K, S)``."""
+        """RBF kernel of scaled features ``z (B, d)`` with every node's supports: ``(B, K, S)``
+        (padded slots are 0)."""
         a = self.feature_weights()
         s = self.support
         x_term = (z * z) @ a.T
@@ -149,7 +152,41 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq) * self.support_mask
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        return torch.einsum("bks,ks->bk", self.kernel(z), self.weight) + self.bias
+        """Logits ``(B, K)`` over the packed (unpadded) supports.
+
+        With ``a_n`` the kernel weights of support ``n``'s node,
+        ``Σ_j a_nj (z_j - s_nj)² = a_n · z² - 2 z · (a_n s_n) + a_n · s_n²``: one small product
+        for the per-node first term, one matrix product of ``z`` with all N weighted supports,
+        one exp over ``(B, N)`` and a per-node sum. Without gradients the packed tensors are
+        cached until a parameter or buffer changes, so a control tick costs a handful of small
+        tensor calls.
+        """
+        a, node, weighted, s_term, w = self._packed()
+        x_term = torch.index_select((z * z) @ a.T, 1, node)
+        sq = (x_term - 2.0 * F.linear(z, weighted) + s_term).clamp_min(0.0)
+        terms = torch.exp(-sq) * w
+        out = torch.zeros(z.shape[0], self.n_nodes, dtype=terms.dtype, device=terms.device)
+        return out.index_add(1, node, terms) + self.bias
+
+    def _packed(self) -> tuple[torch.Tensor, ...]:
+        """Kernel weights ``a (K, d)``, node index ``(N,)``, ``a_n s_n (N, d)``,
+        ``a_n · s_n² (N,)`` and weights ``(N,)`` of the N real supports (padding dropped)."""
+        tensors = (self.gamma, self.feature_scale, self.support, self.support_mask, self.weight)
+        extra = getattr(self, "log_feature_scale", None)
+        if extra is not None:
+            tensors += (extra,)
+        grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+        key = tuple((id(t), t._version) for t in tensors)
+        if not grad and self._packed_cache is not None and self._packed_cache[0] == key:
+            return self._packed_cache[1]
+        a = self.feature_weights()
+        node, slot = torch.nonzero(self.support_mask, as_tuple=True)
+        s = self.support[node, slot]
+        weighted = a[node] * s
+        packed = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot])
+        if not grad:
+            self._packed_cache = (key, packed)
+        return packed
 
     def _supports_for(self, node: NodeData) -> np.ndarray:
         c = self.config
