@@ -18,6 +18,8 @@ joints) for the IK keeps the loop free of wind-up when a palm presses on the box
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -30,16 +32,15 @@ from cpmp.sim.scene import HANDS
 def rotation_error(goal: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """Rotation vector [rad] taking ``rot`` (3, 3) to ``goal`` (3, 3), world frame, shape (3,).
 
-    Goes through a standardised quaternion (w >= 0), so the angle is in [0, pi].
+    Goes through the quaternion of ``goal rot^T``; :func:`mujoco.mju_quat2Vel` maps an angle
+    above pi to its complement, so this equals the rotation vector of the standardised
+    quaternion (w >= 0) and its angle is in [0, pi].
     """
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, (goal @ rot.T).ravel())
-    if quat[0] < 0:
-        quat = -quat
-    sin_half = float(np.linalg.norm(quat[1:]))
-    if sin_half < 1e-12:
-        return np.zeros(3)
-    return quat[1:] * (2.0 * np.arctan2(sin_half, quat[0]) / sin_half)
+    out = np.empty(3)
+    mujoco.mju_quat2Vel(out, quat, 1.0)
+    return out
 
 
 def rotation_angle(goal: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -48,6 +49,9 @@ def rotation_angle(goal: np.ndarray, rot: np.ndarray) -> np.ndarray:
     cos = 0.5 * (np.trace(err, axis1=-2, axis2=-1) - 1.0)
     return np.arccos(np.clip(cos, -1.0, 1.0))
 
+
+LEFT, RIGHT = HANDS.index("left"), HANDS.index("right")
+"""Rows of the two arms in the (2, ...) arrays."""
 
 NULLSPACE_REGULARISER = 1e-6
 """Tiny damping [m^2] of the pseudo-inverse used for the null-space projector: the DLS-damped
@@ -79,6 +83,17 @@ class MPController:
         self._previous: dict[str, str] = {}
         self.ref_pos = np.zeros((2, 3))
         self.ref_rot = np.zeros((2, 3, 3))
+        # per-tick constants: finger decay factor, joint-limit band edges [rad] and push gain
+        # [1/s per rad], gram regularisers (4, 6, 6) (DLS damping for both arms, then the
+        # null-space regulariser for both arms)
+        self._finger_decay = float(np.exp(-cfg.finger_gain * cfg.control_dt))
+        self._band_lo = self.lo + cfg.limit_margin
+        self._band_hi = self.hi - cfg.limit_margin
+        self._push_gain = cfg.limit_gain / cfg.limit_margin
+        eye6 = np.eye(6)
+        self._gram_diag = np.stack(
+            [cfg.ik_damping**2 * eye6] * 2 + [NULLSPACE_REGULARISER * eye6] * 2
+        )
 
     def reset(self, q: np.ndarray, fingers: dict[str, np.ndarray]) -> None:
         """Start from arm posture ``q`` (2, 7) and finger angles per hand."""
@@ -93,38 +108,53 @@ class MPController:
         box_pos: measured box centre (3,) [m].
         """
         cfg = self.cfg
-        dt = cfg.control_dt
         pos, rot, jac = self.kin.fk_jacobian(self.q_ref)
         self.ref_pos, self.ref_rot = pos, rot
-        twist = np.zeros((2, 6))
-        velocity: dict[str, np.ndarray] = {}
-        for hand in ("right", "left"):
-            i = HANDS.index(hand)
-            mp = active[f"{hand}_pos"]
-            self._latch(mp, pos, box_pos)
-            feedforward = np.zeros(3)
-            if mp.frame == "world":
-                goal = mp.target
-            elif mp.frame == "box":
-                goal = box_pos + mp.target
-            elif mp.frame == "held":
-                goal = mp.target + self._latched[mp.variable]
-            else:
-                goal = pos[HANDS.index("right")] + self._latched[mp.variable]
-                feedforward = velocity["right"]
-            v = cfg.pos_gain * mp.axis_gain * (goal - pos[i])
-            speed = np.linalg.norm(v)
-            if speed > cfg.max_speed:
-                v *= cfg.max_speed / speed
-            velocity[hand] = v + feedforward
-            twist[i, :3] = velocity[hand]
-            twist[i, 3:] = cfg.rot_gain * rotation_error(active[f"{hand}_rot"].target, rot[i])
-        self.q_ref = self._resolve(jac, twist, dt)
+        twist = np.empty((2, 6))
+        right = self._velocity(active["right_pos"], RIGHT, pos, box_pos, None)
+        twist[RIGHT, :3] = right
+        twist[LEFT, :3] = self._velocity(active["left_pos"], LEFT, pos, box_pos, right)
+        twist[LEFT, 3:] = rotation_error(active["left_rot"].target, rot[LEFT])
+        twist[RIGHT, 3:] = rotation_error(active["right_rot"].target, rot[RIGHT])
+        twist[:, 3:] *= cfg.rot_gain
+        self.q_ref = self._resolve(jac, twist, cfg.control_dt)
         for hand in HANDS:
             goal = active[f"{hand}_fingers"].target
-            decay = np.exp(-cfg.finger_gain * dt)
-            self.fingers_ref[hand] = goal + (self.fingers_ref[hand] - goal) * decay
+            self.fingers_ref[hand] = goal + (self.fingers_ref[hand] - goal) * self._finger_decay
         self._previous = {v: mp.name for v, mp in active.items()}
+
+    def _velocity(
+        self,
+        mp: MP,
+        i: int,
+        pos: np.ndarray,
+        box_pos: np.ndarray,
+        right_velocity: np.ndarray | None,
+    ) -> np.ndarray:
+        """Commanded linear velocity [m/s] (3,) of hand row ``i`` under position MP ``mp``.
+
+        pos: (2, 3) reference end-effector positions [m]; box_pos (3,) [m];
+        right_velocity: the right hand's commanded velocity (3,), fed forward by ``right_ee``
+        MPs.
+        """
+        cfg = self.cfg
+        self._latch(mp, pos, box_pos)
+        frame = mp.frame
+        if frame == "world":
+            goal = mp.target
+        elif frame == "box":
+            goal = box_pos + mp.target
+        elif frame == "held":
+            goal = mp.target + self._latched[mp.variable]
+        else:
+            goal = pos[RIGHT] + self._latched[mp.variable]
+        v = cfg.pos_gain * mp.axis_gain * (goal - pos[i])
+        speed = math.sqrt(v.dot(v))
+        if speed > cfg.max_speed:
+            v *= cfg.max_speed / speed
+        if frame == "right_ee":
+            v += right_velocity
+        return v
 
     def _latch(self, mp: MP, pos: np.ndarray, box_pos: np.ndarray) -> None:
         """Latch the hand offset of a held/relative MP when it starts (pos: (2, 3) [m])."""
@@ -132,24 +162,24 @@ class MPController:
         if mp.frame == "held" and (previous not in HELD_MPS or mp.variable not in self._latched):
             self._latched[mp.variable] = pos[HANDS.index(mp.variable.split("_")[0])] - box_pos
         elif mp.frame == "right_ee" and (previous != mp.name or mp.variable not in self._latched):
-            self._latched[mp.variable] = pos[HANDS.index("left")] - pos[HANDS.index("right")]
+            self._latched[mp.variable] = pos[LEFT] - pos[RIGHT]
 
     def _resolve(self, jac: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """One DLS resolved-rate step of both arms. jac (2, 6, 7), twist (2, 6) -> q (2, 7)."""
+        """One DLS resolved-rate step of both arms. jac (2, 6, 7), twist (2, 6) -> q (2, 7).
+
+        ``J^T (J J^T + l^2 I)^-1 v + (I - J^T (J J^T + e I)^-1 J) s`` is evaluated as
+        ``s + J^T (a - b)`` with ``[a; b]`` from one stacked solve of both arms' damped and
+        null-space grams (4, 6, 6) against ``[v; J s]``.
+        """
         cfg = self.cfg
         q = self.q_ref
         jt = np.swapaxes(jac, 1, 2)
-        gram = jac @ jt + (cfg.ik_damping**2) * np.eye(6)
-        pinv = jt @ np.linalg.inv(gram)
-        dq = np.einsum("bij,bj->bi", pinv, twist)
-        margin = cfg.limit_margin
-        push = np.clip((self.lo + margin - q) / margin, 0.0, None) - np.clip(
-            (q - (self.hi - margin)) / margin, 0.0, None
-        )
-        secondary = cfg.posture_gain * (self.q_home - q) + cfg.limit_gain * push
-        exact = jt @ np.linalg.inv(jac @ jt + NULLSPACE_REGULARISER * np.eye(6))
-        null = np.eye(7) - exact @ jac
-        dq += np.einsum("bij,bj->bi", null, secondary)
-        peak = np.max(np.abs(dq), axis=1, keepdims=True)
-        dq *= np.minimum(1.0, cfg.max_joint_speed / np.maximum(peak, 1e-12))
-        return np.clip(q + dq * dt, self.lo, self.hi)
+        gram = jac @ jt
+        push = np.maximum(self._band_lo - q, 0.0) + np.minimum(self._band_hi - q, 0.0)
+        secondary = cfg.posture_gain * (self.q_home - q) + self._push_gain * push
+        rhs = np.concatenate((twist[:, :, None], jac @ secondary[:, :, None]))
+        sol = np.linalg.solve(np.concatenate((gram, gram)) + self._gram_diag, rhs)
+        dq = (jt @ (sol[:2] - sol[2:]))[:, :, 0] + secondary
+        peak = np.abs(dq).max(axis=1, keepdims=True)
+        dq *= cfg.max_joint_speed / np.maximum(peak, cfg.max_joint_speed)
+        return np.minimum(np.maximum(q + dq * dt, self.lo), self.hi)

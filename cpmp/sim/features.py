@@ -33,7 +33,6 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.sim.config import TaskConfig
-from cpmp.sim.control import rotation_angle
 from cpmp.sim.mps import IDLE, MP
 from cpmp.sim.scene import HANDS, Box
 
@@ -41,6 +40,7 @@ WORKSPACE_LO = np.array([0.0, -0.5, 0.6])
 """Lower workspace bound [m] for position scaling (x, y, z)."""
 WORKSPACE_HI = np.array([0.7, 0.5, 1.2])
 """Upper workspace bound [m] for position scaling (x, y, z)."""
+_WORKSPACE_SPAN = WORKSPACE_HI - WORKSPACE_LO
 HEIGHT_SCALE = 0.2
 """Box heights are divided by this [m]."""
 RELATIVE_SCALE = 0.15
@@ -63,7 +63,7 @@ def feature_names(library: dict[str, dict[str, MP]]) -> list[str]:
 
 def scale_position(pos: np.ndarray) -> np.ndarray:
     """Workspace position(s) [m], (..., 3) -> roughly [0, 1]."""
-    return (pos - WORKSPACE_LO) / (WORKSPACE_HI - WORKSPACE_LO)
+    return (pos - WORKSPACE_LO) / _WORKSPACE_SPAN
 
 
 def box_size_features(box: Box, cfg: TaskConfig) -> np.ndarray:
@@ -79,6 +79,65 @@ def goal_distance(delta_sq: float, sigma: float) -> float:
     return float(1.0 - np.exp(-0.5 * delta_sq / sigma**2))
 
 
+class GoalDistances:
+    """The ``dist.*`` features of one MP library, evaluated for all MPs in one vectorised pass.
+
+    The goals of orientation MPs (world rotations) and finger MPs (joint angles) are fixed for
+    an episode, so they are stacked once here, in :func:`feature_names` order.
+
+    Parameters
+    ----------
+    library : dict[str, dict[str, MP]]
+        ``library[variable][name]``, as from :func:`cpmp.sim.mps.build_library`.
+    cfg : TaskConfig
+        Supplies ``rot_sigma`` and ``finger_sigma``.
+    """
+
+    def __init__(self, library: dict[str, dict[str, MP]], cfg: TaskConfig) -> None:
+        rot_rows, rot_targets = [], []
+        finger_targets: dict[str, list[np.ndarray]] = {h: [] for h in HANDS}
+        row_by_hand: dict[str, list[int]] = {h: [] for h in HANDS}
+        sigmas = []
+        for variable, mps in library.items():
+            hand = variable.split("_")[0]
+            for mp in mps.values():
+                if mp.name == IDLE:
+                    continue
+                row = len(sigmas)
+                if variable.endswith("_rot"):
+                    # trace(R_goal R^T) = <R_goal, R>: a row over both hands' flat rotations
+                    block = np.zeros((len(HANDS), 9))
+                    block[HANDS.index(hand)] = np.asarray(mp.target, dtype=np.float64).ravel()
+                    rot_rows.append(row)
+                    rot_targets.append(block.ravel())
+                    sigmas.append(cfg.rot_sigma)
+                elif variable.endswith("_fingers"):
+                    finger_targets[hand].append(np.asarray(mp.target, dtype=np.float64))
+                    row_by_hand[hand].append(row)
+                    sigmas.append(cfg.finger_sigma)
+        self._rot_rows = np.array(rot_rows, dtype=np.intp)
+        # halved, so that cos(angle) = 0.5 (trace - 1) is one product and one subtraction
+        self._half_rot_targets = 0.5 * np.array(rot_targets).reshape(len(rot_rows), -1)
+        self._finger_rows = {h: np.array(r, dtype=np.intp) for h, r in row_by_hand.items() if r}
+        self._finger_targets = {h: np.stack(finger_targets[h]) for h in self._finger_rows}
+        # eq. (6) exponent -D^2 / (2 sigma^2) as D^2 / (-2 sigma^2)
+        self._neg_two_sigma_sq = -2.0 * np.array(sigmas) ** 2
+
+    def __call__(self, ee_rot: np.ndarray, fingers: dict[str, np.ndarray]) -> np.ndarray:
+        """Goal distances (m,) in [0, 1): eq. (6) of every orientation and finger MP.
+
+        ee_rot (2, 3, 3): end-effector rotation matrices, rows (left, right); fingers: per
+        hand, joint angles (k,) [rad].
+        """
+        sq = np.empty(self._neg_two_sigma_sq.shape)
+        cos = self._half_rot_targets @ ee_rot.reshape(-1) - 0.5
+        sq[self._rot_rows] = np.arccos(np.minimum(np.maximum(cos, -1.0), 1.0)) ** 2
+        for hand, rows in self._finger_rows.items():
+            diff = fingers[hand] - self._finger_targets[hand]
+            sq[rows] = np.vecdot(diff, diff)
+        return 1.0 - np.exp(sq / self._neg_two_sigma_sq)
+
+
 def compute_features(
     size_features: np.ndarray,
     box_pos: np.ndarray,
@@ -86,35 +145,21 @@ def compute_features(
     ee_rot: np.ndarray,
     fingers: dict[str, np.ndarray],
     contacts: np.ndarray,
-    library: dict[str, dict[str, MP]],
-    cfg: TaskConfig,
+    goals: GoalDistances,
 ) -> np.ndarray:
     """Feature vector (d,) from the measured state.
 
     size_features (3,); box_pos (3,) [m]; ee_pos (2, 3) [m] and ee_rot (2, 3, 3), rows
     (left, right); fingers: per hand, joint angles (k,) [rad]; contacts (3,): left palm-box,
-    right palm-box, box-support contact (0 or 1).
+    right palm-box, box-support contact (0 or 1); goals: the episode's goal-distance table.
     """
-    parts = [
-        size_features,
-        scale_position(box_pos),
-        scale_position(ee_pos).ravel(),
-        (0.5 + 0.5 * np.tanh((ee_pos - box_pos) / RELATIVE_SCALE)).ravel(),
-        np.asarray(contacts, dtype=np.float64),
-    ]
-    dists = []
-    for variable, mps in library.items():
-        hand = variable.split("_")[0]
-        if variable.endswith("_rot"):
-            rot = ee_rot[HANDS.index(hand)]
-            for mp in mps.values():
-                if mp.name == IDLE:
-                    continue
-                angle = float(rotation_angle(mp.target, rot))
-                dists.append(goal_distance(angle**2, cfg.rot_sigma))
-        elif variable.endswith("_fingers"):
-            for mp in mps.values():
-                diff = fingers[hand] - mp.target
-                dists.append(goal_distance(float(diff @ diff), cfg.finger_sigma))
-    parts.append(np.asarray(dists))
-    return np.concatenate(parts)
+    relative = 0.5 + 0.5 * np.tanh((ee_pos - box_pos) / RELATIVE_SCALE)
+    return np.concatenate(
+        (
+            size_features,
+            scale_position(np.concatenate((box_pos[None], ee_pos))).ravel(),
+            relative.ravel(),
+            contacts,
+            goals(ee_rot, fingers),
+        )
+    )

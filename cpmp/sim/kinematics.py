@@ -82,9 +82,8 @@ class ArmKinematics:
         Returns ``pos`` (2, 3) [m], ``rot`` (2, 3, 3) and ``jac`` (2, 6, 7) with rows
         (linear [m/rad]; angular [rad/rad]) in the world frame (mount frames are world-aligned).
         """
+        th = torch.from_numpy(np.ascontiguousarray(q, dtype=np.float64))
         with torch.inference_mode():
-            th = torch.as_tensor(q, dtype=torch.float64)
-            jac, pose = self.chains["right"].jacobian(th, ret_eef_pose=True)
+            jac, pose = self.chains["right"].jacobian_tensor(th, ret_eef_pose=True)
         mat = pose.numpy()
-        pos = mat[:, :3, 3] + self.mount_pos
-        return pos, mat[:, :3, :3], jac.numpy()
+        return mat[:, :3, 3] + self.mount_pos, mat[:, :3, :3], jac.numpy()

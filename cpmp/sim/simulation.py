@@ -12,7 +12,7 @@ import numpy as np
 from cpmp.errors import UnknownMPError
 from cpmp.sim.config import TaskConfig
 from cpmp.sim.control import MPController
-from cpmp.sim.features import box_size_features, compute_features, feature_names
+from cpmp.sim.features import GoalDistances, box_size_features, compute_features, feature_names
 from cpmp.sim.kinematics import ArmKinematics
 from cpmp.sim.mps import MP, VARIABLES, build_library, container_center
 from cpmp.sim.scene import (
@@ -36,10 +36,12 @@ _GEOM_TYPES = {
 }
 
 
-_INSTABILITY_WARNINGS = (
-    mujoco.mjtWarning.mjWARN_BADQPOS,
-    mujoco.mjtWarning.mjWARN_BADQVEL,
-    mujoco.mjtWarning.mjWARN_BADQACC,
+_INSTABILITY_WARNINGS = np.array(
+    [
+        int(mujoco.mjtWarning.mjWARN_BADQPOS),
+        int(mujoco.mjtWarning.mjWARN_BADQVEL),
+        int(mujoco.mjtWarning.mjWARN_BADQACC),
+    ]
 )
 """MuJoCo warnings that mean the integration blew up (MuJoCo then resets the state itself)."""
 
@@ -90,14 +92,22 @@ class Simulation:
             h: np.array([m.actuator(f"{h}_{j}").id for j in FINGER_JOINTS[h]]) for h in HANDS
         }
         self._adhesion = {h: m.actuator(f"{h}_adhesion").id for h in HANDS}
+        # actuators written each tick: arms (rows left, right), fingers per hand, adhesion
+        self._ctrl_index = np.concatenate(
+            [self._arm_act.ravel()]
+            + [self._finger_act[h] for h in HANDS]
+            + [np.array([self._adhesion[h] for h in HANDS])]
+        )
         self._site = np.array([m.site(f"{h}_ee").id for h in HANDS])
         self._box_body = m.body("box").id
         self._box_geom = m.geom("box").id
         self._palm_geom = {h: m.geom(f"{h}_palm").id for h in HANDS}
         support_bodies = {m.body(name).id for name in ("world", "table", "plate", "container")}
-        self._support_geoms = np.array(
-            [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in support_bodies]
-        )
+        # per geom: (is the left palm, is the right palm, belongs to a support body)
+        self._touch_table = np.zeros((m.ngeom, 3), dtype=bool)
+        for i, hand in enumerate(HANDS):
+            self._touch_table[self._palm_geom[hand], i] = True
+        self._touch_table[:, 2] = np.isin(m.geom_bodyid, list(support_bodies))
         self._robot_dofs = np.array(
             [m.joint(i).dofadr[0] for i in range(m.njnt) if m.joint(i).name != "box_free"]
         )
@@ -114,6 +124,7 @@ class Simulation:
         self.mp_names: dict[str, list[str]] = {v: list(mps) for v, mps in self.library.items()}
         self.feature_names: list[str] = feature_names(self.library)
         self._size_features = box_size_features(box, cfg)
+        self._goal_distances = GoalDistances(self.library, cfg)
         self.controller = MPController(cfg, self.kin, self.arm_limits, self.q_home)
         self.active: dict[str, str] = {}
         self.timing = {"physics": 0.0, "kinematics": 0.0}
@@ -143,6 +154,8 @@ class Simulation:
 
     def set_active(self, active: Mapping[str, str]) -> None:
         """Activate one MP per control variable (short names from :attr:`mp_names`)."""
+        if active == self.active:
+            return
         for variable in self.variables:
             if variable not in active:
                 raise UnknownMPError(f"no MP given for control variable {variable!r}")
@@ -162,15 +175,15 @@ class Simulation:
             raise UnknownMPError("call set_active() before step()")
         d = self.data
         start = time.perf_counter()
-        mps = {v: self.library[v][name] for v, name in self.active.items()}
-        self.controller.update(mps, self.box_pos())
-        d.ctrl[self._arm_act] = self.controller.q_ref
-        for hand in HANDS:
-            d.ctrl[self._finger_act[hand]] = self.controller.fingers_ref[hand]
-            d.ctrl[self._adhesion[hand]] = 1.0 if self.active[f"{hand}_fingers"] == "grasp" else 0.0
+        active = self.active
+        ctl = self.controller
+        ctl.update({v: self.library[v][name] for v, name in active.items()}, self.box_pos())
+        adhesion = [1.0 if active[f"{h}_fingers"] == "grasp" else 0.0 for h in HANDS]
+        d.ctrl[self._ctrl_index] = np.concatenate(
+            [ctl.q_ref.ravel()] + [ctl.fingers_ref[h] for h in HANDS] + [adhesion]
+        )
         middle = time.perf_counter()
-        for _ in range(self.n_substeps):
-            mujoco.mj_step(self.model, d)
+        mujoco.mj_step(self.model, d, nstep=self.n_substeps)
         mujoco.mj_kinematics(self.model, d)
         self.timing["kinematics"] += middle - start
         self.timing["physics"] += time.perf_counter() - middle
@@ -180,11 +193,10 @@ class Simulation:
     def diverged(self) -> bool:
         """True if the state holds NaN/inf, MuJoCo flagged bad accelerations, or speeds blew up."""
         d = self.data
-        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+        # NaN/inf speeds fail the comparison too
+        if not (np.isfinite(d.qpos).all() and np.abs(d.qvel).max() <= 1e3):
             return True
-        if any(d.warning[int(w)].number > 0 for w in _INSTABILITY_WARNINGS):
-            return True
-        return bool(np.max(np.abs(d.qvel)) > 1e3)
+        return bool(d.warning.number[_INSTABILITY_WARNINGS].any())
 
     # measured state -------------------------------------------------------------------------
     def box_pos(self) -> np.ndarray:
@@ -193,38 +205,34 @@ class Simulation:
 
     def ee_pos(self) -> np.ndarray:
         """Measured end-effector site positions [m], (2, 3), rows (left, right)."""
-        return self.data.site_xpos[self._site].copy()
+        return self.data.site_xpos[self._site]  # fancy indexing copies
 
     def ee_rot(self) -> np.ndarray:
         """Measured end-effector site rotation matrices, (2, 3, 3)."""
-        return self.data.site_xmat[self._site].reshape(2, 3, 3).copy()
+        return self.data.site_xmat[self._site].reshape(2, 3, 3)  # fancy indexing copies
 
     def finger_angles(self) -> dict[str, np.ndarray]:
         """Measured finger joint angles [rad] per hand."""
         return {h: self.data.qpos[self._finger_qpos[h]].copy() for h in HANDS}
 
-    def _box_partners(self) -> np.ndarray:
-        """Geom ids currently in contact with the box."""
+    def _touches(self) -> np.ndarray:
+        """Touch flags (3,) bool: left palm-box, right palm-box, box-support contact."""
         pairs = self.data.contact.geom[: self.data.ncon]
-        return np.concatenate(
-            [pairs[pairs[:, 0] == self._box_geom, 1], pairs[pairs[:, 1] == self._box_geom, 0]]
-        )
+        # the other geom of every contact pair that involves the box
+        partners = pairs[:, ::-1][pairs == self._box_geom]
+        return self._touch_table[partners].any(axis=0)
 
     def palm_touches_box(self, hand: str) -> bool:
         """True if ``hand``'s palm is in contact with the box."""
-        return bool(np.any(self._box_partners() == self._palm_geom[hand]))
+        return bool(self._touches()[HANDS.index(hand)])
 
     def box_supported(self) -> bool:
         """True if the box touches a static surface (table, plate or container)."""
-        return bool(np.any(np.isin(self._box_partners(), self._support_geoms)))
+        return bool(self._touches()[2])
 
     def contacts(self) -> np.ndarray:
         """Touch signals (3,): left palm-box, right palm-box, box-support (0 or 1)."""
-        partners = self._box_partners()
-        return np.array(
-            [float(np.any(partners == self._palm_geom[h])) for h in HANDS]
-            + [float(np.any(np.isin(partners, self._support_geoms)))]
-        )
+        return self._touches().astype(np.float64)
 
     def robot_speed(self) -> float:
         """Largest arm/finger joint speed [rad/s]."""
@@ -240,8 +248,7 @@ class Simulation:
             self.ee_rot(),
             self.finger_angles(),
             self.contacts(),
-            self.library,
-            self.cfg,
+            self._goal_distances,
         )
         self.timing["kinematics"] += time.perf_counter() - start
         return out
