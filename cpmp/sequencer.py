@@ -273,8 +273,10 @@ class ConcurrentSequencer:
         return cls(graphs, model, feature_names, seq_config, summary, combos)
 
     # ----------------------------------------------------------------------------- inference
-    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
+    def progress(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
+        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order
+        (start heads, if any, after them); ``heads`` keeps only the first ``heads`` columns
+        (and skips evaluating the others)."""
         if isinstance(x, torch.Tensor):
             x = x.detach().cpu().numpy()
         xn = np.asarray(x, dtype=np.float64)
@@ -286,7 +288,7 @@ class ConcurrentSequencer:
         if not np.isfinite(xn).all():
             raise DataError("features contain NaN or inf; the sequencer needs finite features")
         with torch.no_grad():
-            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
+            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn)), heads).numpy()
 
     @property
     def node_keys(self) -> list[tuple[str, str]]:
@@ -296,7 +298,8 @@ class ConcurrentSequencer:
 
     def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
         """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
-        return self._phi_dict(self.progress(np.asarray(x, dtype=np.float64).reshape(-1)))
+        state = np.asarray(x, dtype=np.float64).reshape(-1)
+        return self._phi_dict(self.progress(state, heads=len(self._keys)))
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
@@ -333,7 +336,7 @@ class ConcurrentSequencer:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
         self._last_t = t
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        phi = self.progress(state)
+        phi = self.progress(state, heads=len(self._keys)).tolist()
         probs: dict[str, dict[str, float]] = {}
         c = self.config
         for v in sorted(self.graphs):
@@ -344,10 +347,10 @@ class ConcurrentSequencer:
                 self._candidates[v] = None
                 continue
             exit_p = phi[self._index[(v, current)]]
-            p = exit_p * (1.0 - phi[idx])
-            probs[v] = dict(zip(names, p.tolist(), strict=True))
-            best = int(np.argmax(p))
-            target, p_best = names[best], float(p[best])
+            p = [exit_p * (1.0 - phi[i]) for i in idx]
+            probs[v] = dict(zip(names, p, strict=True))
+            best = max(range(len(p)), key=p.__getitem__)
+            target, p_best = names[best], p[best]
             cand = self._candidates.get(v)
             if p_best <= c.threshold or exit_p <= c.min_exit:
                 self._candidates[v] = None
@@ -364,10 +367,11 @@ class ConcurrentSequencer:
         self.last_tick = TickInfo(t, self._phi_dict(phi), probs, dict(self.active))
         return dict(self.active)
 
-    def _phi_dict(self, phi: np.ndarray) -> dict[str, dict[str, float]]:
+    def _phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
         """Per-node φ ``(K,)`` as variable -> MP -> φ (start heads left out)."""
         out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
-        for (v, mp), value in zip(self._keys, phi[: len(self._keys)].tolist(), strict=True):
+        values = phi.tolist() if isinstance(phi, np.ndarray) else phi
+        for (v, mp), value in zip(self._keys, values[: len(self._keys)], strict=True):
             out[v][mp] = value
         return out
 

@@ -117,6 +117,20 @@ def test_packed_cache_follows_parameter_changes(train_demos, test_demos):
         np.testing.assert_allclose(clone.logits(z), model.logits(z), atol=1e-12)
 
 
+@pytest.mark.parametrize("kind", ["klr", "klr_sparse", "mlp"])
+def test_first_heads_equal_the_full_bank_columns(fitted, test_demos, kind):
+    model = fitted[kind].predictor
+    x = torch.as_tensor(test_demos[0].features[:6])
+    with torch.no_grad():
+        full = model(x)
+        for heads in (1, model.n_nodes // 2, model.n_nodes):
+            part = model(x, heads=heads)
+            assert part.shape == (6, heads)
+            np.testing.assert_allclose(part, full[:, :heads], rtol=0, atol=1e-12)
+        with pytest.raises(DataError, match="heads"):
+            model(x, heads=model.n_nodes + 1)
+
+
 def test_klr_gradients_flow_through_packed_logits(fitted, test_demos):
     model = fitted["klr"].predictor
     x = torch.as_tensor(test_demos[0].features[:4]).requires_grad_(True)

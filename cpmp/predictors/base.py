@@ -138,22 +138,34 @@ class ProgressPredictor(nn.Module):
     def n_nodes(self) -> int:
         return len(self.node_keys)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Progress of every node: ``x (..., d)`` raw features -> ``(..., K)`` in [0, 1]."""
+    def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
+        """Progress of every node: ``x (..., d)`` raw features -> ``(..., K)`` in [0, 1].
+
+        ``heads``: evaluate only the first ``heads`` nodes (``(..., heads)``), e.g. a
+        sequencer's graph nodes without its start heads.
+        """
         if x.shape[-1] != self.n_features:
             raise DataError(
                 f"expected feature vectors with {self.n_features} entries, got shape "
                 f"{tuple(x.shape)}"
             )
+        if heads is not None and not 0 < heads <= self.n_nodes:
+            raise DataError(f"heads must be in 1..{self.n_nodes}, got {heads}")
         lead = x.shape[:-1]
         z = x.to(self.dtype_).reshape(-1, self.n_features)
         if self.config.feature_scaling != "none":
             z = self.scaler(z)
-        return torch.sigmoid(self.logits(z)).reshape(*lead, self.n_nodes)
+        out = torch.sigmoid(self.logits(z) if heads is None else self.head_logits(z, heads))
+        return out.reshape(*lead, out.shape[-1])
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
         """Logits of every node for scaled features ``z (B, d)`` -> ``(B, K)``."""
         raise NotImplementedError
+
+    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        """Logits of the first ``heads`` nodes ``(B, heads)``; banks override this to skip the
+        other nodes' work."""
+        return self.logits(z)[:, :heads]
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Data-dependent set-up before training (support points, initial weights)."""

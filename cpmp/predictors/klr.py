@@ -17,7 +17,6 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from torch import nn
-from torch.nn import functional as F
 
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
@@ -130,7 +129,7 @@ class KLRPredictor(ProgressPredictor):
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
-        self._packed_cache: tuple[tuple, tuple[torch.Tensor, ...]] | None = None
+        self._packed_cache: tuple[tuple, tuple[Any, ...]] | None = None
 
     def shape_spec(self) -> dict[str, Any]:
         return {"n_support": int(self.support.shape[1])}
@@ -152,25 +151,33 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq) * self.support_mask
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        """Logits ``(B, K)`` over the packed (unpadded) supports.
+        return self.head_logits(z, self.n_nodes)
+
+    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        """Logits ``(B, heads)`` of the first ``heads`` nodes over their packed (unpadded)
+        supports.
 
         With ``a_n`` the kernel weights of support ``n``'s node,
         ``Σ_j a_nj (z_j - s_nj)² = a_n · z² - 2 z · (a_n s_n) + a_n · s_n²``: one small product
-        for the per-node first term, one matrix product of ``z`` with all N weighted supports,
+        for the per-node first term, one matrix product of ``z`` with the weighted supports,
         one exp over ``(B, N)`` and a per-node sum. Without gradients the packed tensors are
         cached until a parameter or buffer changes, so a control tick costs a handful of small
         tensor calls.
         """
-        a, node, weighted, s_term, w = self._packed()
-        x_term = torch.index_select((z * z) @ a.T, 1, node)
-        sq = (x_term - 2.0 * F.linear(z, weighted) + s_term).clamp_min(0.0)
-        terms = torch.exp(-sq) * w
-        out = torch.zeros(z.shape[0], self.n_nodes, dtype=terms.dtype, device=terms.device)
-        return out.index_add(1, node, terms) + self.bias
+        a, node, weighted, s_term, w, ends = self._packed()
+        h = heads
+        n = ends[h - 1] if h > 0 else 0
+        node, weighted, s_term, w = node[:n], weighted[:n], s_term[:n], w[:n]
+        x_term = torch.index_select((z * z) @ a[:h].T, 1, node)
+        sq = torch.addmm(s_term, z, weighted.T, alpha=-2.0) + x_term
+        terms = torch.exp(-sq.clamp_min(0.0)) * w
+        out = torch.zeros(z.shape[0], h, dtype=terms.dtype, device=terms.device)
+        return out.index_add(1, node, terms) + self.bias[:h]
 
-    def _packed(self) -> tuple[torch.Tensor, ...]:
+    def _packed(self) -> tuple[Any, ...]:
         """Kernel weights ``a (K, d)``, node index ``(N,)``, ``a_n s_n (N, d)``,
-        ``a_n · s_n² (N,)`` and weights ``(N,)`` of the N real supports (padding dropped)."""
+        ``a_n · s_n² (N,)`` and weights ``(N,)`` of the N real supports (padding dropped, grouped
+        by node), and each node's end offset in them (list of K ints)."""
         tensors = (self.gamma, self.feature_scale, self.support, self.support_mask, self.weight)
         extra = getattr(self, "log_feature_scale", None)
         if extra is not None:
@@ -183,7 +190,8 @@ class KLRPredictor(ProgressPredictor):
         node, slot = torch.nonzero(self.support_mask, as_tuple=True)
         s = self.support[node, slot]
         weighted = a[node] * s
-        packed = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot])
+        ends = torch.cumsum(self.support_mask.sum(1), 0).tolist()
+        packed = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot], ends)
         if not grad:
             self._packed_cache = (key, packed)
         return packed

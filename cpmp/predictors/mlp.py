@@ -83,10 +83,14 @@ class MLPPredictor(ProgressPredictor):
                 b.zero_()
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        h = z[:, None, :].expand(-1, self.n_nodes, -1)
+        return self.head_logits(z, self.n_nodes)
+
+    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        k = heads
+        h = z[:, None, :].expand(-1, k, -1)
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.einsum("bki,kio->bko", h, w) + b
+            h = torch.einsum("bki,kio->bko", h, w[:k]) + b[:k]
             if layer < last:
                 h = self._act(h)
         return h[..., 0]

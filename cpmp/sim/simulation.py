@@ -46,13 +46,14 @@ _INSTABILITY_WARNINGS = np.array(
 """MuJoCo warnings that mean the integration blew up (MuJoCo then resets the state itself)."""
 
 
-@functools.lru_cache(maxsize=1)
-def shared_kinematics() -> ArmKinematics:
-    """The arm kinematics (independent of the box), built once per process."""
+@functools.lru_cache(maxsize=2)
+def shared_kinematics(compile: bool = True) -> ArmKinematics:
+    """The arm kinematics (independent of the box), built once per process and ``compile``
+    setting (see :class:`~cpmp.sim.kinematics.ArmKinematics`)."""
     xml = scene_xml_text()
     model = mujoco.MjModel.from_xml_string(xml)
     mounts = {h: model.body(f"{h}_mount").pos.copy() for h in HANDS}
-    return ArmKinematics(xml, mounts)
+    return ArmKinematics(xml, mounts, compile=compile)
 
 
 class Simulation:
@@ -78,7 +79,7 @@ class Simulation:
         self.model = build_spec(box, cfg).compile()
         self.model.opt.timestep = cfg.physics_dt
         self.data = mujoco.MjData(self.model)
-        self.kin = shared_kinematics()
+        self.kin = shared_kinematics(cfg.compile_kinematics)
         m = self.model
         self.n_substeps = round(cfg.control_dt / m.opt.timestep)
         self._arm_qpos = np.array(

@@ -9,7 +9,7 @@ import pytest
 from cpmp.errors import ConfigError
 from cpmp.sim import Box, Simulation, TaskConfig, correct_strategy
 from cpmp.sim.control import rotation_angle
-from cpmp.sim.scene import ARM_JOINTS, HANDS, build_model
+from cpmp.sim.scene import ARM_JOINTS, HANDS, build_model, scene_xml_text
 from cpmp.sim.simulation import shared_kinematics
 
 
@@ -52,6 +52,37 @@ def test_fk_and_jacobian_match_mujoco(cfg):
             dofs = [m.joint(f"{hand}_{j}").dofadr[0] for j in ARM_JOINTS]
             expected = np.vstack([jacp[:, dofs], jacr[:, dofs]])
             assert np.max(np.abs(jac[i] - expected)) < 1e-6
+
+
+def test_compiled_jacobian_equals_eager_pytorch_kinematics(cfg):
+    compiled, eager = shared_kinematics(True), shared_kinematics(False)
+    assert compiled.compiled and not eager.compiled
+    rng = np.random.default_rng(1)
+    limits = Simulation(cfg, Box(0.2, 0.15, 0.1)).arm_limits
+    for _ in range(5):
+        q = rng.uniform(limits[..., 0], limits[..., 1])
+        for got, want in zip(compiled.fk_jacobian(q), eager.fk_jacobian(q), strict=True):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_failed_compilation_falls_back_to_eager_with_a_warning(monkeypatch):
+    from cpmp.sim import kinematics
+
+    def no_compiler(*args, **kwargs):
+        raise RuntimeError("no C++ compiler")
+
+    monkeypatch.setattr(kinematics.torch, "compile", no_compiler)
+    eager = shared_kinematics(False)
+    with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
+        kin = kinematics.ArmKinematics(scene_xml_text(), _mounts(eager), compile=True)
+    assert not kin.compiled
+    q = np.linspace(-1.0, 1.0, 14).reshape(2, 7)
+    for got, want in zip(kin.fk_jacobian(q), eager.fk_jacobian(q), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+def _mounts(kin):
+    return {hand: kin.mount_pos[i] for i, hand in enumerate(HANDS)}
 
 
 def _run(sim, active, seconds):

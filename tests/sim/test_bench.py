@@ -1,0 +1,59 @@
+"""The simulation speed benchmark (``scripts/bench_sim.py``): report structure, not speed."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from cpmp.sim.bench import TARGET_REAL_TIME_FACTOR, benchmark
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "scripts"))
+
+import bench_sim  # noqa: E402
+
+
+def _check_episode(report, cfg):
+    assert report["wall_time_s"] > 0 and report["sim_time_s"] > 0
+    assert report["real_time_factor"] == pytest.approx(report["sim_time_s"] / report["wall_time_s"])
+    assert report["meets_target"] == (report["real_time_factor"] >= TARGET_REAL_TIME_FACTOR)
+    assert set(report["share"]) == {"physics", "kinematics", "policy", "other"}
+    assert sum(report["share"].values()) == pytest.approx(1.0)
+    assert all(v >= 0 for k, v in report["share"].items() if k != "other")
+    ticks = round(report["sim_time_s"] / cfg.control_dt)
+    per_tick = sum(report["ms_per_tick"].values()) * ticks / 1e3
+    assert per_tick == pytest.approx(report["wall_time_s"], rel=1e-6)
+
+
+def test_replay_benchmark_times_a_complete_episode(cfg, boxes):
+    report = benchmark(cfg, boxes["right"], n_demos=0)
+    assert report["strategy"] == "right"
+    assert report["demonstration"]["success"]
+    assert report["kinematics"]["compiled"] is cfg.compile_kinematics
+    assert report["replay"]["outcome"] == "complete"
+    _check_episode(report["replay"], cfg)
+    assert "learned" not in report
+
+
+@pytest.mark.slow
+def test_learned_policy_benchmark_reports_the_full_loop(cfg, boxes):
+    report = benchmark(cfg, boxes["right"], n_demos=3, seed=1)
+    learned = report["learned"]
+    _check_episode(learned, cfg)
+    assert learned["n_demos"] == 3 and learned["fit_seconds"] > 0
+    assert learned["n_heads"] > 0 and learned["n_support_total"] > 0
+    assert learned["ms_per_tick"]["policy"] > 0
+
+
+def test_script_prints_json(capsys):
+    assert bench_sim.main(["--width", "0.15", "--depth", "0.12", "--demos", "0"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["replay"]["outcome"] == "complete"
+
+
+def test_script_rejects_a_bad_box(capsys):
+    assert bench_sim.main(["--width", "-0.1", "--demos", "0"]) == 2
+    assert "Box.width must be a positive length" in capsys.readouterr().err
