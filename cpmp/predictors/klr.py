@@ -165,14 +165,13 @@ class KLRPredictor(ProgressPredictor):
         tensor calls.
         """
         a, node, weighted, s_term, w, ends = self._packed()
-        h = heads
-        n = ends[h - 1] if h > 0 else 0
+        n = ends[heads - 1]
         node, weighted, s_term, w = node[:n], weighted[:n], s_term[:n], w[:n]
-        x_term = torch.index_select((z * z) @ a[:h].T, 1, node)
+        x_term = torch.index_select((z * z) @ a[:heads].T, 1, node)
         sq = torch.addmm(s_term, z, weighted.T, alpha=-2.0) + x_term
         terms = torch.exp(-sq.clamp_min(0.0)) * w
-        out = torch.zeros(z.shape[0], h, dtype=terms.dtype, device=terms.device)
-        return out.index_add(1, node, terms) + self.bias[:h]
+        out = torch.zeros(z.shape[0], heads, dtype=terms.dtype, device=terms.device)
+        return out.index_add(1, node, terms) + self.bias[:heads]
 
     def _packed(self) -> tuple[Any, ...]:
         """Kernel weights ``a (K, d)``, node index ``(N,)``, ``a_n s_n (N, d)``,

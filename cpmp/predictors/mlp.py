@@ -86,11 +86,10 @@ class MLPPredictor(ProgressPredictor):
         return self.head_logits(z, self.n_nodes)
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        k = heads
-        h = z[:, None, :].expand(-1, k, -1)
+        h = z[:, None, :].expand(-1, heads, -1)
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.einsum("bki,kio->bko", h, w[:k]) + b[:k]
+            h = torch.einsum("bki,kio->bko", h, w[:heads]) + b[:heads]
             if layer < last:
                 h = self._act(h)
         return h[..., 0]
