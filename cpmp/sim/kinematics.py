@@ -93,7 +93,9 @@ class ArmKinematics:
             return eager
         probe = torch.linspace(-1.5, 1.5, 14, dtype=torch.float64).reshape(2, 7)
         try:
-            compiled = torch.compile(eager, fullgraph=True, dynamic=False)
+            compiled = torch.compile(
+                eager, fullgraph=True, dynamic=False, options={"cpp_wrapper": True}
+            )
             with torch.no_grad():
                 got, want = compiled(probe), eager(probe)
             pairs = zip(got, want, strict=True)
