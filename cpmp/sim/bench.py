@@ -51,7 +51,7 @@ def benchmark(
     box: Box,
     threads: int = 1,
     n_demos: int = 6,
-    seed: int = 0,
+    seed: int = 1,
 ) -> dict[str, Any]:
     """Time the simulation on ``box`` with IK control and a policy in the loop.
 
@@ -59,11 +59,15 @@ def benchmark(
     closed-loop episode replaying that demonstration's labels (a policy of negligible cost, so
     this is the cost of physics + IK + features); and, if ``n_demos > 0``, a closed-loop
     episode of a sequencer learned (main-job defaults) from ``n_demos`` demonstrations on boxes
-    drawn with ``seed`` — the full loop of the paper's evaluation. Returns a JSON-ready dict:
-    simulated and wall times [s], real-time factors against :data:`TARGET_REAL_TIME_FACTOR`,
-    per-tick cost [ms] and wall-time shares of physics, kinematics (IK + features), policy and
-    the rest (bookkeeping). Building the arm kinematics (``torch.compile`` of the Jacobian
-    unless ``cfg.compile_kinematics`` is off) is timed apart as a one-off set-up cost.
+    drawn with ``seed`` — the full loop of the paper's evaluation. (On the default box, the
+    policy learned with seed 1 completes the task, so its timing covers every phase: reach,
+    grasp, carry, release, return; seed 0's deadlocks after 5 s standing still.)
+
+    Returns a JSON-ready dict: simulated and wall times [s], real-time factors against
+    :data:`TARGET_REAL_TIME_FACTOR`, per-tick cost [ms] and wall-time shares of physics,
+    kinematics (IK + features), policy and the rest (bookkeeping). Building the arm kinematics
+    (``torch.compile`` of the Jacobian unless ``cfg.compile_kinematics`` is off) is timed apart
+    as a one-off set-up cost.
     """
     torch.set_num_threads(threads)
     start = time.perf_counter()
