@@ -129,7 +129,7 @@ class KLRPredictor(ProgressPredictor):
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
-        self._packed_cache: tuple[tuple, tuple[Any, ...]] | None = None
+        self._packed_cache: tuple[tuple, tuple[Any, ...], dict[int, tuple]] | None = None
 
     def shape_spec(self) -> dict[str, Any]:
         return {"n_support": int(self.support.shape[1])}
@@ -164,36 +164,44 @@ class KLRPredictor(ProgressPredictor):
         cached until a parameter or buffer changes, so a control tick costs a handful of small
         tensor calls.
         """
-        a, node, weighted, s_term, w, ends = self._packed()
-        n = ends[heads - 1]
-        node, weighted, s_term, w = node[:n], weighted[:n], s_term[:n], w[:n]
-        x_term = torch.index_select((z * z) @ a[:heads].T, 1, node)
+        a_t, node, weighted, s_term, w = self._packed(heads)
+        x_term = torch.index_select((z * z) @ a_t, 1, node)
         sq = torch.addmm(s_term, z, weighted.T, alpha=-2.0) + x_term
         terms = torch.exp(-sq.clamp_min(0.0)) * w
         out = torch.zeros(z.shape[0], heads, dtype=terms.dtype, device=terms.device)
         return out.index_add(1, node, terms) + self.bias[:heads]
 
-    def _packed(self) -> tuple[Any, ...]:
-        """Kernel weights ``a (K, d)``, node index ``(N,)``, ``a_n s_n (N, d)``,
-        ``a_n · s_n² (N,)`` and weights ``(N,)`` of the N real supports (padding dropped, grouped
-        by node), and each node's end offset in them (list of K ints)."""
+    def _packed(self, heads: int) -> tuple[torch.Tensor, ...]:
+        """The real (unpadded) supports of the first ``heads`` nodes, grouped by node: kernel
+        weights ``a[:heads]ᵀ (d, heads)``, node index ``(N,)``, ``a_n s_n (N, d)``,
+        ``a_n · s_n² (N,)`` and weights ``(N,)``. Cached per ``heads`` while no gradient is
+        needed, keyed on the identity and version counter of every tensor they derive from."""
         tensors = (self.gamma, self.feature_scale, self.support, self.support_mask, self.weight)
         extra = getattr(self, "log_feature_scale", None)
         if extra is not None:
             tensors += (extra,)
         grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
         key = tuple((id(t), t._version) for t in tensors)
-        if not grad and self._packed_cache is not None and self._packed_cache[0] == key:
-            return self._packed_cache[1]
-        a = self.feature_weights()
-        node, slot = torch.nonzero(self.support_mask, as_tuple=True)
-        s = self.support[node, slot]
-        weighted = a[node] * s
-        ends = torch.cumsum(self.support_mask.sum(1), 0).tolist()
-        packed = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot], ends)
-        if not grad:
-            self._packed_cache = (key, packed)
-        return packed
+        if grad or self._packed_cache is None or self._packed_cache[0] != key:
+            a = self.feature_weights()
+            node, slot = torch.nonzero(self.support_mask, as_tuple=True)
+            s = self.support[node, slot]
+            weighted = a[node] * s
+            ends = torch.cumsum(self.support_mask.sum(1), 0).tolist()
+            full = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot], ends)
+            if grad:
+                return self._first_heads(full, heads)
+            self._packed_cache = (key, full, {})
+        _, full, per_heads = self._packed_cache
+        if heads not in per_heads:
+            per_heads[heads] = self._first_heads(full, heads)
+        return per_heads[heads]
+
+    @staticmethod
+    def _first_heads(full: tuple[Any, ...], heads: int) -> tuple[torch.Tensor, ...]:
+        a, node, weighted, s_term, w, ends = full
+        n = ends[heads - 1]
+        return a[:heads].T.contiguous(), node[:n], weighted[:n], s_term[:n], w[:n]
 
     def _supports_for(self, node: NodeData) -> np.ndarray:
         c = self.config
