@@ -148,6 +148,8 @@ def test_invalid_config_raises_config_error():
         TaskConfig.from_dict({"no_such_option": 1})
     with pytest.raises(ConfigError):
         Box(-0.1, 0.1, 0.1)
+    with pytest.raises(ConfigError, match="compile_kinematics must be true or false"):
+        TaskConfig.from_dict({"compile_kinematics": "yes"})
 
 
 def test_yaml_config_matches_dataclass_defaults():
