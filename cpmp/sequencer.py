@@ -1,19 +1,23 @@
-"""The concurrent sequencer: one sequence graph per control variable, coupled by features.
+"""The concurrent sequencer: one sequence graph per control variable.
 
 Transition rule (paper section III): at the start each graph activates the initial node with
-the highest entry probability ``1 - φ``. At every tick, for each successor ``s`` of the current
-node ``c`` the transition probability is ``p_s = φ_c(x) · (1 - φ_s(x))``; the sequencer switches
-to the best successor once its ``p`` exceeds ``threshold`` and has not improved by more than
-``min_improvement`` for ``patience`` seconds.
+the highest entry probability ``1 - φ`` (or, with ``start_rule="joint"``, the demonstrated
+combination of initial nodes with the highest summed log entry probability). At every tick, for
+each successor ``s`` of the current node ``c`` the transition probability is
+``p_s = φ_c(x) · (1 - φ_s(x))``; a switching rule (:mod:`cpmp.switching`) decides when the best
+successor fires. In the paper the graphs are coupled only through the shared features ``x``;
+cpmp's defaults also hold back transitions whose context (the other variables' MPs) was never
+demonstrated, and resolve stalls (:mod:`cpmp.switching`).
 
-The graphs are independent; they are coupled only because every node's progress is predicted
-from the same global feature vector ``x``.
+``ConcurrentSequencer.fit(demos)`` with no options gives cpmp's recommended configuration;
+``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` the paper's method.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +38,15 @@ from cpmp.predictors import (
     predictor_options,
 )
 from cpmp.progress import expected_progress
+from cpmp.switching import (
+    COUPLINGS,
+    SWITCH_RULES,
+    Coupling,
+    StallDetector,
+    SwitchRule,
+    make_rule,
+    recovery_choice,
+)
 from cpmp.training import TrainerConfig, fit_predictor
 
 if TYPE_CHECKING:
@@ -42,24 +55,47 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 CHECKPOINT_FORMAT = "cpmp-sequencer"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2
+NONFINITE_POLICIES = ("hold", "raise")
+
+PAPER_OPTIONS: dict[str, Any] = {
+    "feature_weighting": "none",
+    "start_kernel": "shared",
+    "start_rule": "independent",
+    "switch_rule": "paper",
+    "coupling": "none",
+    "recovery": False,
+}
+"""Fit options that turn :meth:`ConcurrentSequencer.fit`'s defaults into the paper's method:
+``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` (the main job's
+``predictor=klr sequencer=paper``)."""
 
 
 @dataclass
 class SequencerConfig:
-    """The transition rule's parameters.
+    """The transition rule's parameters (defaults: cpmp's recommended configuration; see
+    :data:`PAPER_OPTIONS` for the paper's).
 
     Attributes:
         threshold: a transition fires only when ``p > threshold`` (paper: 0.65).
-        patience: seconds ``p`` must go without improving before the switch fires (paper: 50 ms).
+        patience: the "50 ms" of the rule [s] (paper: 0.05).
         min_improvement: an increase of ``p`` smaller than this does not count as improving.
             Attractors converge asymptotically, so ``p`` keeps creeping up by tiny amounts; with
             a strict comparison (``0``) such a transition might never fire.
+        switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
+            min_improvement``, the paper's sentence read literally) or ``plateau`` (``p`` above
+            the threshold for ``patience`` without a new maximum); see :mod:`cpmp.switching`.
+        coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
+            hold back a transition while another variable runs an MP never seen at that
+            demonstrated switch (learned from the labels; see :mod:`cpmp.switching`).
+        recovery: resolve stalls (no switch and no motion for ``stall_time``) by taking the
+            candidate transition most consistent with the coupling, then most probable, if its
+            ``p`` reaches ``recovery_threshold``.
+        stall_time: seconds without any switch and without motion that count as a stall.
+        rest_speed: features count as at rest below this speed, in training ranges per second.
+        recovery_threshold: the relaxed threshold of a recovery transition.
         min_exit: a transition also needs the current node's exit probability ``φ`` above this
-            (0 = the paper's rule). ``p = φ (1 - φ_next)`` can pass the threshold with ``φ``
-            well below 1 when the successor's entry probability is near 1, e.g. a grasp that
-            lasts through lift, carry and lower is left at the end of carry; the gate keeps an
-            MP active until it has (nearly) run its course.
+            (0 = off, the paper's rule).
         start_kernel: ``shared`` (paper): the initial node is chosen with the nodes' progress
             predictors. ``isotropic``: with extra heads for the initial nodes, fitted in the same
             run on the same data but always with the isotropic kernel. Meant for
@@ -70,32 +106,70 @@ class SequencerConfig:
             seen together in a demonstration the one with the highest summed log entry
             probability, so graphs cannot start in a mixture of strategies that was never
             demonstrated (the coupling the paper's discussion proposes).
+        nonfinite: what a tick with a non-finite φ does: ``hold`` (keep every MP, note the
+            event) or ``raise`` (:class:`~cpmp.errors.DataError`). A non-finite φ never fires.
     """
 
     threshold: float = 0.65
     patience: float = 0.05
     min_improvement: float = 1e-3
+    switch_rule: str = "paper"
+    coupling: str = "context"
+    recovery: bool = True
+    stall_time: float = 1.0
+    rest_speed: float = 0.01
+    recovery_threshold: float = 0.3
     min_exit: float = 0.0
-    start_kernel: str = "shared"
-    start_rule: str = "independent"
+    start_kernel: str = "isotropic"
+    start_rule: str = "joint"
+    nonfinite: str = "hold"
 
     def __post_init__(self) -> None:
+        for name in (
+            "threshold",
+            "patience",
+            "min_improvement",
+            "stall_time",
+            "rest_speed",
+            "recovery_threshold",
+            "min_exit",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"sequencer option {name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f"sequencer option {name} must be finite, got {value}")
         if not 0.0 <= self.threshold < 1.0:
             raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
+        if not 0.0 <= self.recovery_threshold < 1.0:
+            raise ConfigError(
+                f"recovery_threshold must be in [0, 1), got {self.recovery_threshold}"
+            )
         if self.patience < 0.0:
             raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
         if self.min_improvement < 0.0:
             raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
+        if self.stall_time <= 0.0 or self.rest_speed <= 0.0:
+            raise ConfigError(
+                f"stall_time and rest_speed must be > 0, got {self.stall_time} and "
+                f"{self.rest_speed}"
+            )
         if not 0.0 <= self.min_exit < 1.0:
             raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
-        if self.start_kernel not in ("shared", "isotropic"):
-            raise ConfigError(
-                f"start_kernel must be 'shared' or 'isotropic', got {self.start_kernel!r}"
-            )
-        if self.start_rule not in ("independent", "joint"):
-            raise ConfigError(
-                f"start_rule must be 'independent' or 'joint', got {self.start_rule!r}"
-            )
+        if not isinstance(self.recovery, bool):
+            raise ConfigError(f"recovery must be true or false, got {self.recovery!r}")
+        for name, allowed in (
+            ("switch_rule", SWITCH_RULES),
+            ("coupling", COUPLINGS),
+            ("start_kernel", ("shared", "isotropic")),
+            ("start_rule", ("independent", "joint")),
+            ("nonfinite", NONFINITE_POLICIES),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(
+                    f"{name} must be one of {', '.join(map(repr, allowed))}, "
+                    f"got {getattr(self, name)!r}"
+                )
 
 
 @dataclass(frozen=True)
@@ -109,6 +183,7 @@ class TransitionEvent:
         target: MP active after.
         probability: transition probability ``p`` at that tick.
         state: (d,) feature vector at that tick.
+        kind: ``switch`` (the switching rule fired) or ``recovery`` (a stall was resolved).
     """
 
     t: float
@@ -117,6 +192,21 @@ class TransitionEvent:
     target: str
     probability: float
     state: np.ndarray = field(repr=False)
+    kind: str = "switch"
+
+
+@dataclass(frozen=True)
+class SequencerNote:
+    """Something the sequencer decided not to do, or did exceptionally, at time ``t`` [s].
+
+    ``kind``: ``hold`` (a transition the rule would fire is held back by the coupling),
+    ``recovery`` (a stall resolved) or ``nonfinite`` (φ was NaN/inf; every MP kept).
+    """
+
+    t: float
+    kind: str
+    variable: str
+    text: str
 
 
 @dataclass
@@ -128,19 +218,14 @@ class TickInfo:
         progress: variable -> MP -> φ (every node).
         transition_probs: variable -> successor -> ``p`` (successors of the active MP).
         active: variable -> active MP after the tick.
+        held: variable -> successor held back by the coupling at this tick.
     """
 
     t: float
     progress: dict[str, dict[str, float]]
     transition_probs: dict[str, dict[str, float]]
     active: dict[str, str]
-
-
-@dataclass
-class _Candidate:
-    target: str
-    best: float
-    since: float
+    held: dict[str, str] = field(default_factory=dict)
 
 
 def _split_options(options: dict[str, Any], kind: str) -> tuple[dict, dict, dict, dict]:
@@ -183,6 +268,8 @@ class ConcurrentSequencer:
         config: SequencerConfig | None = None,
         fit_summary: dict[str, Any] | None = None,
         initial_combinations: Sequence[Mapping[str, str]] | None = None,
+        coupling: Coupling | None = None,
+        feature_range: np.ndarray | None = None,
     ) -> None:
         self.graphs = dict(graphs)
         self.predictor = predictor.eval()
@@ -212,11 +299,33 @@ class ConcurrentSequencer:
             )
             for v, mp in keys
         }
+        self.coupling = coupling or Coupling()
+        """Learned contexts of the demonstrated switches (used with ``coupling="context"``)."""
+        self.feature_range = (
+            np.ones(len(self.feature_names))
+            if feature_range is None
+            else np.asarray(feature_range, dtype=np.float64).reshape(-1)
+        )
+        """(d,) range of each feature in the training data (stall detection's unit)."""
+        if self.feature_range.shape != (len(self.feature_names),):
+            raise ConfigError(
+                f"feature_range has {self.feature_range.size} entries for "
+                f"{len(self.feature_names)} features"
+            )
         self.active: dict[str, str] = {}
         self.events: list[TransitionEvent] = []
+        self.notes: list[SequencerNote] = []
         self.last_tick: TickInfo | None = None
-        self._candidates: dict[str, _Candidate | None] = {}
+        self._rules = {v: self._new_rule() for v in self.graphs}
+        self._stall = StallDetector(
+            self.feature_range, self.config.stall_time, self.config.rest_speed
+        )
+        self._holding: dict[str, str | None] = {}
         self._last_t: float | None = None
+
+    def _new_rule(self) -> SwitchRule:
+        c = self.config
+        return make_rule(c.switch_rule, c.threshold, c.patience, c.min_improvement)
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -270,7 +379,11 @@ class ConcurrentSequencer:
             combo = {v: str(demo.labels[v][0]) for v in sorted(graphs)}
             if combo not in combos:
                 combos.append(combo)
-        return cls(graphs, model, feature_names, seq_config, summary, combos)
+        coupling = Coupling.learn(demos, sorted(graphs))
+        feature_range = np.ptp(all_x, axis=0)
+        return cls(
+            graphs, model, feature_names, seq_config, summary, combos, coupling, feature_range
+        )
 
     # ----------------------------------------------------------------------------- inference
     def progress(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
@@ -305,7 +418,13 @@ class ConcurrentSequencer:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
         demonstrated combination of initial nodes with the highest summed log entry probability
         when ``start_rule="joint"``)."""
+        t = self._check_t(t)
         phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
+        if not np.isfinite(phi).all():
+            raise DataError(
+                "the progress predictor gave a non-finite φ at reset; the model is broken "
+                "(check its parameters) or the features are far outside the training data"
+            )
         if self.config.start_rule == "joint" and self.initial_combinations:
             entry = np.clip(1.0 - phi, 1e-12, 1.0)
             scores = [
@@ -320,52 +439,113 @@ class ConcurrentSequencer:
                 entry_v = [1.0 - phi[self._start_index[(v, mp)]] for mp in initial]
                 self.active[v] = initial[int(np.argmax(entry_v))]
         self.events = []
-        self._candidates = {v: None for v in self.graphs}
+        self.notes = []
+        for rule in self._rules.values():
+            rule.reset()
+        self._holding = {v: None for v in self.graphs}
+        self._stall.reset(float(t), np.asarray(x, dtype=np.float64).reshape(-1))
         self._last_t = float(t)
         self.last_tick = TickInfo(
             float(t), self._phi_dict(phi), {v: {} for v in self.graphs}, dict(self.active)
         )
         return dict(self.active)
 
+    @staticmethod
+    def _check_t(t: float) -> float:
+        t = float(t)
+        if not math.isfinite(t):
+            raise DataError(f"time must be finite, got t={t}")
+        return t
+
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
         if not self.active:
             raise NotFittedError("call reset(t, x) before step(t, x)")
-        t = float(t)
+        t = self._check_t(t)
         if self._last_t is not None and t < self._last_t:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
         self._last_t = t
         state = np.asarray(x, dtype=np.float64).reshape(-1)
         phi = self.progress(state, heads=len(self._keys)).tolist()
-        probs: dict[str, dict[str, float]] = {}
         c = self.config
+        if not all(map(math.isfinite, phi)):
+            bad = [
+                f"{v}/{mp}"
+                for (v, mp), f in zip(self._keys, phi, strict=True)
+                if not math.isfinite(f)
+            ]
+            text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
+            if c.nonfinite == "raise":
+                raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
+            if not self.notes or self.notes[-1].kind != "nonfinite":
+                self.notes.append(SequencerNote(t, "nonfinite", "", text))
+            self.last_tick = TickInfo(t, self._phi_dict(phi), {}, dict(self.active))
+            return dict(self.active)
+        self._stall.observe(t, state)
+        context = dict(self.active)
+        coupled = c.coupling == "context"
+        probs: dict[str, dict[str, float]] = {}
+        held: dict[str, str] = {}
+        candidates: list[tuple[str, str, str, float, int]] = []
+        fired = False
         for v in sorted(self.graphs):
-            current = self.active[v]
+            current = context[v]
             names, idx = self._successor_idx[(v, current)]
             if not names:
                 probs[v] = {}
-                self._candidates[v] = None
                 continue
             exit_p = phi[self._index[(v, current)]]
             p = [exit_p * (1.0 - phi[i]) for i in idx]
             probs[v] = dict(zip(names, p, strict=True))
-            best = max(range(len(p)), key=p.__getitem__)
-            target, p_best = names[best], p[best]
-            cand = self._candidates.get(v)
-            if p_best <= c.threshold or exit_p <= c.min_exit:
-                self._candidates[v] = None
-                continue
-            if cand is None or cand.target != target:
-                cand = _Candidate(target, p_best, t)
-            elif p_best > cand.best + c.min_improvement:
-                cand.best, cand.since = p_best, t
-            self._candidates[v] = cand
-            if t - cand.since >= c.patience - 1e-9:
-                self.events.append(TransitionEvent(t, v, current, target, p_best, state.copy()))
-                self.active[v] = target
-                self._candidates[v] = None
-        self.last_tick = TickInfo(t, self._phi_dict(phi), probs, dict(self.active))
+            bad = [len(self.coupling.inconsistent((v, current, s), context)) for s in names]
+            candidates += [(v, current, s, q, b) for s, q, b in zip(names, p, bad, strict=True)]
+            gate = exit_p > c.min_exit
+            allowed = [gate and (not coupled or b == 0) for b in bad]
+            k = self._rules[v].update(t, p, allowed)
+            top = max(range(len(p)), key=p.__getitem__)
+            if coupled and gate and p[top] > c.threshold and not allowed[top] and k != top:
+                held[v] = names[top]
+                if self._holding.get(v) != names[top]:
+                    others = self.coupling.inconsistent((v, current, names[top]), context)
+                    self.notes.append(
+                        SequencerNote(
+                            t,
+                            "hold",
+                            v,
+                            f"{v}: {current} -> {names[top]} held (p={p[top]:.2f}): "
+                            + ", ".join(f"{u} runs {context[u]}" for u in others)
+                            + ", never seen at this switch",
+                        )
+                    )
+            self._holding[v] = held.get(v)
+            if k is not None:
+                self._switch(t, v, names[k], p[k], state, "switch")
+                fired = True
+        if not fired and c.recovery and self._stall.stalled(t):
+            choice = recovery_choice(candidates, c.recovery_threshold)
+            if choice is not None:
+                v, source, target, p_rec = choice
+                self._switch(t, v, target, p_rec, state, "recovery")
+                self.notes.append(
+                    SequencerNote(
+                        t,
+                        "recovery",
+                        v,
+                        f"stall of {c.stall_time:g} s resolved: {v}: {source} -> {target} "
+                        f"(p={p_rec:.2f})",
+                    )
+                )
+        self.last_tick = TickInfo(t, self._phi_dict(phi), probs, dict(self.active), held)
         return dict(self.active)
+
+    def _switch(
+        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: str
+    ) -> None:
+        self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
+        self.active[v] = target
+        self._rules[v].reset()
+        self._holding[v] = None
+        self._stall.switched(t)
 
     def _phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
         """Per-node φ ``(K,)`` as variable -> MP -> φ (start heads left out)."""
@@ -403,6 +583,8 @@ class ConcurrentSequencer:
             "sequencer": dataclasses.asdict(self.config),
             "fit_summary": to_builtin(self.fit_summary),
             "initial_combinations": self.initial_combinations,
+            "coupling": self.coupling.to_dict(),
+            "feature_range": self.feature_range.tolist(),
         }
         path = Path(path)
         with atomic_path(path) as tmp:
@@ -423,11 +605,17 @@ class ConcurrentSequencer:
             raise CpmpFileError(f"{path} is not a readable cpmp checkpoint: {err}") from err
         if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
             raise CpmpFileError(f"{path} is not a cpmp sequencer checkpoint")
-        if payload.get("version") != CHECKPOINT_VERSION:
+        version = payload.get("version")
+        if version not in (1, CHECKPOINT_VERSION):
             raise CpmpFileError(
-                f"{path} has checkpoint version {payload.get('version')}; this cpmp reads "
-                f"version {CHECKPOINT_VERSION}"
+                f"{path} has checkpoint version {version}; this cpmp reads versions 1 and "
+                f"{CHECKPOINT_VERSION}"
             )
+        options = dict(payload["sequencer"])
+        if version == 1:
+            # Written before the switching rules, coupling and recovery existed: keep its
+            # behaviour (the plateau rule, graphs coupled through the features only).
+            options.update(switch_rule="plateau", coupling="none", recovery=False)
         graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
         predictor = predictor_from_spec(payload["predictor"]["spec"])
         predictor.load_state_dict(payload["predictor"]["state"])
@@ -435,9 +623,11 @@ class ConcurrentSequencer:
             graphs,
             predictor,
             payload["feature_names"],
-            SequencerConfig(**payload["sequencer"]),
+            SequencerConfig(**options),
             payload.get("fit_summary", {}),
             payload.get("initial_combinations", []),
+            Coupling.from_dict(payload.get("coupling", [])),
+            payload.get("feature_range"),
         )
 
     def with_config(self, **options: Any) -> ConcurrentSequencer:
@@ -450,11 +640,21 @@ class ConcurrentSequencer:
             config,
             self.fit_summary,
             self.initial_combinations,
+            self.coupling,
+            self.feature_range,
         )
 
     def describe(self) -> str:
-        """All graphs as text."""
-        return "\n".join(self.graphs[v].to_text() for v in sorted(self.graphs))
+        """All graphs as text, each followed by its learned switch contexts (the coupling)."""
+        parts = []
+        for v in sorted(self.graphs):
+            parts.append(self.graphs[v].to_text())
+            lines = self.coupling.describe(v)
+            if lines:
+                used = "" if self.config.coupling == "context" else " (not used: coupling=none)"
+                parts.append(f"{v}: switch contexts{used}")
+                parts += lines
+        return "\n".join(parts)
 
     def check_variable(self, variable: str) -> SequenceGraph:
         if variable not in self.graphs:

@@ -42,8 +42,10 @@ def test_initial_node_is_highest_entry_probability():
     assert seq.reset(0.0, [0.5, 0.6, 0.0]) == {"v": "A"}
 
 
-def test_switch_after_patience_without_improvement():
-    seq = _chain_sequencer(threshold=0.65, patience=0.05, min_improvement=1e-3)
+def test_plateau_switch_after_patience_without_improvement():
+    seq = _chain_sequencer(
+        switch_rule="plateau", threshold=0.65, patience=0.05, min_improvement=1e-3
+    )
     seq.reset(0.0, [0.0, 0.0, 0.0])
     # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant
     for k in range(1, 5):
@@ -56,8 +58,8 @@ def test_switch_after_patience_without_improvement():
     np.testing.assert_allclose(event.state, [0.7, 0.0, 0.0])
 
 
-def test_improving_probability_delays_switch():
-    seq = _chain_sequencer(patience=0.05, min_improvement=1e-3)
+def test_plateau_improving_probability_delays_switch():
+    seq = _chain_sequencer(switch_rule="plateau", patience=0.05, min_improvement=1e-3)
     seq.reset(0.0, [0.0, 0.0, 0.0])
     t, p = 0.0, 0.66
     while p < 0.95:  # rises 0.01 per tick: always improving, so no switch
@@ -71,10 +73,10 @@ def test_improving_probability_delays_switch():
     assert seq.step(round(t + 0.01, 10), [flat, 0.0, 0.0]) == {"v": "B"}
 
 
-def test_creeping_improvement_below_tolerance_does_not_block():
+def test_plateau_creeping_improvement_below_tolerance_does_not_block():
     creeping = [0.7 + 1e-4 * k for k in range(20)]
-    strict = _chain_sequencer(min_improvement=0.0)
-    tolerant = _chain_sequencer(min_improvement=1e-3)
+    strict = _chain_sequencer(switch_rule="plateau", min_improvement=0.0)
+    tolerant = _chain_sequencer(switch_rule="plateau", min_improvement=1e-3)
     for seq in (strict, tolerant):
         seq.reset(0.0, [0.0, 0.0, 0.0])
         for k, p in enumerate(creeping, start=1):
@@ -83,8 +85,8 @@ def test_creeping_improvement_below_tolerance_does_not_block():
     assert tolerant.active == {"v": "B"}
 
 
-def test_below_threshold_never_switches_and_dip_resets():
-    seq = _chain_sequencer(threshold=0.65, patience=0.05)
+def test_plateau_below_threshold_never_switches_and_dip_resets():
+    seq = _chain_sequencer(switch_rule="plateau", threshold=0.65, patience=0.05)
     seq.reset(0.0, [0.0, 0.0, 0.0])
     for k in range(1, 30):
         seq.step(0.01 * k, [0.64, 0.0, 0.0])
