@@ -113,15 +113,31 @@ def demonstrated_switches(demo: Demonstration, variable: str) -> list[tuple[str,
 
 
 def switch_distances(
-    events: Sequence[TransitionEvent], demo: Demonstration, variable: str
+    events: Sequence[TransitionEvent],
+    demo: Demonstration,
+    variable: str,
+    columns: np.ndarray | None = None,
 ) -> list[float] | None:
     """Distances between triggered and demonstrated switch states of ``variable``; ``None`` if
-    the triggered switches do not match the demonstrated ones one to one."""
+    the triggered switches do not match the demonstrated ones one to one. ``columns`` (d,) bool
+    restricts the distance to those features (e.g. :func:`continuous_features`)."""
     fired = [e for e in events if e.variable == variable]
     shown = demonstrated_switches(demo, variable)
     if [(e.source, e.target) for e in fired] != [(s, t) for s, t, _ in shown]:
         return None
-    return [float(np.linalg.norm(e.state - x)) for e, (_, _, x) in zip(fired, shown, strict=True)]
+    keep = slice(None) if columns is None else np.asarray(columns, dtype=bool)
+    return [
+        float(np.linalg.norm((e.state - x)[keep]))
+        for e, (_, _, x) in zip(fired, shown, strict=True)
+    ]
+
+
+def continuous_features(demos: Sequence[Demonstration]) -> np.ndarray:
+    """``(d,)`` bool: features that take more than two distinct values in ``demos`` (binary
+    signals, such as touch, flip by 1 when a switch comes one tick early or late)."""
+    from cpmp.switching import indicator_features
+
+    return ~indicator_features(np.concatenate([d.features for d in demos], axis=0))
 
 
 def replay_demonstrations(

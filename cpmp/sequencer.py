@@ -26,7 +26,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError, UnknownMPError
+from cpmp.errors import (
+    ConfigError,
+    CpmpError,
+    CpmpFileError,
+    DataError,
+    NotFittedError,
+    UnknownMPError,
+)
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, to_builtin
 from cpmp.predictors import (
@@ -44,6 +51,7 @@ from cpmp.switching import (
     Coupling,
     StallDetector,
     SwitchRule,
+    indicator_features,
     make_rule,
     recovery_choice,
 )
@@ -60,6 +68,7 @@ NONFINITE_POLICIES = ("hold", "raise")
 
 PAPER_OPTIONS: dict[str, Any] = {
     "feature_weighting": "none",
+    "feature_scaling": "none",
     "start_kernel": "shared",
     "start_rule": "independent",
     "switch_rule": "paper",
@@ -87,7 +96,11 @@ class SequencerConfig:
             the threshold for ``patience`` without a new maximum); see :mod:`cpmp.switching`.
         coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
             hold back a transition while another variable runs an MP never seen at that
-            demonstrated switch (learned from the labels; see :mod:`cpmp.switching`).
+            demonstrated switch, or one that has progressed less than at every demonstrated
+            one (learned from the labels; see :mod:`cpmp.switching`).
+        progress_margin: with ``coupling=context``, another variable's MP counts as not far
+            enough while its predicted φ is more than this below the least progress it had at
+            a demonstrated switch (``None``: compare MPs only).
         recovery: resolve stalls (no switch and no motion for ``stall_time``) by taking the
             candidate transition most consistent with the coupling, then most probable, if its
             ``p`` reaches ``recovery_threshold``.
@@ -115,10 +128,11 @@ class SequencerConfig:
     min_improvement: float = 1e-3
     switch_rule: str = "paper"
     coupling: str = "context"
+    progress_margin: float | None = 0.2
     recovery: bool = True
     stall_time: float = 1.0
     rest_speed: float = 0.01
-    recovery_threshold: float = 0.3
+    recovery_threshold: float = 0.2
     min_exit: float = 0.0
     start_kernel: str = "isotropic"
     start_rule: str = "joint"
@@ -141,6 +155,13 @@ class SequencerConfig:
                 raise ConfigError(f"sequencer option {name} must be finite, got {value}")
         if not 0.0 <= self.threshold < 1.0:
             raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
+        margin = self.progress_margin
+        if margin is not None and (
+            isinstance(margin, bool)
+            or not isinstance(margin, (int, float))
+            or not 0.0 <= margin <= 1.0
+        ):
+            raise ConfigError(f"progress_margin must be null or in [0, 1], got {margin!r}")
         if not 0.0 <= self.recovery_threshold < 1.0:
             raise ConfigError(
                 f"recovery_threshold must be in [0, 1), got {self.recovery_threshold}"
@@ -373,23 +394,39 @@ class ConcurrentSequencer:
             raise ConfigError(f"subsample must be >= 1, got {subsample}")
         data = node_training_data(graphs, model, subsample)
         summary = fit_predictor(model, data, trainer_config, seed=seed)
+        bad = [
+            k
+            for k, v in model.state_dict().items()
+            if v.is_floating_point() and not torch.isfinite(v).all()
+        ]
+        if bad:
+            raise DataError(
+                f"the {predictor} fit produced non-finite parameters ({', '.join(bad)}); "
+                "check the feature magnitudes and the options gamma / l2 / lr"
+            )
         summary["n_demos"] = len(demos)
+        summary["warnings"] = fit_warnings(model, data)
+        for text in summary["warnings"]:
+            log.warning("%s", text)
         combos: list[dict[str, str]] = []
         for demo in demos:
             combo = {v: str(demo.labels[v][0]) for v in sorted(graphs)}
             if combo not in combos:
                 combos.append(combo)
-        coupling = Coupling.learn(demos, sorted(graphs))
-        feature_range = np.ptp(all_x, axis=0)
+        coupling = Coupling.learn(demos, sorted(graphs), model.scaler.transform)
+        feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
         return cls(
             graphs, model, feature_names, seq_config, summary, combos, coupling, feature_range
         )
 
     # ----------------------------------------------------------------------------- inference
-    def progress(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
-        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order
-        (start heads, if any, after them); ``heads`` keeps only the first ``heads`` columns
-        (and skips evaluating the others)."""
+    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
+        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
+        return self._heads(x, len(self._keys))
+
+    def _heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
+        """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
+        ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others)."""
         if isinstance(x, torch.Tensor):
             x = x.detach().cpu().numpy()
         xn = np.asarray(x, dtype=np.float64)
@@ -405,21 +442,20 @@ class ConcurrentSequencer:
 
     @property
     def node_keys(self) -> list[tuple[str, str]]:
-        """(variable, MP) of every node, in the order of :meth:`progress`'s first columns
-        (start heads, if any, follow them)."""
+        """(variable, MP) of every node, in the order of :meth:`progress`'s columns."""
         return list(self._keys)
 
     def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
         """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        return self._phi_dict(self.progress(state, heads=len(self._keys)))
+        return self._phi_dict(self.progress(state))
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
         demonstrated combination of initial nodes with the highest summed log entry probability
         when ``start_rule="joint"``)."""
         t = self._check_t(t)
-        phi = self.progress(np.asarray(x, dtype=np.float64).reshape(-1))
+        phi = self._heads(np.asarray(x, dtype=np.float64).reshape(-1))
         if not np.isfinite(phi).all():
             raise DataError(
                 "the progress predictor gave a non-finite φ at reset; the model is broken "
@@ -466,7 +502,7 @@ class ConcurrentSequencer:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
         self._last_t = t
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        phi = self.progress(state, heads=len(self._keys)).tolist()
+        phi = self.progress(state).tolist()
         c = self.config
         if not all(map(math.isfinite, phi)):
             bad = [
@@ -484,6 +520,7 @@ class ConcurrentSequencer:
         self._stall.observe(t, state)
         context = dict(self.active)
         coupled = c.coupling == "context"
+        done = {u: phi[self._index[(u, mp)]] for u, mp in context.items()}
         probs: dict[str, dict[str, float]] = {}
         held: dict[str, str] = {}
         candidates: list[tuple[str, str, str, float, int]] = []
@@ -497,7 +534,11 @@ class ConcurrentSequencer:
             exit_p = phi[self._index[(v, current)]]
             p = [exit_p * (1.0 - phi[i]) for i in idx]
             probs[v] = dict(zip(names, p, strict=True))
-            bad = [len(self.coupling.inconsistent((v, current, s), context)) for s in names]
+            why = [
+                self.coupling.inconsistent((v, current, s), context, done, c.progress_margin)
+                for s in names
+            ]
+            bad = [len(w) for w in why]
             candidates += [(v, current, s, q, b) for s, q, b in zip(names, p, bad, strict=True)]
             gate = exit_p > c.min_exit
             allowed = [gate and (not coupled or b == 0) for b in bad]
@@ -506,14 +547,13 @@ class ConcurrentSequencer:
             if coupled and gate and p[top] > c.threshold and not allowed[top] and k != top:
                 held[v] = names[top]
                 if self._holding.get(v) != names[top]:
-                    others = self.coupling.inconsistent((v, current, names[top]), context)
                     self.notes.append(
                         SequencerNote(
                             t,
                             "hold",
                             v,
                             f"{v}: {current} -> {names[top]} held (p={p[top]:.2f}): "
-                            + ", ".join(f"{u} runs {context[u]}" for u in others)
+                            + "; ".join(why[top])
                             + ", never seen at this switch",
                         )
                     )
@@ -611,14 +651,61 @@ class ConcurrentSequencer:
                 f"{path} has checkpoint version {version}; this cpmp reads versions 1 and "
                 f"{CHECKPOINT_VERSION}"
             )
+        try:
+            return cls._from_payload(payload, version)
+        except (CpmpError, KeyError, TypeError, ValueError, RuntimeError, AttributeError) as err:
+            raise CpmpFileError(
+                f"{path} is a damaged or incompatible cpmp checkpoint "
+                f"({type(err).__name__}: {err}); retrain it with scripts/train.py"
+            ) from err
+
+    @classmethod
+    def _from_payload(cls, payload: dict[str, Any], version: int) -> ConcurrentSequencer:
+        """Rebuild from a checkpoint payload, checking it against its own spec."""
+        known = {"format", "version", "sequencer", "graphs", "predictor", "feature_names"}
+        missing = sorted(known - set(payload))
+        if missing:
+            raise KeyError(f"missing entries {missing}")
         options = dict(payload["sequencer"])
+        unknown = sorted(set(options) - {f.name for f in dataclasses.fields(SequencerConfig)})
+        if unknown:
+            raise ValueError(f"unknown sequencer options {unknown}")
         if version == 1:
             # Written before the switching rules, coupling and recovery existed: keep its
             # behaviour (the plateau rule, graphs coupled through the features only).
             options.update(switch_rule="plateau", coupling="none", recovery=False)
         graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
         predictor = predictor_from_spec(payload["predictor"]["spec"])
-        predictor.load_state_dict(payload["predictor"]["state"])
+        state = payload["predictor"]["state"]
+        expected = predictor.state_dict()
+        problems = [f"missing {k}" for k in expected if k not in state]
+        problems += [f"unexpected {k}" for k in state if k not in expected]
+        problems += [
+            f"{k} has shape {tuple(state[k].shape)}, the spec needs {tuple(v.shape)}"
+            for k, v in expected.items()
+            if k in state and (not isinstance(state[k], torch.Tensor) or state[k].shape != v.shape)
+        ]
+        if problems:
+            raise ValueError("predictor state does not match its spec: " + "; ".join(problems))
+        predictor.load_state_dict(state)
+        bad = [
+            k
+            for k, v in predictor.state_dict().items()
+            if v.is_floating_point() and not torch.isfinite(v).all()
+        ]
+        if bad:
+            raise ValueError(f"non-finite predictor parameters: {', '.join(bad)}")
+        feature_range = payload.get("feature_range")
+        if feature_range is not None:
+            feature_range = np.asarray(feature_range, dtype=np.float64)
+            if (
+                feature_range.shape != (predictor.n_features,)
+                or not np.isfinite(feature_range).all()
+            ):
+                raise ValueError(
+                    f"feature_range must be {predictor.n_features} finite numbers, got shape "
+                    f"{feature_range.shape}"
+                )
         return cls(
             graphs,
             predictor,
@@ -627,7 +714,7 @@ class ConcurrentSequencer:
             payload.get("fit_summary", {}),
             payload.get("initial_combinations", []),
             Coupling.from_dict(payload.get("coupling", [])),
-            payload.get("feature_range"),
+            feature_range,
         )
 
     def with_config(self, **options: Any) -> ConcurrentSequencer:
@@ -696,6 +783,42 @@ def node_training_data(
                 activations=scaled,
             )
         )
+    return out
+
+
+DEGENERATE_PATH = 1e-9
+"""Total L1 path length (scaled features) below which a node's activations count as still."""
+UNSEPARATED_MAE = 0.2
+"""Mean absolute progress error on a node's own training data above which it is reported."""
+
+
+def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:
+    """Degenerate nodes, one message each: activations without feature change (their progress
+    falls back to normalised time, which the features cannot show) and nodes whose fitted φ
+    misses their own targets by more than :data:`UNSEPARATED_MAE` on average."""
+    out = []
+    with torch.no_grad():
+        for i, node in enumerate(data):
+            v, mp = node.key
+            if mp.startswith(START_PREFIX):
+                continue  # the same activations as the node itself
+            name = f"node {v}/{mp}"
+            length = sum(float(np.abs(np.diff(a, axis=0)).sum()) for a in node.activations)
+            if length < DEGENERATE_PATH:
+                out.append(
+                    f"{name}: the features do not change during its activations, so its "
+                    "progress cannot be predicted from them; add a feature that moves while "
+                    "this MP runs"
+                )
+                continue
+            z = node.x
+            logit = predictor.logits(z)[:, i] if z.shape[0] else z[:, 0]
+            mae = float((torch.sigmoid(logit) - node.target).abs().mean())
+            if mae > UNSEPARATED_MAE:
+                out.append(
+                    f"{name}: the predictor cannot fit its progress (training MAE {mae:.2f}); "
+                    "its activations may look alike at start and end in these features"
+                )
     return out
 
 

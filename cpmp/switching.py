@@ -17,10 +17,12 @@ current node fires, given its transition probability ``p_s(t) = φ_current(x) ·
 **Coupling** (the paper's discussion asks for more than the shared features): for every
 demonstrated switch ``source -> target`` of a variable, the MPs every *other* variable was
 running when it happened (the labels one sample before and at the switch, so that switches made
-in the same tick in either order are both allowed). A transition whose context — the other
-variables' current MPs — contains an MP never seen for that switch is held back. It is learned
-from the labels alone (nothing task-specific), per other variable (a product of marginal sets,
-more lenient than requiring a demonstrated joint context).
+in the same tick in either order are both allowed), and how far each of those MPs had
+progressed (the least expected progress, eq. 1, over the demonstrations). A transition whose
+context — the other variables' current MPs — contains an MP never seen for that switch, or an
+MP whose predicted progress φ is more than a margin below the least demonstrated one, is held
+back. It is learned from the labels alone (nothing task-specific), per other variable (a
+product of marginal sets, more lenient than requiring a demonstrated joint context).
 
 **Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds while
 the features are at rest (every feature moves slower than ``rest_speed`` times its training
@@ -31,7 +33,7 @@ among those the most probable, fires if its ``p`` reaches ``recovery_threshold``
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -138,80 +140,160 @@ class Coupling:
 
     Attributes:
         contexts: ``(variable, source, target)`` -> other variable -> MPs it ran at that switch.
+        progress: ``(variable, source, target)`` -> other variable -> MP -> the lowest expected
+            progress (eq. 1) that MP had reached at a demonstrated switch, for other variables
+            that kept running the same MP through the switch.
     """
 
     contexts: dict[Edge, dict[str, frozenset[str]]] = field(default_factory=dict)
+    progress: dict[Edge, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     @classmethod
-    def learn(cls, demos: Sequence[Demonstration], variables: Sequence[str]) -> Coupling:
-        """Collect the contexts of every switch of ``variables`` in ``demos``."""
+    def learn(
+        cls,
+        demos: Sequence[Demonstration],
+        variables: Sequence[str],
+        transform: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> Coupling:
+        """Collect the contexts of every switch of ``variables`` in ``demos``; ``transform``
+        maps features ``(n, d)`` to the space progress is measured in (the predictor's
+        scaling)."""
+        from cpmp.progress import expected_progress
+
         contexts: dict[Edge, dict[str, set[str]]] = {}
+        progress: dict[Edge, dict[str, dict[str, float]]] = {}
         variables = list(variables)
         for demo in demos:
             labels = {v: np.asarray(demo.labels[v]) for v in variables}
+            x = demo.features if transform is None else transform(demo.features)
+            done = {}
+            for u in variables:
+                done[u] = np.zeros(demo.n_samples)
+                for seg in demo.segments(u):
+                    sl = slice(seg.start, seg.stop)
+                    done[u][sl] = expected_progress(x[sl], demo.time[sl])
             for v in variables:
                 lab = labels[v]
                 for i in np.flatnonzero(lab[1:] != lab[:-1]) + 1:
-                    ctx = contexts.setdefault((v, str(lab[i - 1]), str(lab[i])), {})
+                    edge = (v, str(lab[i - 1]), str(lab[i]))
+                    ctx = contexts.setdefault(edge, {})
+                    prog = progress.setdefault(edge, {})
                     for u in variables:
-                        if u != v:
-                            ctx.setdefault(u, set()).update(
-                                (str(labels[u][i - 1]), str(labels[u][i]))
-                            )
-        return cls({e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()})
+                        if u == v:
+                            continue
+                        before, after = str(labels[u][i - 1]), str(labels[u][i])
+                        ctx.setdefault(u, set()).update((before, after))
+                        if before == after:
+                            seen = prog.setdefault(u, {})
+                            seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
+        return cls(
+            {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
+            {e: c for e, c in progress.items() if c},
+        )
 
-    def inconsistent(self, edge: Edge, active: Mapping[str, str]) -> list[str]:
-        """Other variables whose current MP was never seen at a demonstrated ``edge`` switch
-        (empty: consistent; an edge without a recorded context is consistent)."""
-        ctx = self.contexts.get(edge)
-        if not ctx:
-            return []
-        return [u for u, mps in ctx.items() if u in active and active[u] not in mps]
+    def inconsistent(
+        self,
+        edge: Edge,
+        active: Mapping[str, str],
+        phi: Mapping[str, float] | None = None,
+        margin: float | None = None,
+    ) -> list[str]:
+        """Why a transition along ``edge`` is inconsistent with every demonstrated context: one
+        entry per other variable that runs an MP never seen at this switch, or (with ``phi``,
+        each variable's predicted progress of its active MP, and a ``margin``) whose MP is
+        more than ``margin`` less advanced than at any demonstrated switch. Empty: consistent
+        (also for an edge that was never demonstrated)."""
+        out = []
+        for u, mps in (self.contexts.get(edge) or {}).items():
+            if u in active and active[u] not in mps:
+                out.append(f"{u} runs {active[u]}")
+        if phi is None or margin is None:
+            return out
+        for u, seen in (self.progress.get(edge) or {}).items():
+            mp = active.get(u)
+            if mp in seen and u in phi and phi[u] < seen[mp] - margin:
+                out.append(
+                    f"{u} has {mp} at progress {phi[u]:.2f} (demonstrated >= {seen[mp]:.2f})"
+                )
+        return out
 
     def describe(self, variable: str) -> list[str]:
-        """One line per switch of ``variable``: the other variables' demonstrated MPs."""
+        """One line per switch of ``variable``: the other variables' demonstrated MPs (and
+        the least progress at which they were seen)."""
         lines = []
         for (v, source, target), ctx in sorted(self.contexts.items()):
             if v != variable:
                 continue
-            parts = [f"{u} in {{{', '.join(sorted(mps))}}}" for u, mps in sorted(ctx.items())]
+            prog = self.progress.get((v, source, target), {})
+            parts = []
+            for u, mps in sorted(ctx.items()):
+                part = f"{u} in {{{', '.join(sorted(mps))}}}"
+                if u in prog:
+                    part += (
+                        " ("
+                        + ", ".join(f"{mp} >= {q:.2f}" for mp, q in sorted(prog[u].items()))
+                        + ")"
+                    )
+                parts.append(part)
             lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
         return lines
 
-    def to_dict(self) -> list[dict[str, Any]]:
+    def to_dict(self) -> dict[str, Any]:
         """JSON/checkpoint-friendly form."""
-        return [
-            {
-                "variable": v,
-                "source": s,
-                "target": t,
-                "context": {u: sorted(m) for u, m in sorted(c.items())},
-            }
-            for (v, s, t), c in sorted(self.contexts.items())
-        ]
+        return {
+            "switches": [
+                {
+                    "variable": v,
+                    "source": s,
+                    "target": t,
+                    "context": {u: sorted(m) for u, m in sorted(c.items())},
+                    "progress": {
+                        u: dict(sorted(q.items()))
+                        for u, q in sorted(self.progress.get((v, s, t), {}).items())
+                    },
+                }
+                for (v, s, t), c in sorted(self.contexts.items())
+            ],
+        }
 
     @classmethod
-    def from_dict(cls, rows: Sequence[Mapping[str, Any]]) -> Coupling:
-        return cls(
-            {
-                (str(r["variable"]), str(r["source"]), str(r["target"])): {
-                    str(u): frozenset(map(str, m)) for u, m in r["context"].items()
-                }
-                for r in rows
+    def from_dict(cls, data: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> Coupling:
+        """Inverse of :meth:`to_dict` (also reads the list form of checkpoint version 2)."""
+        rows = data.get("switches", []) if isinstance(data, Mapping) else data
+        contexts, progress = {}, {}
+        for r in rows:
+            edge = (str(r["variable"]), str(r["source"]), str(r["target"]))
+            contexts[edge] = {str(u): frozenset(map(str, m)) for u, m in r["context"].items()}
+            prog = {
+                str(u): {str(mp): float(q) for mp, q in seen.items()}
+                for u, seen in (r.get("progress") or {}).items()
             }
-        )
+            if prog:
+                progress[edge] = prog
+        return cls(contexts, progress)
+
+
+def indicator_features(x: np.ndarray) -> np.ndarray:
+    """``(d,)`` bool: features of ``x (N, d)`` that take at most two distinct values (binary
+    signals such as touch; they flicker while a contact is made or broken)."""
+    x = np.asarray(x, dtype=np.float64)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    return np.all((x == lo) | (x == hi), axis=0)
 
 
 class StallDetector:
     """Tracks when any variable last switched and when the features last moved.
 
     ``feature_range (d,)``: each feature's range in the training data; motion is measured
-    relative to it, so the detector does not depend on the features' units.
+    relative to it, so the detector does not depend on the features' units. Features with a
+    range of 0 are ignored (:meth:`ConcurrentSequencer.fit` gives indicator features range 0:
+    a touch signal that flickers is not motion).
     """
 
     def __init__(self, feature_range: np.ndarray, stall_time: float, rest_speed: float) -> None:
         r = np.asarray(feature_range, dtype=np.float64)
-        self.inv_range = np.where(r > 1e-12 * max(float(np.max(r, initial=0.0)), 1e-300), 1 / r, 0)
+        varies = r > 1e-12 * max(float(np.max(r, initial=0.0)), 1e-300)
+        self.inv_range = np.divide(1.0, r, out=np.zeros_like(r), where=varies)
         self.stall_time = stall_time
         self.rest_speed = rest_speed
         self._x: np.ndarray | None = None
@@ -224,13 +306,19 @@ class StallDetector:
         self.last_switch = self.last_motion = t
 
     def observe(self, t: float, x: np.ndarray) -> None:
-        """Feed the features ``x (d,)`` of the tick at ``t`` [s]."""
-        dt = t - self._t
-        if self._x is not None and dt > 0:
-            speed = float(np.max(np.abs(x - self._x) * self.inv_range, initial=0.0)) / dt
-            if speed > self.rest_speed:
-                self.last_motion = t
-        self._x, self._t = np.array(x, dtype=np.float64), t
+        """Feed the features ``x (d,)`` of the tick at ``t`` [s].
+
+        Motion is a displacement of any feature by more than ``rest_speed * stall_time`` of
+        its range from where the features were when motion was last seen (a dead band: contact
+        jitter that goes back and forth never adds up to motion, a slow drift does)."""
+        x = np.array(x, dtype=np.float64)
+        if self._x is None:
+            self._x, self._t = x, t
+            return
+        moved = float(np.max(np.abs(x - self._x) * self.inv_range, initial=0.0))
+        if moved > self.rest_speed * self.stall_time:
+            self.last_motion = t
+            self._x, self._t = x, t
 
     def switched(self, t: float) -> None:
         self.last_switch = t
@@ -265,6 +353,7 @@ __all__ = [
     "PlateauRule",
     "StallDetector",
     "SwitchRule",
+    "indicator_features",
     "make_rule",
     "recovery_choice",
 ]

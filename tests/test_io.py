@@ -31,3 +31,44 @@ def test_failed_write_leaves_old_file_and_no_temp(tmp_path):
 def test_missing_directory_is_a_clear_error(tmp_path):
     with pytest.raises(CpmpFileError, match="does not exist"):
         atomic_write_text(tmp_path / "nope" / "a.txt", "x")
+
+
+def test_killed_save_leaves_a_temporary_that_the_next_save_removes(tmp_path):
+    """A writer killed with SIGKILL cannot clean up; the next save to the same target does."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    target = tmp_path / "model.pt"
+    target.write_text("old")
+    script = (
+        "import sys, time\n"
+        "from cpmp.io import atomic_path\n"
+        "with atomic_path(sys.argv[1]) as tmp:\n"
+        "    tmp.write_bytes(b'x' * 1000)\n"
+        "    print(tmp, flush=True)\n"
+        "    time.sleep(60)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script, str(target)], stdout=subprocess.PIPE)
+    tmp = proc.stdout.readline().decode().strip()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    proc.stdout.close()
+    assert os.path.exists(tmp) and target.read_text() == "old"
+    other = tmp_path / ".model.pt.12345x.tmp"  # not one of ours: left alone
+    other.write_text("keep")
+    time.sleep(0.01)
+    atomic_write_text(target, "new")
+    assert not os.path.exists(tmp)
+    assert target.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [other.name, "model.pt"]
+
+
+def test_live_writers_temporaries_are_kept(tmp_path):
+    target = tmp_path / "a.txt"
+    with atomic_path(target) as tmp:
+        tmp.write_text("in progress")
+        atomic_write_text(target, "other writer")  # same process, still alive: kept
+        assert tmp.exists()
+    assert target.read_text() == "in progress"

@@ -323,7 +323,8 @@ def test_isotropic_start_heads(train_demos, tmp_path):
     assert torch.all(scale[n:] == 1.0)  # start heads keep the isotropic kernel
     assert not torch.all(scale[:n] == 1.0)  # the nodes' own heads are path-weighted
     x0 = train_demos[1].features[0]
-    assert seq.progress(x0).shape == (n + 3,)
+    assert seq.progress(x0).shape == (n,)  # the nodes only; the start heads are internal
+    assert seq.predictor(torch.as_tensor(x0)).shape == (n + 3,)
     assert set(seq.predict_progress(x0)["b"]) == {"b_go", "b_wait", "b_back"}
     assert seq.reset(0.0, x0) == {"a": "a_go", "b": "b_go"}  # demo 1 is a parallel demo
     loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))

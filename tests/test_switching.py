@@ -103,10 +103,37 @@ def test_coupling_learns_contexts_of_switches():
     assert coupling.contexts[("u", "U1", "U2")] == {"w": frozenset({"W1"})}
     # simultaneous switches: either order is allowed
     assert coupling.contexts[("u", "U2", "U3")] == {"w": frozenset({"W2", "W3"})}
-    assert coupling.inconsistent(("w", "W1", "W2"), {"u": "U1", "w": "W1"}) == ["u"]
+    assert coupling.inconsistent(("w", "W1", "W2"), {"u": "U1", "w": "W1"}) == ["u runs U1"]
     assert coupling.inconsistent(("w", "W1", "W2"), {"u": "U2", "w": "W1"}) == []
     assert coupling.inconsistent(("w", "W9", "W2"), {"u": "U1"}) == []  # never seen: no rule
     assert Coupling.from_dict(coupling.to_dict()) == coupling
+
+
+def test_coupling_learns_how_far_the_others_had_progressed():
+    # u's feature moves 0 -> 1 during U2 (4 samples); w switched when U2 was 1/3 done, so a
+    # w switch needs U2 at >= 1/3 - margin; U1 -> U2 and the simultaneous end carry no progress
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+    )
+    demo.features[3:7, 0] = [0.0, 1.0, 2.0, 3.0]
+    demo.features[7:, 0] = 3.0
+    coupling = Coupling.learn([demo], ["u", "w"])
+    assert coupling.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(1 / 3)}}
+    assert ("u", "U2", "U3") not in coupling.progress  # w switched in the same tick
+    edge, active = ("w", "W1", "W2"), {"u": "U2", "w": "W1"}
+    assert coupling.inconsistent(edge, active, {"u": 0.05}, margin=0.2) == [
+        "u has U2 at progress 0.05 (demonstrated >= 0.33)"
+    ]
+    assert coupling.inconsistent(edge, active, {"u": 0.2}, margin=0.2) == []
+    assert coupling.inconsistent(edge, active, {"u": 0.05}, margin=None) == []
+    assert "u in {U2} (U2 >= 0.33)" in "\n".join(coupling.describe("w"))
+    assert Coupling.from_dict(coupling.to_dict()) == coupling
+    # checkpoints written before progress was learned hold a plain list of switches
+    old = [
+        {k: r[k] for k in ("variable", "source", "target", "context")}
+        for r in coupling.to_dict()["switches"]
+    ]
+    assert Coupling.from_dict(old).contexts == coupling.contexts
 
 
 def _two_chains(**config):
@@ -145,7 +172,11 @@ def test_coupling_holds_a_transition_until_its_context_is_demonstrated():
     assert note.kind == "hold" and "u runs U1" in note.text
     coupled.step(6 * DT, [0.9, 0.0, 0.9, 0.0])  # u switches to U2 ...
     assert coupled.active == {"u": "U2", "w": "W1"}  # ... w decides on the tick's context
-    coupled.step(7 * DT, [0.9, 0.0, 0.9, 0.0])
+    coupled.step(7 * DT, [0.9, 0.0, 0.9, 0.0])  # U2 at φ = 0: less than demonstrated (1/3)
+    assert coupled.active == {"u": "U2", "w": "W1"}
+    assert coupled.last_tick.held == {"w": "W2"}  # the same hold: no second note
+    assert len(coupled.notes) == 1
+    coupled.step(8 * DT, [0.9, 0.5, 0.9, 0.0])
     assert coupled.active == {"u": "U2", "w": "W2"}
     assert [e.variable for e in coupled.events] == ["u", "w"]
 
@@ -236,3 +267,27 @@ def test_unknown_rule_and_coupling_are_refused():
         SequencerConfig(switch_rule="eager")
     with pytest.raises(ConfigError, match="coupling"):
         SequencerConfig(coupling="strong")
+
+
+def test_indicator_features_and_jitter_are_not_motion():
+    from cpmp.switching import StallDetector, indicator_features
+
+    x = np.array([[0.0, 0.1, 5.0], [1.0, 0.4, 5.0], [0.0, 0.2, 5.0]])
+    assert indicator_features(x).tolist() == [True, False, True]
+    # range 1 per feature; band = rest_speed * stall_time = 0.01
+    det = StallDetector(np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01)
+    det.reset(0.0, np.zeros(2))
+    for k in range(1, 301):  # 3 s of contact jitter of +-0.004: never motion
+        det.observe(k * DT, np.array([0.004 * (-1) ** k, 0.0]))
+    assert det.last_motion == 0.0 and det.stalled(3.0)
+    drift = StallDetector(np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01)
+    drift.reset(0.0, np.zeros(2))
+    for k in range(1, 301):  # a slow drift of 0.02 range/s is motion
+        drift.observe(k * DT, np.array([0.0002 * k, 0.0]))
+    assert drift.last_motion > 2.4 and not drift.stalled(3.0)
+
+
+@pytest.mark.parametrize("margin", [-0.1, 1.5, float("nan"), "0.2", True])
+def test_progress_margin_is_validated(margin):
+    with pytest.raises(ConfigError, match="progress_margin"):
+        SequencerConfig(progress_margin=margin)

@@ -95,6 +95,10 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
                 record_demonstration(b, task) for b in progress_bar(repro_boxes, "expected")
             ]
         signatures = strategy_signatures(train)
+        if settings.feature_noise > 0:
+            from cpmp.augment import add_feature_noise
+
+            train = add_feature_noise(train, settings.feature_noise, seed=seed)
         seed_row: dict[str, Any] = {"seed": seed, "by_train_size": {}}
         for d in settings.train_sizes:
             subset = balanced_subset(train, d)
@@ -132,7 +136,10 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
                     for k in ("all_match", "sequence_match", "distance_mean", "distance_std")
                 },
                 "reproduction": summary,
-                "fit": {k: seq.fit_summary.get(k) for k in ("loss", "seconds", "n_support_total")},
+                "fit": {
+                    k: seq.fit_summary.get(k)
+                    for k in ("loss", "seconds", "n_support_total", "warnings")
+                },
             }
             if d == largest:
                 with stage(f"seed {seed}: strategy map"):
@@ -194,18 +201,20 @@ def _aggregate(
         for key in ("W", "I", "C", "diverged"):
             rep[key], rep[f"{key}_std"] = mean_std([r["reproduction"][key] for r in rows])
         rep["per_seed"] = {key: [r["reproduction"][key] for r in rows] for key in ("W", "I", "C")}
-        pooled_mean, pooled_sq, n = 0.0, 0.0, 0
-        for r in rows:
-            rr = r["reproduction"]
-            if rr["n_distances"]:
-                k = rr["n_distances"]
-                pooled_mean += rr["distance_mean"] * k
-                pooled_sq += (rr["distance_std"] ** 2 + rr["distance_mean"] ** 2) * k
-                n += k
-        rep["distance_mean"] = pooled_mean / n if n else None
-        rep["distance_std"] = (
-            float(np.sqrt(max(pooled_sq / n - rep["distance_mean"] ** 2, 0))) if n else None
-        )
+        for prefix in ("distance", "distance_continuous"):
+            pooled_mean, pooled_sq, n = 0.0, 0.0, 0
+            for r in rows:
+                rr = r["reproduction"]
+                if rr["n_distances"] and rr.get(f"{prefix}_mean") is not None:
+                    k = rr["n_distances"]
+                    pooled_mean += rr[f"{prefix}_mean"] * k
+                    pooled_sq += (rr[f"{prefix}_std"] ** 2 + rr[f"{prefix}_mean"] ** 2) * k
+                    n += k
+            mean = pooled_mean / n if n else None
+            rep[f"{prefix}_mean"] = mean
+            rep[f"{prefix}_std"] = float(np.sqrt(max(pooled_sq / n - mean**2, 0))) if n else None
+        for key in ("recoveries", "recovered_episodes", "recovered_complete", "holds"):
+            rep[key], _ = mean_std([r["reproduction"].get(key) for r in rows])
         rep["n_boxes"] = settings.n_boxes
         rep["paper"] = PAPER_TABLE_I.get(d)
         reproduction[d] = rep
@@ -217,6 +226,12 @@ def _aggregate(
     largest = str(max(settings.train_sizes))
     accuracy = [s["by_train_size"][largest].get("strategy_map_accuracy") for s in per_seed]
     acc_mean, acc_std = mean_std(accuracy)
+    warnings = [
+        f"seed {s['seed']}, D = {d}: {text}"
+        for s in per_seed
+        for d, row in s["by_train_size"].items()
+        for text in row["fit"].get("warnings") or []
+    ]
     return jsonable(
         {
             "experiment": settings.__dict__,
@@ -237,6 +252,7 @@ def _aggregate(
                 "grid": settings.strategy_grid,
                 "train_size": int(largest),
             },
+            "fit_warnings": warnings,
             "per_seed": per_seed,
         }
     )

@@ -20,6 +20,7 @@ import numpy as np
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation import (
     activation_progress,
+    continuous_features,
     progress_errors,
     replay_demonstrations,
     switch_distances,
@@ -69,6 +70,9 @@ class ExperimentSettings:
         record: which reproduction episodes write an ``.rrd``: ``all``, ``first`` or ``none``.
         record_demos: also write the collected demonstrations as ``.rrd``.
         max_time: episode time limit [s] (``None``: the task's ``max_time``).
+        feature_noise: std of Gaussian noise added to the training demonstrations' features,
+            as a fraction of each feature's range over the training set (0: none); the test
+            demonstrations and the closed loop stay noise-free.
     """
 
     name: str = "quick"
@@ -82,6 +86,7 @@ class ExperimentSettings:
     record: str = "all"
     record_demos: bool = False
     max_time: float | None = None
+    feature_noise: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
@@ -119,6 +124,11 @@ class ExperimentSettings:
             )
         if self.record not in ("all", "first", "none"):
             raise ConfigError(f"experiment.record must be all, first or none, got {self.record!r}")
+        noise = self.feature_noise
+        if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not noise >= 0:
+            raise ConfigError(f"experiment.feature_noise must be a number >= 0, got {noise!r}")
+        if not np.isfinite(noise):
+            raise ConfigError(f"experiment.feature_noise must be finite, got {noise}")
         if self.max_time is not None and self.max_time <= 0:
             raise ConfigError(f"experiment.max_time must be > 0, got {self.max_time}")
 
@@ -247,6 +257,9 @@ class EpisodeRecord:
     reason: str
     duration: float
     distances: list[float]
+    distances_continuous: list[float] = field(default_factory=list)
+    recoveries: int = 0
+    holds: int = 0
     rrd: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -260,6 +273,7 @@ class EpisodeLogger:
         self.recorder = recorder
         self.seq = seq
         self._n_events = 0
+        self._n_notes = 0
 
     def __call__(self, info: Any) -> None:
         tick = self.seq.last_tick
@@ -273,9 +287,12 @@ class EpisodeLogger:
         )
         for event in self.seq.events[self._n_events :]:
             self.recorder.log_transition(
-                event.t, event.variable, event.source, event.target, event.probability
+                event.t, event.variable, event.source, event.target, event.probability, event.kind
             )
+        for note in self.seq.notes[self._n_notes :]:
+            self.recorder.log_note(note.t, note.kind, note.variable, note.text)
         self._n_events = len(self.seq.events)
+        self._n_notes = len(self.seq.notes)
 
 
 def reproduce(
@@ -328,10 +345,13 @@ def reproduce(
             recorder.log_outcome(result.duration, result.outcome, result.reason)
             recorder.close()
         distances: list[float] = []
+        continuous: list[float] = []
         if result.outcome == "complete":
+            events = [_as_event(tr) for tr in result.transitions]
+            columns = continuous_features([demo])
             for v in seq.graphs:
-                d = switch_distances([_as_event(tr) for tr in result.transitions], demo, v)
-                distances += d or []
+                distances += switch_distances(events, demo, v) or []
+                continuous += switch_distances(events, demo, v, columns) or []
         out.append(
             EpisodeRecord(
                 box=(box.width, box.depth),
@@ -341,6 +361,9 @@ def reproduce(
                 reason=result.reason,
                 duration=result.duration,
                 distances=distances,
+                distances_continuous=continuous,
+                recoveries=sum(e.kind == "recovery" for e in seq.events),
+                holds=sum(n.kind == "hold" for n in seq.notes),
                 rrd=str(rrd) if rrd else None,
             )
         )
@@ -374,12 +397,19 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
             counts["I"] += 1
             counts["diverged"] += e.outcome == "diverged"
     distances = [d for e in episodes if e.outcome == "complete" for d in e.distances]
+    continuous = [d for e in episodes if e.outcome == "complete" for d in e.distances_continuous]
     return {
         **counts,
         "n": len(episodes),
         "distance_mean": float(np.mean(distances)) if distances else None,
         "distance_std": float(np.std(distances)) if distances else None,
         "n_distances": len(distances),
+        "distance_continuous_mean": float(np.mean(continuous)) if continuous else None,
+        "distance_continuous_std": float(np.std(continuous)) if continuous else None,
+        "recoveries": sum(e.recoveries for e in episodes),
+        "recovered_episodes": sum(e.recoveries > 0 for e in episodes),
+        "recovered_complete": sum(e.recoveries > 0 and e.outcome == "complete" for e in episodes),
+        "holds": sum(e.holds for e in episodes),
     }
 
 

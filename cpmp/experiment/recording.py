@@ -71,6 +71,7 @@ _GEOM_MIN_SIZE = {"box": 3, "capsule": 2, "sphere": 1, "cylinder": 2}
 _DEFAULT_RGBA = (0.6, 0.6, 0.6, 1.0)
 _TRANSITION_ARCHETYPE = "cpmp.Transition"
 _OUTCOME_ARCHETYPE = "cpmp.Outcome"
+_NOTE_ARCHETYPE = "cpmp.Note"
 _PROPERTY_NAME = "cpmp"
 
 _ScalarBuffer = tuple[list[int], list[float], list[float]]
@@ -80,13 +81,25 @@ _PoseBuffer = tuple[list[int], list[float], list[np.ndarray], list[np.ndarray]]
 
 
 class TransitionEvent(NamedTuple):
-    """One MP transition: ``t`` [s], control ``variable``, ``source`` -> ``target`` MP."""
+    """One MP transition: ``t`` [s], control ``variable``, ``source`` -> ``target`` MP;
+    ``kind`` is ``switch`` (the switching rule fired) or ``recovery`` (a stall was resolved)."""
 
     t: float
     variable: str
     source: str
     target: str
     probability: float
+    kind: str = "switch"
+
+
+class NoteEvent(NamedTuple):
+    """A sequencer note: ``t`` [s], ``kind`` (``hold``, ``recovery``, ``nonfinite``), the
+    ``variable`` concerned (may be empty) and a readable ``text``."""
+
+    t: float
+    kind: str
+    variable: str
+    text: str
 
 
 @dataclass
@@ -108,11 +121,13 @@ class RecordingSummary:
     n_ticks: int
     entity_paths: list[str]
     metadata: dict[str, Any] = field(default_factory=dict)
+    notes: list[NoteEvent] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict of the fields, each transition as a dict with named fields."""
+        """JSON-able dict of the fields, each transition and note as a dict with named fields."""
         data = asdict(self)
         data["transitions"] = [event._asdict() for event in self.transitions]
+        data["notes"] = [note._asdict() for note in self.notes]
         return data
 
 
@@ -428,15 +443,24 @@ class EpisodeRecorder:
         self._buffered_ticks = 0
 
     def log_transition(
-        self, t: float, variable: str, source: str, target: str, probability: float
+        self,
+        t: float,
+        variable: str,
+        source: str,
+        target: str,
+        probability: float,
+        kind: str = "switch",
     ) -> None:
-        """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s]."""
+        """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s]
+        (``kind``: ``switch`` or ``recovery``)."""
         self._check_open()
         t = self._check_time(t)
         self._check_mp(variable, source)
         self._check_mp(variable, target)
         probability = float(probability)
         text = f"{variable}: {source} -> {target} (p={probability:.2f})"
+        if kind != "switch":
+            text += f" [{kind}]"
         record = self._rr.DynamicArchetype(
             _TRANSITION_ARCHETYPE,
             components={
@@ -444,11 +468,25 @@ class EpisodeRecorder:
                 "source": source,
                 "target": target,
                 "probability": probability,
+                "kind": str(kind),
             },
         )
         self._set_event_time(t)
         self._rec.log("events/transitions", self._rr.TextLog(text, level="INFO"), record)
         self._rec.log(_entity("events", "transitions", variable), self._rr.TextLog(text))
+
+    def log_note(self, t: float, kind: str, variable: str, text: str) -> None:
+        """Record a sequencer note at ``t`` [s]: a held transition, a stall recovery or a
+        non-finite φ (``kind``), about ``variable`` (may be empty), as readable ``text``."""
+        self._check_open()
+        t = self._check_time(t)
+        record = self._rr.DynamicArchetype(
+            _NOTE_ARCHETYPE,
+            components={"kind": str(kind), "variable": str(variable), "text": str(text)},
+        )
+        level = "WARN" if kind in ("recovery", "nonfinite") else "INFO"
+        self._set_event_time(t)
+        self._rec.log("events/notes", self._rr.TextLog(f"{kind}: {text}", level=level), record)
 
     def log_outcome(self, t: float, outcome: str, reason: str = "") -> None:
         """Record the episode's outcome (e.g. ``"success"``) at ``t`` [s], with a reason."""
@@ -581,6 +619,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     ticks: dict[int, set[int]] = {index: set() for index in range(len(stores))}
     entity_paths: set[str] = set()
     transitions: list[TransitionEvent] = []
+    notes: list[NoteEvent] = []
     outcomes: list[tuple[float, int, str, str]] = []
     duration = 0.0
     for index, _store, entity_path, batch in batches:
@@ -606,6 +645,12 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                 name: batch.column(f"{_TRANSITION_ARCHETYPE}:{name}").to_pylist()
                 for name in ("variable", "source", "target", "probability")
             }
+            kind_column = f"{_TRANSITION_ARCHETYPE}:kind"
+            kinds = (
+                batch.column(kind_column).to_pylist()
+                if kind_column in columns
+                else [None] * len(times)
+            )
             for row, t in enumerate(times):
                 if _first(fields["variable"][row]) is None:
                     continue
@@ -616,8 +661,24 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                         source=str(_first(fields["source"][row])),
                         target=str(_first(fields["target"][row])),
                         probability=float(_first(fields["probability"][row])),
+                        kind=str(_first(kinds[row]) or "switch"),
                     )
                 )
+        if f"{_NOTE_ARCHETYPE}:kind" in columns:
+            cells = {
+                name: batch.column(f"{_NOTE_ARCHETYPE}:{name}").to_pylist()
+                for name in ("kind", "variable", "text")
+            }
+            for row, t in enumerate(times):
+                if _first(cells["kind"][row]) is not None:
+                    notes.append(
+                        NoteEvent(
+                            t,
+                            str(_first(cells["kind"][row])),
+                            str(_first(cells["variable"][row]) or ""),
+                            str(_first(cells["text"][row]) or ""),
+                        )
+                    )
         if f"{_OUTCOME_ARCHETYPE}:outcome" in columns:
             outcome_column = batch.column(f"{_OUTCOME_ARCHETYPE}:outcome").to_pylist()
             reason_column = (
@@ -632,6 +693,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                     outcomes.append((t, len(outcomes), str(outcome), str(reason or "")))
 
     transitions.sort(key=lambda event: event.t)
+    notes.sort(key=lambda note: note.t)
     last_outcome = max(outcomes, default=None)
     episodes = [
         names.get(index, f"{store.application_id}/{store.recording_id}")
@@ -646,6 +708,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         n_ticks=sum(len(values) for values in ticks.values()),
         entity_paths=sorted(entity_paths),
         metadata=metadata,
+        notes=notes,
     )
 
 
@@ -658,9 +721,12 @@ def format_summary(summary: RecordingSummary) -> str:
     ]
     lines += [
         f"  t={event.t:8.3f} s  {event.variable}: {event.source} -> {event.target} "
-        f"(p={event.probability:.2f})"
+        f"(p={event.probability:.2f})" + ("" if event.kind == "switch" else f" [{event.kind}]")
         for event in summary.transitions
     ]
+    if summary.notes:
+        lines.append(f"notes ({len(summary.notes)}):")
+        lines += [f"  t={n.t:8.3f} s  {n.kind}: {n.text}" for n in summary.notes]
     if summary.outcome is None:
         lines.append("outcome: none recorded")
     else:
@@ -672,6 +738,7 @@ def format_summary(summary: RecordingSummary) -> str:
 __all__ = [
     "GEOM_TYPES",
     "EpisodeRecorder",
+    "NoteEvent",
     "RecordingSummary",
     "TransitionEvent",
     "format_summary",

@@ -48,19 +48,25 @@ def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The human-readable report: Table I beside the paper's, progress errors, strategy map."""
     exp = report["experiment"]
+    seq = report.get("sequencer", {})
     lines = [
         f"# cpmp experiment `{exp['name']}`",
         "",
         f"Predictor `{report['predictor']['kind']}` (feature weighting "
-        f"`{report['predictor'].get('feature_weighting', 'none')}`), start rule "
-        f"`{report.get('sequencer', {}).get('start_rule', 'independent')}`, seeds {exp['seeds']}, "
-        f"{exp['n_boxes']} random boxes per training size and seed; counts are mean ± std over "
-        "seeds.",
+        f"`{report['predictor'].get('feature_weighting', '–')}`, scaling "
+        f"`{report['predictor'].get('feature_scaling', '–')}`), start rule "
+        f"`{seq.get('start_rule', 'independent')}`, switching rule "
+        f"`{seq.get('switch_rule', 'plateau')}`, coupling `{seq.get('coupling', 'none')}`, "
+        f"recovery `{seq.get('recovery', False)}`; task settle time "
+        f"{report.get('task', {}).get('settle_time', '–')} s, demonstration feature noise "
+        f"{exp.get('feature_noise', 0.0)}; seeds {exp['seeds']}, {exp['n_boxes']} random boxes "
+        "per training size and seed; counts are mean ± std over seeds.",
         "",
         "## Reproduction (Table I)",
         "",
-        "| D | W | I | C | W / I / C (paper) | distance | distance (paper) |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| D | W | I | C | W / I / C (paper) | distance | distance, continuous features "
+        "| distance (paper) | recoveries |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for d, row in report["reproduction"].items():
         paper = PAPER_TABLE_I.get(d)
@@ -69,7 +75,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         lines.append(
             f"| {d} | {_fmt(row['W'], row['W_std'], 1)} | {_fmt(row['I'], row['I_std'], 1)} | "
             f"{_fmt(row['C'], row['C_std'], 1)} | {paper_counts} | "
-            f"{_fmt(row['distance_mean'], row['distance_std'])} | {paper_dist} |"
+            f"{_fmt(row['distance_mean'], row['distance_std'])} | "
+            f"{_fmt(row.get('distance_continuous_mean'), row.get('distance_continuous_std'))} | "
+            f"{paper_dist} | {_fmt(row.get('recoveries'), None, 1)} |"
         )
     lines += [
         "",
@@ -78,7 +86,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "Distance: Euclidean feature-space distance between the state at which the sequencer "
         "triggered a transition and the state at which the scripted demonstrator switched on "
         "the same box (k-th switch of each variable paired with the k-th), pooled over all "
-        "complete episodes.",
+        "complete episodes; the continuous column leaves out binary features (touch signals), "
+        "which flip by 1 when a switch comes a tick early or late. Recoveries: stalls resolved "
+        "per seed (mean).",
         "",
         "## Progress prediction (Fig. 6)",
         "",
@@ -100,6 +110,10 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             f"{smap['grid'][0]} x {smap['grid'][1]} width x depth grid (D = {smap['train_size']},"
             f" mean over seeds).",
         ]
+    warnings = report.get("fit_warnings") or []
+    if warnings:
+        lines += ["", "## Fit warnings", ""]
+        lines += [f"- {text}" for text in warnings]
     lines += ["", "## Files", ""]
     lines += [f"- `{name}`: {what}" for name, what in report.get("files", {}).items()]
     return "\n".join(lines) + "\n"

@@ -9,6 +9,7 @@ Training data comes per node as :class:`NodeData`; banks fit all nodes in one op
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -46,42 +47,81 @@ class NodeData:
 
 @dataclass
 class PredictorConfig:
-    """Options shared by every predictor."""
+    """Options shared by every predictor.
 
-    feature_scaling: str = "none"
+    Attributes:
+        feature_scaling: ``global`` (default), ``none`` (the paper), ``minmax`` or
+            ``standard`` (see :class:`FeatureScaler`); the fitted scaling is stored in the
+            checkpoint and applied to every input.
+        dtype: ``float64`` or ``float32``.
+    """
+
+    feature_scaling: str = "global"
     dtype: str = "float64"
 
     def __post_init__(self) -> None:
-        if self.feature_scaling not in ("none", "minmax", "standard"):
+        if self.feature_scaling not in SCALINGS:
             raise ConfigError(
-                f"feature_scaling must be 'none', 'minmax' or 'standard', "
+                f"feature_scaling must be one of {', '.join(SCALINGS)}, "
                 f"got {self.feature_scaling!r}"
             )
         if self.dtype not in ("float32", "float64"):
             raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
 
+    def _number(self, name: str) -> float:
+        value = getattr(self, name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"predictor option {name} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"predictor option {name} must be finite, got {value!r}")
+        return float(value)
+
     def _positive(self, *names: str) -> None:
         for name in names:
-            value = getattr(self, name)
-            if value is None or not value > 0:
-                raise ConfigError(f"predictor option {name} must be > 0, got {value!r}")
+            if not self._number(name) > 0:
+                raise ConfigError(
+                    f"predictor option {name} must be > 0, got {getattr(self, name)!r}"
+                )
 
     def _non_negative(self, *names: str) -> None:
         for name in names:
+            if self._number(name) < 0:
+                raise ConfigError(
+                    f"predictor option {name} must be >= 0, got {getattr(self, name)!r}"
+                )
+
+    def _integer(self, *names: str, allow_none: bool = False) -> None:
+        """Whole-number options (counts); ``2.0`` is accepted as 2, ``2.5`` is an error."""
+        for name in names:
             value = getattr(self, name)
-            if value is None or value < 0:
-                raise ConfigError(f"predictor option {name} must be >= 0, got {value!r}")
+            if value is None and allow_none:
+                continue
+            number = self._number(name)
+            if number != int(number):
+                raise ConfigError(f"predictor option {name} must be a whole number, got {value!r}")
+            setattr(self, name, int(number))
 
     @property
     def torch_dtype(self) -> torch.dtype:
         return torch.float64 if self.dtype == "float64" else torch.float32
 
 
+SCALINGS = ("global", "none", "minmax", "standard")
+
+
 class FeatureScaler(nn.Module):
     """Affine feature scaling ``(x - offset) / scale`` fitted on training data.
 
-    ``none`` keeps features as they are (the paper scales its features to about [0, 1] itself);
-    ``minmax`` maps each feature's training range to [0, 1]; ``standard`` to zero mean, unit std.
+    * ``global`` (default): every feature minus its training minimum, divided by *one* common
+      factor, the largest per-feature training range. The features keep the relative
+      geometry their designer gave them (the paper scales its features to about [0, 1] itself)
+      while a change of units of all features (m -> mm) no longer changes the model.
+    * ``none``: features as they are (the paper).
+    * ``minmax``: each feature's training range to [0, 1]; ``standard``: each feature to zero
+      mean and unit std. Per-feature scaling suits features in mixed units, but it also blows
+      up features that barely vary (sensor noise on a near-constant coordinate) until they
+      dominate the kernel.
+
     Constant features get scale 1.
     """
 
@@ -94,12 +134,16 @@ class FeatureScaler(nn.Module):
         """Fit on training samples ``x`` (N, d)."""
         if mode == "none":
             return
-        if mode == "minmax":
+        if mode == "global":
+            lo = x.min(axis=0)
+            offset, scale = lo, np.full(x.shape[1], np.max(x.max(axis=0) - lo))
+        elif mode == "minmax":
             lo, hi = x.min(axis=0), x.max(axis=0)
             offset, scale = lo, hi - lo
         else:
             offset, scale = x.mean(axis=0), x.std(axis=0)
-        scale = np.where(scale > 1e-12, scale, 1.0)
+        magnitude = float(np.max(np.abs(x), initial=0.0))
+        scale = np.where((scale > 0) & (scale > 1e-12 * magnitude), scale, 1.0)
         self.offset.copy_(torch.as_tensor(offset, dtype=self.offset.dtype))
         self.scale.copy_(torch.as_tensor(scale, dtype=self.scale.dtype))
 

@@ -27,7 +27,7 @@ from cpmp.predictors.base import (
     ProgressPredictor,
     soft_bce,
 )
-from cpmp.progress import support_points
+from cpmp.progress import support_count, support_points
 
 
 @dataclass
@@ -39,17 +39,20 @@ class KLRConfig(PredictorConfig):
         support_scale: support points per unit of L1 path length of an activation.
         min_support: minimum support points per activation (the paper uses 3).
         max_support: optional cap per activation.
+        max_total_support: hard cap on the support points of all nodes together; a fit that
+            would need more stops with a :class:`~cpmp.errors.ConfigError` before allocating
+            anything (memory grows with samples x supports).
         l2: weight of the ``½ l2 ||w||²`` penalty added to each node's mean loss.
         bias: learn a per-node intercept (the usual logistic-regression intercept; ``False``
             gives exactly eq. 4, where φ tends to 0.5 far from every support point). On the
             synthetic task the intercept picks the right initial node in 6/6 held-out replays
             against 4/6 without it.
         max_iter: LBFGS iterations per optimiser step.
-        feature_weighting: ``none`` (isotropic kernel, the paper) or ``path``: per node, weight
-            each feature in the kernel by its share of the node's L1 path length (eq. 1 splits
-            into one term per feature), so features that drive the node's progress count and
-            features that stay constant while it runs (e.g. box size, the other arm) count
-            little. Weights are ``max(d * share_j, weight_floor)``.
+        feature_weighting: ``path`` (default) or ``none`` (isotropic kernel, the paper):
+            ``path`` weights, per node, each feature in the kernel by its share of the node's
+            L1 path length (eq. 1 splits into one term per feature), so features that drive
+            the node's progress count and features that stay constant while it runs (e.g. box
+            size, the other arm) count little. Weights are ``max(d * share_j, weight_floor)``.
         weight_floor: smallest feature weight under ``path`` weighting.
     """
 
@@ -57,15 +60,18 @@ class KLRConfig(PredictorConfig):
     support_scale: float = 2.0
     min_support: int = 3
     max_support: int | None = None
+    max_total_support: int = 50_000
     l2: float = 1e-4
     bias: bool = True
     max_iter: int = 500
-    feature_weighting: str = "none"
+    feature_weighting: str = "path"
     weight_floor: float = 0.1
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self._positive("gamma", "max_iter", "min_support")
+        self._integer("max_iter", "min_support", "max_total_support")
+        self._integer("max_support", allow_none=True)
+        self._positive("gamma", "max_iter", "min_support", "max_total_support")
         self._non_negative("support_scale", "l2", "weight_floor")
         if self.feature_weighting not in ("none", "path"):
             raise ConfigError(
@@ -105,6 +111,7 @@ class SparseKLRConfig(KLRConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        self._integer("min_candidates", "epochs")
         self._positive("candidate_scale", "min_candidates", "epochs", "lr")
         self._non_negative("l1", "prune_tol")
 
@@ -211,7 +218,34 @@ class KLRPredictor(ProgressPredictor):
         ]
         return np.concatenate(pts, axis=0)
 
+    def _support_rule(self) -> tuple[float, int, int | None]:
+        """``(per unit path length, minimum, maximum)`` support points per activation."""
+        c = self.config
+        return c.support_scale, c.min_support, c.max_support
+
+    def _support_total(self, data: list[NodeData]) -> int:
+        """Support points :meth:`_supports_for` would place, counted without placing them."""
+        scale, least, most = self._support_rule()
+        total = 0
+        for node in data:
+            for a in node.activations:
+                length = float(np.abs(np.diff(a, axis=0)).sum()) if len(a) > 1 else 0.0
+                total += support_count(length, scale, least, most) if length > 0 else 1
+        return total
+
+    def _check_support_budget(self, data: list[NodeData]) -> None:
+        total = self._support_total(data)
+        if total > self.config.max_total_support:
+            raise ConfigError(
+                f"the fit needs {total} support points, more than max_total_support="
+                f"{self.config.max_total_support}: lower support_scale or set max_support "
+                "(or raise max_total_support if the memory is there); with "
+                f"feature_scaling={self.config.feature_scaling!r} the count follows the "
+                "features' units"
+            )
+
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        self._check_support_budget(data)
         per_node = [self._supports_for(node) for node in data]
         self._set_supports(per_node)
         if self.config.feature_weighting == "path":
@@ -298,6 +332,9 @@ class FullKLRPredictor(KLRPredictor):
     def _supports_for(self, node: NodeData) -> np.ndarray:
         return node.x.detach().cpu().numpy()
 
+    def _support_total(self, data: list[NodeData]) -> int:
+        return sum(int(node.x.shape[0]) for node in data)
+
 
 class SparseKLRPredictor(KLRPredictor):
     """``klr_sparse``: learn which of many candidate supports to keep (L1 + pruning)."""
@@ -330,6 +367,9 @@ class SparseKLRPredictor(KLRPredictor):
             support_points(a, c.candidate_scale, c.min_candidates, None) for a in node.activations
         ]
         return np.concatenate(pts, axis=0)
+
+    def _support_rule(self) -> tuple[float, int, int | None]:
+        return self.config.candidate_scale, self.config.min_candidates, None
 
     def _assign_support(self, support: torch.Tensor) -> None:
         del self.support

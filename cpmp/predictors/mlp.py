@@ -47,6 +47,7 @@ class MLPConfig(PredictorConfig):
             raise ConfigError(
                 f"activation must be one of {sorted(_ACTIVATIONS)}, got {self.activation!r}"
             )
+        self._integer("epochs")
         self._positive("epochs", "lr")
         self._non_negative("weight_decay")
 

@@ -18,12 +18,7 @@ TARGET_REAL_TIME_FACTOR = 10.0
 """The speed the simulation issue asks for: >= 10x real time on one core, IK and policy in the
 loop."""
 
-LEARNED_POLICY = {
-    "predictor": "klr",
-    "feature_weighting": "path",
-    "start_kernel": "isotropic",
-    "start_rule": "joint",
-}
+LEARNED_POLICY = {"predictor": "klr"}
 """The main job's default sequencer (``predictor=klr_path sequencer=coupled``) as
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` options."""
 

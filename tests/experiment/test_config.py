@@ -3,6 +3,7 @@ fail fast with a clear message, before any demonstration is collected."""
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
@@ -92,7 +93,42 @@ def test_sequencer_configs_mean_what_they_say():
     assert (paper.threshold, paper.patience, paper.start_rule) == (0.65, 0.05, "independent")
     coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
     assert (coupled.start_rule, coupled.start_kernel) == ("joint", "isotropic")
+    assert (coupled.coupling, coupled.recovery) == ("context", True)
     assert coupled.threshold == paper.threshold
+
+
+def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
+    """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
+    ``fit(demos)`` with no options is the main job's default configuration."""
+    from cpmp.predictors import make_config
+    from cpmp.sequencer import PAPER_OPTIONS, SequencerConfig
+
+    seq_keys = set(SequencerConfig.__dataclass_fields__)
+
+    def resolved(cfg, options):
+        kind, pred = predictor_options(cfg.predictor)
+        seq = to_dict(cfg.sequencer)
+        return (
+            kind,
+            dataclasses.asdict(make_config(kind, **pred)),
+            dataclasses.asdict(SequencerConfig(**seq)),
+        ), (
+            "klr",
+            dataclasses.asdict(
+                make_config("klr", **{k: v for k, v in options.items() if k not in seq_keys})
+            ),
+            dataclasses.asdict(
+                SequencerConfig(**{k: v for k, v in options.items() if k in seq_keys})
+            ),
+        )
+
+    got, want = resolved(
+        compose_cfg("experiment", ["predictor=klr", "sequencer=paper"]), PAPER_OPTIONS
+    )
+    assert got == want
+    assert "predictor" not in PAPER_OPTIONS
+    got, want = resolved(compose_cfg("experiment"), {})
+    assert got == want
 
 
 def test_quick_is_the_default_experiment():

@@ -276,3 +276,29 @@ def test_inspect_rrd_cli(episode_file: Path, tmp_path: Path, capsys) -> None:
     assert "left_pos: approach -> grasp" in captured.out
     assert captured.err.count("\n") == 1
     assert "error" in captured.err and "bad.rrd" in captured.err
+
+
+def test_recovery_transitions_and_notes_round_trip(tmp_path: Path) -> None:
+    """What the sequencer decided and why: a held transition and a stall recovery are in the
+    recording and in its summary."""
+    path = tmp_path / "notes.rrd"
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        for tick in range(3):
+            recorder.log_tick(
+                tick * DT,
+                [tick, 0.0],
+                progress={"left_pos": {"approach": 0.5}},
+                active={"left_pos": "approach", "right_fingers": "open"},
+            )
+        recorder.log_note(0.1, "hold", "left_pos", "approach -> grasp held: right_fingers=open")
+        recorder.log_transition(0.2, "left_pos", "approach", "grasp", 0.4, kind="recovery")
+        recorder.log_note(0.2, "recovery", "left_pos", "stalled 1.0 s")
+    summary = read_recording(path)
+    assert [(e.target, e.kind) for e in summary.transitions] == [("grasp", "recovery")]
+    assert [(n.kind, n.variable) for n in summary.notes] == [
+        ("hold", "left_pos"),
+        ("recovery", "left_pos"),
+    ]
+    assert summary.notes[0].text == "approach -> grasp held: right_fingers=open"
+    assert summary.notes[1].t == pytest.approx(0.2, abs=TIME_TOL)
+    assert "hold" in format_summary(summary) and "[recovery]" in format_summary(summary)

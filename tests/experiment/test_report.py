@@ -86,17 +86,18 @@ def test_render_markdown_formats_numbers_and_paper_column():
     text = render_markdown(jsonable(make_report()))
     assert text.startswith("# cpmp experiment `handmade`")
     assert (
-        "Predictor `klr_sparse` (feature weighting `none`), start rule `independent`, "
-        "seeds [0, 1], 20 random boxes" in text
+        "Predictor `klr_sparse` (feature weighting `–`, scaling `–`), start rule "
+        "`independent`, switching rule `plateau`, coupling `none`, recovery `False`; task "
+        "settle time – s, demonstration feature noise 0.0; seeds [0, 1], 20 random boxes" in text
     )
     assert "| W / I / C (paper) |" in text
     paper = PAPER_TABLE_I["3"]
     assert (
         f"| 3 | 2.5 ± 0.5 | 4.0 ± 0.0 | 13.5 ± 1.2 | {paper['W']} / {paper['I']} / {paper['C']} "
-        "| 0.12 ± 0.01 | 0.13 ± 0.08 |" in text
+        "| 0.12 ± 0.01 | – | 0.13 ± 0.08 | – |" in text
     )
     # D = 12 is not in the paper's table; no complete episode -> no distance
-    assert "| 12 | 0.0 ± 0.5 | 1.0 ± 0.0 | 19.0 ± 1.2 | – | – | – |" in text
+    assert "| 12 | 0.0 ± 0.5 | 1.0 ± 0.0 | 19.0 ± 1.2 | – | – | – | – | – |" in text
     assert "| 3 | 0.046 ± 0.002 | 0.080 | – |" in text
     assert "| 12 | 0.020 ± 0.001 | 0.030 | 0.010 |" in text
     assert "Initial strategy correct on 87.5 % of a 8 x 6 width x depth grid (D = 12" in text
@@ -132,3 +133,11 @@ def test_write_json_into_missing_directory_fails_cleanly(tmp_path):
 
     with pytest.raises(CpmpFileError, match="does not exist"):
         write_json(tmp_path / "missing" / "x.json", {"a": 1})
+
+
+def test_render_markdown_lists_fit_warnings_only_when_there_are_some():
+    report = make_report()
+    assert "Fit warnings" not in render_markdown(jsonable(report))
+    report["fit_warnings"] = ["seed 0, D = 3: node c/wait: the features do not change"]
+    text = render_markdown(jsonable(report))
+    assert "## Fit warnings" in text and "- seed 0, D = 3: node c/wait" in text
