@@ -32,8 +32,8 @@ FORMAT_VERSION = 1
 PathLike = str | os.PathLike[str]
 MetadataValue = str | int | float | bool | None
 
-_DEMO_NAME = re.compile(r"^demo_[A-Za-z0-9_.\-]+$")
-_SPLIT_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
+_DEMO_NAME = re.compile(r"demo_[A-Za-z0-9_.\-]+")
+_SPLIT_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
 
 
 class Segment(NamedTuple):
@@ -146,6 +146,8 @@ class Demonstration:
 
     def _check_time(self, time: Any) -> np.ndarray:
         who = self._who
+        if np.iscomplexobj(time):
+            raise DataError(f"{who}: time must be real seconds, got complex values")
         try:
             t = np.array(time, dtype=np.float64)
         except (TypeError, ValueError) as err:
@@ -173,6 +175,11 @@ class Demonstration:
 
     def _check_features(self, features: Any, n: int) -> np.ndarray:
         who = self._who
+        if np.iscomplexobj(features):
+            raise DataError(
+                f"{who}: features must be real numbers, got complex values; pass the real and "
+                "imaginary parts (or magnitude and phase) as separate features"
+            )
         try:
             x = np.array(features, dtype=np.float64)
         except (TypeError, ValueError) as err:
@@ -407,7 +414,7 @@ def _group_names(demos: list[Demonstration]) -> list[str]:
     names = [demo.name or f"demo_{i}" for i, demo in enumerate(demos)]
     seen: dict[str, int] = {}
     for i, name in enumerate(names):
-        if not _DEMO_NAME.match(name):
+        if not _DEMO_NAME.fullmatch(name):
             raise DataError(
                 f"{name}: cannot be stored as an HDF5 group; rename it to demo_<something> "
                 "using letters, digits, '_', '.' or '-' (or leave name=None for demo_<index>)"
@@ -443,7 +450,7 @@ def _resolve_splits(
         return {}
     resolved: dict[str, list[str]] = {}
     for split, members in splits.items():
-        if not isinstance(split, str) or not _SPLIT_NAME.match(split) or split == ".":
+        if not isinstance(split, str) or not _SPLIT_NAME.fullmatch(split) or split == ".":
             raise DataError(
                 f"split name {split!r} is invalid; use letters, digits, '_', '.' or '-'"
             )

@@ -30,19 +30,45 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     if not directory.exists():
         raise CpmpFileError(f"cannot write {target}: directory {directory} does not exist")
     remove_stale_temporaries(target)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=directory
-    )
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=directory
+        )
+    except OSError as err:
+        raise CpmpFileError(
+            f"cannot write {target}: {err.strerror or err}; choose a writable directory"
+        ) from err
     os.close(fd)
     tmp = Path(tmp_name)
     os.chmod(tmp, 0o666 & ~_umask())
     try:
         yield tmp
+        _fsync(tmp)
         os.replace(tmp, target)
+        _fsync_directory(directory)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
         raise
+
+
+def _fsync(path: Path) -> None:
+    """Flush ``path``'s data to disk, so the rename never publishes an empty file."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make the rename itself durable (where the platform allows directory fsync)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import pickle
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -405,7 +406,7 @@ class ConcurrentSequencer:
                 "check the feature magnitudes and the options gamma / l2 / lr"
             )
         summary["n_demos"] = len(demos)
-        summary["warnings"] = fit_warnings(model, data)
+        summary["warnings"] = glitch_warnings(graphs, demos) + fit_warnings(model, data)
         for text in summary["warnings"]:
             log.warning("%s", text)
         combos: list[dict[str, str]] = []
@@ -641,6 +642,17 @@ class ConcurrentSequencer:
             )
         try:
             payload = torch.load(path, map_location="cpu", weights_only=True)
+        except pickle.UnpicklingError as err:
+            if "global" not in str(err).lower():  # not a refused class: a damaged file
+                raise CpmpFileError(
+                    f"{path} is not a readable cpmp checkpoint (the file is damaged or of "
+                    "another kind)"
+                ) from err
+            raise CpmpFileError(
+                f"{path} is not a trusted cpmp checkpoint: it holds Python objects that a cpmp "
+                "checkpoint never contains, so it was not loaded; retrain the model with "
+                "scripts/train.py or load only files you wrote with ConcurrentSequencer.save"
+            ) from err
         except Exception as err:
             raise CpmpFileError(f"{path} is not a readable cpmp checkpoint: {err}") from err
         if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
@@ -790,6 +802,38 @@ DEGENERATE_PATH = 1e-9
 """Total L1 path length (scaled features) below which a node's activations count as still."""
 UNSEPARATED_MAE = 0.2
 """Mean absolute progress error on a node's own training data above which it is reported."""
+
+
+GLITCH_SAMPLES = 2
+"""Activations of at most this many samples between two other MPs are reported as likely
+label glitches."""
+
+
+def glitch_warnings(
+    graphs: Mapping[str, SequenceGraph], demos: Sequence[Demonstration]
+) -> list[str]:
+    """One message per node with an activation of at most :data:`GLITCH_SAMPLES` samples in
+    the middle of a demonstration (A...A, B, C...C): such a node can hardly ever be entered in
+    closed loop, and the sequencer would wait there."""
+    out = []
+    for v in sorted(graphs):
+        for mp, acts in sorted(graphs[v].activations.items()):
+            short = [
+                a
+                for a in acts
+                if a.stop - a.start <= GLITCH_SAMPLES
+                and a.start > 0
+                and a.stop < demos[a.demo].n_samples
+            ]
+            if short:
+                a = short[0]
+                name = demos[a.demo].name or f"demonstration {a.demo}"
+                out.append(
+                    f"node {v}/{mp}: its activation in {name} lasts {a.stop - a.start} "
+                    f"sample(s) (from sample {a.start}); if that is a label glitch, relabel it, "
+                    "or the sequencer may wait in this MP"
+                )
+    return out
 
 
 def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:

@@ -116,3 +116,17 @@ def test_still_node_is_reported_in_the_fit_summary(train_demos, caplog):
         ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None).fit_summary["warnings"]
         == []
     )
+
+
+def test_one_sample_label_glitch_is_reported(train_demos):
+    demo = train_demos[0]
+    labels = {v: lab.copy() for v, lab in demo.labels.items()}
+    a = labels["a"].astype(object)
+    switch = int(np.flatnonzero(a[1:] != a[:-1])[0]) + 1
+    a[switch] = "a_glitch"  # A...A, glitch, B...B
+    labels["a"] = a.astype(str)
+    glitched = Demonstration(demo.time, demo.features, labels, demo.feature_names, demo.name)
+    seq = ConcurrentSequencer.fit([glitched, *train_demos[1:]], "klr", seed=0, logger=None)
+    warnings = [w for w in seq.fit_summary["warnings"] if "a_glitch" in w]
+    assert warnings[0].startswith("node a/a_glitch: its activation in demo_0 lasts 1 sample(s)")
+    assert not [w for w in seq.fit_summary["warnings"] if "a_glitch" not in w]

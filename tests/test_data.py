@@ -509,3 +509,18 @@ def test_doc_snippets_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     exec(blocks[1], namespace)
     assert namespace["demo"].switch_indices("right_hand").tolist() == [100]
     assert [d.name for d in namespace["train"]] == ["demo_0"]
+
+
+def test_complex_features_or_time_are_refused() -> None:
+    demo = make_demo()
+    with pytest.raises(DataError, match="features must be real numbers, got complex"):
+        make_demo(features=demo.features + 1j)
+    with pytest.raises(DataError, match="time must be real seconds"):
+        make_demo(time=demo.time + 0j)
+
+
+def test_names_with_a_trailing_newline_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="cannot be stored as an HDF5 group"):
+        save_demonstrations(tmp_path / "a.h5", [make_demo(name="demo_1\n")])
+    with pytest.raises(DataError, match="split name"):
+        save_demonstrations(tmp_path / "a.h5", [make_demo()], splits={"train\n": [0]})

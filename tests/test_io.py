@@ -72,3 +72,29 @@ def test_live_writers_temporaries_are_kept(tmp_path):
         atomic_write_text(target, "other writer")  # same process, still alive: kept
         assert tmp.exists()
     assert target.read_text() == "in progress"
+
+
+def test_read_only_directory_is_a_cpmp_file_error(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):  # running as root: permissions are not enforced
+            pytest.skip("the directory stays writable for this user")
+        with pytest.raises(CpmpFileError, match="choose a writable directory"):
+            atomic_write_text(locked / "a.txt", "x")
+    finally:
+        locked.chmod(0o700)
+
+
+def test_data_reaches_the_disk_before_the_rename(tmp_path, monkeypatch):
+    import cpmp.io
+
+    calls = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(cpmp.io.os, "fsync", lambda fd: calls.append("fsync") or real_fsync(fd))
+    monkeypatch.setattr(
+        cpmp.io.os, "replace", lambda a, b: calls.append("replace") or real_replace(a, b)
+    )
+    atomic_write_text(tmp_path / "a.txt", "x")
+    assert calls[:2] == ["fsync", "replace"]

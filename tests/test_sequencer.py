@@ -1,5 +1,6 @@
 """The concurrent sequencer: transition rule, replay, closed loop, persistence, bad input."""
 
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -197,6 +198,11 @@ def test_load_errors(tmp_path):
     torch.save({"format": "something-else"}, other)
     with pytest.raises(CpmpFileError, match="not a cpmp sequencer checkpoint"):
         ConcurrentSequencer.load(other)
+    hostile = tmp_path / "hostile.pt"
+    torch.save({"format": "cpmp-sequencer", "payload": Path("/etc/passwd")}, hostile)
+    with pytest.raises(CpmpFileError, match="not a trusted cpmp checkpoint") as info:
+        ConcurrentSequencer.load(hostile)
+    assert "weights_only=False" not in str(info.value)
 
 
 def test_bad_inputs(fitted_klr, train_demos):

@@ -158,8 +158,11 @@ def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
         summary = summaries[path]
         assert block.startswith(path)
         assert f"transitions ({len(summary.transitions)}):" in block
-        lines = [line for line in block.splitlines() if " -> " in line]
+        listed = block.split("transitions (")[1].split("notes (")[0].split("outcome:")[0]
+        lines = [line for line in listed.splitlines() if " -> " in line]
         assert len(lines) == len(summary.transitions)
+        if summary.notes:
+            assert f"notes ({len(summary.notes)}):" in block
         for line, event in zip(lines, summary.transitions, strict=True):
             assert f"{event.variable}: {event.source} -> {event.target}" in line
         assert f"outcome: {summary.outcome}" in block
