@@ -143,6 +143,28 @@ class SyntheticTask:
         return seqs, False
 
 
+def evaluate(
+    seq: Policy, task: SyntheticTask | None = None, n_episodes: int = 20, seed: int = 0
+) -> dict[str, int]:
+    """Closed-loop outcomes of ``seq`` on ``n_episodes`` random episodes (seeded): ``wrong_start``
+    (the initial MPs differ from the demonstrator's for the episode's context), ``incomplete``
+    (both points not home within ``max_time``) or ``complete``."""
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
+        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    task = task or SyntheticTask()
+    rng = np.random.default_rng(seed)
+    counts = {"complete": 0, "wrong_start": 0, "incomplete": 0}
+    for _ in range(n_episodes):
+        episode = task.sample_episode(rng)
+        seqs, done = task.rollout(episode, seq)
+        want = {"a": "a_go", "b": "b_go" if episode["context"] >= 0.5 else "b_wait"}
+        if {v: s[0] for v, s in seqs.items()} != want:
+            counts["wrong_start"] += 1
+        else:
+            counts["complete" if done else "incomplete"] += 1
+    return counts
+
+
 def make_demonstrations(
     n: int, seed: int = 0, task: SyntheticTask | None = None
 ) -> list[Demonstration]:

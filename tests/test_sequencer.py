@@ -336,3 +336,29 @@ def test_isotropic_start_heads(train_demos, tmp_path):
     loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
     assert np.array_equal(loaded.progress(x0), seq.progress(x0))
     assert loaded.reset(0.0, x0) == seq.reset(0.0, x0)
+
+
+def test_synthetic_evaluate_classifies_outcomes(fitted_klr):
+    from cpmp.synthetic import evaluate
+
+    class Frozen:
+        def __init__(self, start):
+            self.start = start
+
+        def reset(self, t, x):
+            return dict(self.start)
+
+        def step(self, t, x):
+            return dict(self.start)
+
+    task = SyntheticTask(max_time=1.0)
+    assert evaluate(Frozen({"a": "a_back", "b": "b_back"}), task, 4, seed=0) == {
+        "complete": 0,
+        "wrong_start": 4,
+        "incomplete": 0,
+    }
+    parallel = evaluate(Frozen({"a": "a_go", "b": "b_go"}), task, 6, seed=0)
+    assert parallel["complete"] == 0 and parallel["incomplete"] >= 1
+    assert parallel["incomplete"] + parallel["wrong_start"] == 6
+    counts = evaluate(fitted_klr, None, 10, seed=5)
+    assert sum(counts.values()) == 10 and counts["complete"] >= 8
