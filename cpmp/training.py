@@ -1,13 +1,16 @@
 """Fitting progress predictors through Lightning: all nodes of all graphs in one fit.
 
-The whole training set is one full batch (a few thousand samples); convex predictors
-(``klr``, ``klr_full``) use LBFGS with a strong-Wolfe line search, which reaches the optimum in
-a few steps, the others Adam.
+The whole training set is one full batch (a few thousand samples). Convex predictors (``klr``,
+``klr_full``) are solved exactly: by default per node by damped Newton steps (IRLS, see
+:mod:`cpmp.predictors.newton`) inside one manually optimised training step, or, with
+``solver: lbfgs``, by LBFGS with a strong-Wolfe line search over all nodes together. The others
+use Adam; ``klr_sparse`` re-fits its pruned weights with the convex solver.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -18,6 +21,7 @@ import torch
 
 from cpmp.errors import ConfigError
 from cpmp.predictors import NodeData, ProgressPredictor
+from cpmp.predictors.newton import NEWTON_MAX_ITER, NEWTON_TOL, NewtonInfo, SolverOptions
 
 log = logging.getLogger(__name__)
 
@@ -27,12 +31,18 @@ class TrainerConfig:
     """Options of the Lightning trainer used for fitting.
 
     Attributes:
-        max_epochs: full-batch optimiser steps (LBFGS: each runs up to ``max_iter`` iterations;
-            ``None`` picks 3 for LBFGS and the predictor's ``epochs`` for Adam).
+        max_epochs: full-batch optimiser steps (Newton: each solves every node to ``newton_tol``;
+            LBFGS: each runs up to the predictor's ``max_iter`` iterations; ``None`` picks 1 for
+            Newton, 3 for LBFGS and the predictor's ``epochs`` for Adam).
         progress_bar: show Lightning's progress bar.
         logger: ``"csv"``, ``"tensorboard"`` or ``None`` (no logging).
         log_dir: where the logger writes (``None``: no logger).
         lr: learning rate override for Adam-trained predictors.
+        solver: ``"newton"`` (default) or ``"lbfgs"``: how convex weight fits are solved
+            (``klr``, ``klr_full`` and ``klr_sparse``'s re-fit); Adam-trained parts ignore it.
+        newton_tol: Newton stops per node when the max-norm of the loss gradient or the Newton
+            decrement is at most this (> 0).
+        newton_max_iter: Newton iterations per node at most (>= 1).
     """
 
     max_epochs: int | None = None
@@ -40,6 +50,9 @@ class TrainerConfig:
     logger: str | None = "csv"
     log_dir: str | None = None
     lr: float | None = None
+    solver: str = "newton"
+    newton_tol: float = NEWTON_TOL
+    newton_max_iter: int = NEWTON_MAX_ITER
 
     def __post_init__(self) -> None:
         if self.max_epochs is not None and self.max_epochs < 1:
@@ -48,23 +61,56 @@ class TrainerConfig:
             raise ConfigError(
                 f"trainer logger must be 'csv', 'tensorboard' or null, got {self.logger!r}"
             )
+        if self.solver not in ("newton", "lbfgs"):
+            raise ConfigError(f"trainer solver must be 'newton' or 'lbfgs', got {self.solver!r}")
+        tol = self.newton_tol
+        if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < math.inf:
+            raise ConfigError(f"trainer newton_tol must be a finite number > 0, got {tol!r}")
+        self.newton_tol = float(tol)
+        count = self.newton_max_iter
+        if (
+            isinstance(count, bool)
+            or not isinstance(count, (int, float))
+            or not math.isfinite(count)
+            or count != int(count)
+            or count < 1
+        ):
+            raise ConfigError(f"trainer newton_max_iter must be a whole number >= 1, got {count!r}")
+        self.newton_max_iter = int(count)
+
+    def solver_options(self) -> SolverOptions:
+        """The convex-solver settings handed to the predictor."""
+        return SolverOptions(self.solver, self.newton_tol, self.newton_max_iter)
 
 
-def _lightning_module(predictor: ProgressPredictor, data: list[NodeData], lr: float | None):
+def _lightning_module(predictor: ProgressPredictor, data: list[NodeData], cfg: TrainerConfig):
     import lightning as L
 
+    newton = predictor.convex and cfg.solver == "newton"
+
     class ProgressModule(L.LightningModule):
-        """Wraps a predictor bank; one training step = the full-batch loss over all nodes."""
+        """Wraps a predictor bank; one training step = the full-batch loss over all nodes.
+
+        With Newton (manual optimisation) a step solves every node's convex problem and logs
+        the loss at the solution; otherwise it returns the loss to LBFGS or Adam.
+        """
 
         def __init__(self) -> None:
             super().__init__()
+            self.automatic_optimization = not newton
             self.predictor = predictor
             self.data = data
             self.save_hyperparameters({"predictor": predictor.spec()["config"]})
             self.history: list[float] = []
+            self.newton_info: list[NewtonInfo] = []
 
         def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
-            loss = self.predictor.training_loss(self.data)
+            if newton:
+                self.newton_info = self.predictor.solve_convex(self.data, cfg.solver_options())
+                with torch.no_grad():
+                    loss = self.predictor.training_loss(self.data)
+            else:
+                loss = self.predictor.training_loss(self.data)
             self.log("train/loss", loss.detach(), prog_bar=True, on_epoch=True, on_step=False)
             return loss
 
@@ -73,9 +119,11 @@ def _lightning_module(predictor: ProgressPredictor, data: list[NodeData], lr: fl
             if value is not None:
                 self.history.append(float(value))
 
-        def configure_optimizers(self) -> torch.optim.Optimizer:
+        def configure_optimizers(self) -> torch.optim.Optimizer | None:
+            if newton:
+                return None
             params = [p for p in self.predictor.parameters() if p.requires_grad]
-            if predictor.optimizer == "lbfgs":
+            if predictor.convex:
                 return torch.optim.LBFGS(
                     params,
                     max_iter=int(getattr(predictor.config, "max_iter", 500)),
@@ -84,7 +132,7 @@ def _lightning_module(predictor: ProgressPredictor, data: list[NodeData], lr: fl
                     tolerance_change=1e-12,
                     history_size=50,
                 )
-            rate = lr if lr is not None else float(getattr(predictor.config, "lr", 1e-2))
+            rate = cfg.lr if cfg.lr is not None else float(getattr(predictor.config, "lr", 1e-2))
             return torch.optim.Adam(params, lr=rate)
 
     return ProgressModule()
@@ -114,10 +162,13 @@ def fit_predictor(
     torch.manual_seed(seed)
     start = time.perf_counter()
     predictor.initialize(data, generator)
-    module = _lightning_module(predictor, data, cfg.lr)
+    module = _lightning_module(predictor, data, cfg)
+    solver = cfg.solver if predictor.convex else "adam"
     if cfg.max_epochs is not None:
         epochs = cfg.max_epochs
-    elif predictor.optimizer == "lbfgs":
+    elif solver == "newton":
+        epochs = 1
+    elif solver == "lbfgs":
         epochs = 3
     else:
         epochs = int(getattr(predictor.config, "epochs", 300))
@@ -147,18 +198,40 @@ def fit_predictor(
         warnings.filterwarnings("ignore", message=".*does not have many workers.*")
         warnings.filterwarnings("ignore", message=".*number of training batches.*")
         warnings.filterwarnings("ignore", message=".*LeafSpec.*")
+        warnings.filterwarnings("ignore", message=".*returned `None`.*no optimizer.*")
         pl_trainer.fit(module, loader)
-    predictor.finalize(data)
+    predictor.finalize(data, cfg.solver_options())
     with torch.no_grad():
         final = float(predictor.training_loss(data))
     elapsed = time.perf_counter() - start
     log.info(
         "fitted %s on %d nodes in %.2f s (loss %.5f)", predictor.kind, len(data), elapsed, final
     )
-    return {
+    out: dict[str, Any] = {
         "loss": final,
         "loss_history": module.history,
         "epochs": epochs,
         "seconds": elapsed,
+        "solver": solver,
         **predictor.summary(),
+    }
+    if module.newton_info:
+        out.update(_newton_summary(module.newton_info))
+        if not out["newton_converged"]:
+            log.warning(
+                "Newton stopped before newton_tol=%g on some nodes (largest gradient %.3g after "
+                "%d iterations); raise newton_max_iter",
+                cfg.newton_tol,
+                out["newton_grad_max"],
+                out["newton_iterations"],
+            )
+    return out
+
+
+def _newton_summary(infos: list[NewtonInfo]) -> dict[str, Any]:
+    """The worst node's Newton outcome: iterations, final gradient max-norm, convergence."""
+    return {
+        "newton_iterations": max(i.iterations for i in infos),
+        "newton_grad_max": max(i.grad_max for i in infos),
+        "newton_converged": all(i.converged for i in infos),
     }

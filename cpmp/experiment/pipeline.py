@@ -54,6 +54,10 @@ def stage(name: str) -> Iterator[None]:
     log.info("stage %s: done in %.1f s", name, time.perf_counter() - start)
 
 
+RECORD_CHOICES = ("failures", "all", "first", "none")
+"""Values of ``experiment.record``."""
+
+
 @dataclass
 class ExperimentSettings:
     """Sizes of the evaluation (``experiment`` config group).
@@ -67,7 +71,9 @@ class ExperimentSettings:
         n_boxes: random boxes reproduced per D and seed (paper: 20).
         box_seed_offset: boxes for reproduction are drawn from ``seed + box_seed_offset``.
         strategy_grid: (widths, depths) cells of the strategy map (Fig. 7).
-        record: which reproduction episodes write an ``.rrd``: ``all``, ``first`` or ``none``.
+        record: which reproduction episodes keep an ``.rrd``: ``failures`` (every episode that
+            did not complete, plus the first one per training size), ``all``, ``first`` or
+            ``none``.
         record_demos: also write the collected demonstrations as ``.rrd``.
         max_time: episode time limit [s] (``None``: the task's ``max_time``).
         feature_noise: std of Gaussian noise added to the training demonstrations' features,
@@ -83,7 +89,7 @@ class ExperimentSettings:
     n_boxes: int = 6
     box_seed_offset: int = 1000
     strategy_grid: list[int] = field(default_factory=lambda: [8, 6])
-    record: str = "all"
+    record: str = "failures"
     record_demos: bool = False
     max_time: float | None = None
     feature_noise: float = 0.0
@@ -122,8 +128,10 @@ class ExperimentSettings:
                 f"experiment.strategy_grid must be [n_widths, n_depths] >= 2, "
                 f"got {self.strategy_grid}"
             )
-        if self.record not in ("all", "first", "none"):
-            raise ConfigError(f"experiment.record must be all, first or none, got {self.record!r}")
+        if self.record not in RECORD_CHOICES:
+            raise ConfigError(
+                f"experiment.record must be one of {', '.join(RECORD_CHOICES)}, got {self.record!r}"
+            )
         noise = self.feature_noise
         if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not noise >= 0:
             raise ConfigError(f"experiment.feature_noise must be a number >= 0, got {noise!r}")
@@ -303,7 +311,7 @@ def reproduce(
     signatures: Mapping[str, Mapping[str, str]],
     *,
     record_dir: Path | None = None,
-    record: str = "all",
+    record: str = "failures",
     max_time: float | None = None,
     label: str = "",
 ) -> list[EpisodeRecord]:
@@ -323,7 +331,9 @@ def reproduce(
         rrd = None
         recorder = None
         callback = None
-        if record_dir is not None and (record == "all" or (record == "first" and i == 0)):
+        if record_dir is not None and (
+            record in ("all", "failures") or (record == "first" and i == 0)
+        ):
             sim = Simulation(task, box)
             rrd = record_dir / f"{label}episode_{i:03d}.rrd"
             recorder = EpisodeRecorder(
@@ -341,7 +351,10 @@ def reproduce(
             if recorder is not None:
                 recorder.abort()
             raise
-        if recorder is not None:
+        if recorder is not None and record == "failures" and i > 0 and result.outcome == "complete":
+            recorder.abort()  # nothing to look at: keep the disk for the failures
+            rrd = None
+        elif recorder is not None:
             recorder.log_outcome(result.duration, result.outcome, result.reason)
             recorder.close()
         distances: list[float] = []

@@ -19,6 +19,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from cpmp.errors import ConfigError, DataError
+from cpmp.predictors.newton import NewtonInfo, SolverOptions
 
 NodeKey = tuple[str, str]
 """(control variable, MP name)."""
@@ -159,12 +160,14 @@ class ProgressPredictor(nn.Module):
     """A bank of per-node progress predictors evaluated together.
 
     Subclasses implement :meth:`logits` (on scaled features), :meth:`initialize` (data-dependent
-    set-up such as support points), :meth:`training_loss` and declare their optimiser.
+    set-up such as support points) and :meth:`training_loss`. A bank whose training loss is
+    convex in its trainable parameters sets ``convex = True`` and implements
+    :meth:`solve_convex`; the others are trained by Adam.
     """
 
     kind: ClassVar[str] = ""
     config_class: ClassVar[type[PredictorConfig]] = PredictorConfig
-    optimizer: ClassVar[str] = "lbfgs"
+    convex: ClassVar[bool] = False
 
     def __init__(self, node_keys: list[NodeKey], n_features: int, config: PredictorConfig) -> None:
         super().__init__()
@@ -218,8 +221,13 @@ class ProgressPredictor(nn.Module):
         """Sum over nodes of the mean soft-label BCE (eq. 5) plus regularisation."""
         raise NotImplementedError
 
-    def finalize(self, data: list[NodeData]) -> None:
-        """Post-training step (e.g. pruning); default none."""
+    def solve_convex(self, data: list[NodeData], solver: SolverOptions) -> list[NewtonInfo]:
+        """Set the trainable parameters to the minimiser of :meth:`training_loss` by Newton's
+        method (convex banks only); returns each node's solver outcome."""
+        raise NotImplementedError(f"predictor {self.kind!r} is not convex")
+
+    def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
+        """Post-training step (e.g. pruning, a convex re-fit by ``solver``); default none."""
 
     def summary(self) -> dict[str, Any]:
         """Per-model facts worth reporting (e.g. support-point counts)."""

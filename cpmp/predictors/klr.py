@@ -27,6 +27,7 @@ from cpmp.predictors.base import (
     ProgressPredictor,
     soft_bce,
 )
+from cpmp.predictors.newton import NewtonInfo, SolverOptions, newton_fit
 from cpmp.progress import support_count, support_points
 
 
@@ -47,7 +48,7 @@ class KLRConfig(PredictorConfig):
             gives exactly eq. 4, where φ tends to 0.5 far from every support point). On the
             synthetic task the intercept picks the right initial node in 6/6 held-out replays
             against 4/6 without it.
-        max_iter: LBFGS iterations per optimiser step.
+        max_iter: LBFGS iterations per optimiser step (trainer ``solver: lbfgs`` only).
         feature_weighting: ``path`` (default) or ``none`` (isotropic kernel, the paper):
             ``path`` weights, per node, each feature in the kernel by its share of the node's
             L1 path length (eq. 1 splits into one term per feature), so features that drive
@@ -96,7 +97,8 @@ class SparseKLRConfig(KLRConfig):
         epochs: Adam steps (full batch).
         lr: Adam learning rate.
         prune_tol: prune supports with ``|w| < prune_tol * max|w|`` of their node.
-        refit: re-fit the surviving weights to convergence (LBFGS) after pruning.
+        refit: re-fit the surviving weights to convergence (the trainer's convex solver,
+            Newton by default) after pruning.
     """
 
     candidate_scale: float = 8.0
@@ -121,7 +123,7 @@ class KLRPredictor(ProgressPredictor):
 
     kind: ClassVar[str] = "klr"
     config_class = KLRConfig
-    optimizer: ClassVar[str] = "lbfgs"
+    convex: ClassVar[bool] = True
     config: KLRConfig
 
     def __init__(
@@ -289,9 +291,14 @@ class KLRPredictor(ProgressPredictor):
         return self._cache
 
     def _node_kernel(self, i: int, x: torch.Tensor) -> torch.Tensor:
+        """Kernel ``(P, S)`` of samples ``x (P, d)`` against node ``i``'s supports (padded slots
+        0), with ``Σ_j a_j (x_j - s_j)² = a · x² - 2 x · (a s) + a · s²``: one matrix product
+        instead of a ``(P, S, d)`` difference tensor."""
         a = self.feature_weights()[i]
-        diff = x[:, None, :] - self.support[i][None]
-        return torch.exp(-(a * diff * diff).sum(-1)) * self.support_mask[i]
+        weighted = a * self.support[i]
+        sq = torch.addmm(((weighted * self.support[i]).sum(-1)), x, weighted.T, alpha=-2.0)
+        sq = sq + ((x * x) @ a)[:, None]
+        return torch.exp(-sq.clamp_min(0.0)) * self.support_mask[i]
 
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
         return self._penalised_loss(data, self._node_kernels(data))
@@ -309,6 +316,32 @@ class KLRPredictor(ProgressPredictor):
             if l1 > 0.0:
                 total = total + l1 * w.abs().sum() / self.support_mask[i].sum().clamp_min(1)
         return total
+
+    def solve_convex(
+        self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
+    ) -> list[NewtonInfo]:
+        """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias with the kernel
+        fixed; ``kernels``: each node's ``(P_i, S)`` kernel (default: the cached ones)."""
+        kernels = self._node_kernels(data) if kernels is None else kernels
+        masks = list(self.support_mask)
+        with torch.no_grad():
+            solutions, infos = newton_fit(
+                [kern[:, mask] for kern, mask in zip(kernels, masks, strict=True)],
+                [node.target for node in data],
+                self.config.l2,
+                init=[(self.weight[i, m], float(self.bias[i])) for i, m in enumerate(masks)],
+                fit_bias=self.config.bias,
+                tol=solver.tol,
+                max_iter=solver.max_iter,
+            )
+            weight = torch.zeros_like(self.weight)
+            bias = self.bias.detach().clone()
+            for i, (mask, (w, b)) in enumerate(zip(masks, solutions, strict=True)):
+                weight[i, mask] = w.to(weight.dtype)
+                bias[i] = b
+            self.weight.copy_(weight)
+            self.bias.copy_(bias)
+        return infos
 
     def support_counts(self) -> dict[str, int]:
         return {
@@ -341,7 +374,7 @@ class SparseKLRPredictor(KLRPredictor):
 
     kind: ClassVar[str] = "klr_sparse"
     config_class = SparseKLRConfig
-    optimizer: ClassVar[str] = "adam"
+    convex: ClassVar[bool] = False
     config: SparseKLRConfig
 
     def __init__(
@@ -357,6 +390,8 @@ class SparseKLRPredictor(KLRPredictor):
             requires_grad=config.learn_lengthscales,
         )
         self.support = nn.Parameter(self.support.clone(), requires_grad=config.learn_positions)
+        self.refit_info: list[NewtonInfo] = []
+        """Per-node outcome of the last Newton re-fit (empty before one)."""
 
     def feature_weights(self) -> torch.Tensor:
         return self.gamma * torch.exp(self.log_feature_scale)
@@ -386,8 +421,9 @@ class SparseKLRPredictor(KLRPredictor):
             kernels = self._node_kernels(data)
         return self._penalised_loss(data, kernels, self.config.l1)
 
-    def finalize(self, data: list[NodeData]) -> None:
-        """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights."""
+    def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
+        """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights
+        by ``solver`` (default: Newton)."""
         with torch.no_grad():
             w = (self.weight * self.support_mask).abs()
             keep = (w >= self.config.prune_tol * w.max(dim=1, keepdim=True).values) & (w > 0)
@@ -411,11 +447,15 @@ class SparseKLRPredictor(KLRPredictor):
         self.log_feature_scale.requires_grad_(False)
         self._cache = None
         if self.config.refit:
-            self._refit(data)
+            self._refit(data, solver or SolverOptions())
 
-    def _refit(self, data: list[NodeData]) -> None:
-        """Convex re-fit of weights and bias on the surviving supports (no L1 shrinkage)."""
+    def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
+        """Convex re-fit of weights and bias on the surviving (fixed) supports, without the L1
+        shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``."""
         kernels = self._node_kernels(data)
+        if solver.method == "newton":
+            self.refit_info = self.solve_convex(data, solver, kernels)
+            return
         params = [self.weight] + ([self.bias] if self.config.bias else [])
         opt = torch.optim.LBFGS(
             params,

@@ -57,7 +57,6 @@ class MLPPredictor(ProgressPredictor):
 
     kind: ClassVar[str] = "mlp"
     config_class = MLPConfig
-    optimizer: ClassVar[str] = "adam"
     config: MLPConfig
 
     def __init__(self, node_keys: list[NodeKey], n_features: int, config: MLPConfig) -> None:

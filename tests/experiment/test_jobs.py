@@ -68,6 +68,7 @@ def tiny(tmp_path_factory):
                 sys.executable,
                 "scripts/experiment.py",
                 "experiment=tiny",
+                "experiment.record=failures",
                 f"hydra.run.dir={script}",
             ],
             cwd=ROOT,
@@ -168,11 +169,29 @@ def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
         assert f"outcome: {summary.outcome}" in block
 
 
+def test_record_failures_keeps_the_first_episode_and_every_failure(tiny):
+    """The script ran with ``experiment.record=failures``, the in-process run with ``all``."""
+    every = json.loads((tiny["direct"] / "episodes.json").read_text())
+    kept = json.loads((tiny["script"] / "episodes.json").read_text())
+    assert all(e["rrd"] and Path(e["rrd"]).is_file() for e in every)
+    for i, e in enumerate(kept):
+        wanted = i == 0 or e["outcome"] != "complete"
+        assert bool(e["rrd"]) == wanted
+        if wanted:
+            assert Path(e["rrd"]).is_file()
+    names = {p.name for p in (tiny["script"] / "seed_0" / "recordings").glob("*")}
+    assert names == {Path(e["rrd"]).name for e in kept if e["rrd"]}
+
+
 def test_script_prints_report_path_last_and_same_numbers(tiny):
     script_report = tiny["script"] / "report.json"
     assert tiny["stdout"].strip().splitlines()[-1] == str(script_report)
     direct = json.loads((tiny["direct"] / "report.json").read_text())
     again = json.loads(script_report.read_text())
+    assert (again["experiment"].pop("record"), direct["experiment"].pop("record")) == (
+        "failures",
+        "all",
+    )  # the script keeps only failures' recordings; every number is the same
     assert without_timings(again) == without_timings(direct)
     episodes = [json.loads((tiny[k] / "episodes.json").read_text()) for k in ("direct", "script")]
     assert without_timings(episodes[0]) == without_timings(episodes[1])
