@@ -91,9 +91,13 @@ def test_random_problem_gradient_is_zero_and_weights_respected():
     assert info.converged and info.iterations < 20
     assert _gradient_max(kernel, target, w, b, 1e-3) < 1e-10
     # sample weights 1/n reproduce the default mean; doubled weights change the optimum
-    w_same, b_same, _ = newton_solve(kernel, target, 1e-3, weight=torch.full((60,), 1 / 60, dtype=torch.float64))
+    w_same, _, _ = newton_solve(
+        kernel, target, 1e-3, weight=torch.full((60,), 1 / 60, dtype=torch.float64)
+    )
     torch.testing.assert_close(w_same, w, rtol=0, atol=1e-10)
-    w_heavy, _, _ = newton_solve(kernel, target, 1e-3, weight=torch.full((60,), 2 / 60, dtype=torch.float64))
+    w_heavy, _, _ = newton_solve(
+        kernel, target, 1e-3, weight=torch.full((60,), 2 / 60, dtype=torch.float64)
+    )
     assert float((w_heavy - w).abs().max()) > 1e-3
     # a fixed bias stays fixed and the weight gradient still vanishes
     w_fixed, b_fixed, info = newton_solve(kernel, target, 1e-3, b0=0.25, fit_bias=False)
@@ -145,7 +149,9 @@ def test_duplicated_supports_stay_finite(l2):
     else:
         # penalised, splitting a weight over copies halves its penalty: a lower optimum
         assert info_d.loss < info_u.loss
-    direct = penalised_loss(_rbf(x, duplicated), target, torch.full((40,), 1 / 40, dtype=torch.float64), w_d, b_d, l2)
+    direct = penalised_loss(
+        _rbf(x, duplicated), target, torch.full((40,), 1 / 40, dtype=torch.float64), w_d, b_d, l2
+    )
     assert float(direct) == pytest.approx(info_d.loss, rel=1e-12)
 
 
