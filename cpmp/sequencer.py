@@ -364,7 +364,8 @@ class ConcurrentSequencer:
             predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse`` or ``mlp``.
             **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
                 ``l2``, ``feature_scaling``), sequencer options (``threshold``, ``patience``,
-                ``min_improvement``), trainer options (``max_epochs``, ``progress_bar``,
+                ``min_improvement``), trainer options (``solver``, ``newton_tol``,
+                ``newton_max_iter``, ``max_epochs``, ``progress_bar``,
                 ``logger``, ``log_dir``), ``seed``, ``variables`` (subset to model) and
                 ``subsample`` (train on every k-th sample of each activation, its last sample
                 always kept; expected progress is computed on the full trajectory first).
@@ -842,6 +843,8 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
     misses their own targets by more than :data:`UNSEPARATED_MAE` on average."""
     out = []
     with torch.no_grad():
+        logits = predictor.logits(torch.cat([node.x for node in data]))  # one batched call
+        offsets = np.cumsum([0] + [int(node.x.shape[0]) for node in data])
         for i, node in enumerate(data):
             v, mp = node.key
             if mp.startswith(START_PREFIX):
@@ -855,8 +858,7 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
                     "this MP runs"
                 )
                 continue
-            z = node.x
-            logit = predictor.logits(z)[:, i] if z.shape[0] else z[:, 0]
+            logit = logits[offsets[i] : offsets[i + 1], i]
             mae = float((torch.sigmoid(logit) - node.target).abs().mean())
             if mae > UNSEPARATED_MAE:
                 out.append(

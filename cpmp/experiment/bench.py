@@ -47,6 +47,7 @@ def bench_sequencer(
             "step_ms_p95": float(np.percentile(times, 95) * 1e3),
             "n_nodes": len(seq.node_keys),
             "n_support_total": seq.fit_summary.get("n_support_total"),
+            "solver": seq.fit_summary.get("solver"),
             "n_parameters": seq.predictor.n_parameters(),
             "state_bytes": int(n_bytes),
         }
