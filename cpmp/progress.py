@@ -81,6 +81,24 @@ def support_count(length: float, scale: float, min_support: int, max_support: in
     return count
 
 
+def _count_for_length(
+    length: float, scale: float, min_support: int, max_support: int | None
+) -> int:
+    """:func:`support_count`, except that a trajectory of zero length gets one point."""
+    return support_count(length, scale, min_support, max_support) if length > 0.0 else 1
+
+
+def support_point_count(
+    features: np.ndarray,
+    scale: float = 2.0,
+    min_support: int = 3,
+    max_support: int | None = None,
+) -> int:
+    """How many points :func:`support_points` places along ``features (n, d)``, without
+    placing them."""
+    return _count_for_length(path_length(features), scale, min_support, max_support)
+
+
 def support_points(
     features: np.ndarray,
     scale: float = 2.0,
@@ -96,9 +114,9 @@ def support_points(
     x = _as_trajectory(features)
     cum = cumulative_path_length(x)
     total = cum[-1]
+    count = _count_for_length(total, scale, min_support, max_support)
     if total <= 0.0:
         return x[:1].copy()
-    count = support_count(total, scale, min_support, max_support)
     targets = np.linspace(0.0, total, count)
     idx = np.clip(np.searchsorted(cum, targets, side="right") - 1, 0, len(cum) - 2)
     seg = cum[idx + 1] - cum[idx]

@@ -45,7 +45,7 @@ from cpmp.predictors import (
     predictor_from_spec,
     predictor_options,
 )
-from cpmp.progress import expected_progress
+from cpmp.progress import expected_progress, path_length
 from cpmp.switching import (
     COUPLINGS,
     SWITCH_RULES,
@@ -396,11 +396,7 @@ class ConcurrentSequencer:
             raise ConfigError(f"subsample must be >= 1, got {subsample}")
         data = node_training_data(graphs, model, subsample)
         summary = fit_predictor(model, data, trainer_config, seed=seed)
-        bad = [
-            k
-            for k, v in model.state_dict().items()
-            if v.is_floating_point() and not torch.isfinite(v).all()
-        ]
+        bad = nonfinite_parameters(model)
         if bad:
             raise DataError(
                 f"the {predictor} fit produced non-finite parameters ({', '.join(bad)}); "
@@ -701,11 +697,7 @@ class ConcurrentSequencer:
         if problems:
             raise ValueError("predictor state does not match its spec: " + "; ".join(problems))
         predictor.load_state_dict(state)
-        bad = [
-            k
-            for k, v in predictor.state_dict().items()
-            if v.is_floating_point() and not torch.isfinite(v).all()
-        ]
+        bad = nonfinite_parameters(predictor)
         if bad:
             raise ValueError(f"non-finite predictor parameters: {', '.join(bad)}")
         feature_range = payload.get("feature_range")
@@ -799,6 +791,15 @@ def node_training_data(
     return out
 
 
+def nonfinite_parameters(module: torch.nn.Module) -> list[str]:
+    """Names of the floating-point parameters and buffers of ``module`` holding NaN or inf."""
+    return [
+        name
+        for name, value in module.state_dict().items()
+        if value.is_floating_point() and not torch.isfinite(value).all()
+    ]
+
+
 DEGENERATE_PATH = 1e-9
 """Total L1 path length (scaled features) below which a node's activations count as still."""
 UNSEPARATED_MAE = 0.2
@@ -850,7 +851,7 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
             if mp.startswith(START_PREFIX):
                 continue  # the same activations as the node itself
             name = f"node {v}/{mp}"
-            length = sum(float(np.abs(np.diff(a, axis=0)).sum()) for a in node.activations)
+            length = sum(path_length(a) for a in node.activations)
             if length < DEGENERATE_PATH:
                 out.append(
                     f"{name}: the features do not change during its activations, so its "

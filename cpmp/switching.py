@@ -297,12 +297,11 @@ class StallDetector:
         self.stall_time = stall_time
         self.rest_speed = rest_speed
         self._x: np.ndarray | None = None
-        self._t = 0.0
         self.last_switch = 0.0
         self.last_motion = 0.0
 
     def reset(self, t: float, x: np.ndarray) -> None:
-        self._x, self._t = np.array(x, dtype=np.float64), t
+        self._x = np.array(x, dtype=np.float64)
         self.last_switch = self.last_motion = t
 
     def observe(self, t: float, x: np.ndarray) -> None:
@@ -313,12 +312,12 @@ class StallDetector:
         jitter that goes back and forth never adds up to motion, a slow drift does)."""
         x = np.array(x, dtype=np.float64)
         if self._x is None:
-            self._x, self._t = x, t
+            self._x = x
             return
         moved = float(np.max(np.abs(x - self._x) * self.inv_range, initial=0.0))
         if moved > self.rest_speed * self.stall_time:
             self.last_motion = t
-            self._x, self._t = x, t
+            self._x = x
 
     def switched(self, t: float) -> None:
         self.last_switch = t

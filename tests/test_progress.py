@@ -7,6 +7,7 @@ from cpmp.progress import (
     expected_progress,
     path_length,
     support_count,
+    support_point_count,
     support_points,
 )
 
@@ -67,3 +68,17 @@ def test_support_count_rule():
     with pytest.raises(ConfigError):
         support_count(1.0, -1.0, 3, None)
     assert support_points(np.ones((5, 2)), 2.0, 3).shape == (1, 2)  # zero length: one point
+
+
+@pytest.mark.parametrize("max_support", [None, 4])
+def test_support_point_count_is_what_support_points_places(max_support):
+    rng = np.random.default_rng(0)
+    trajectories = [
+        np.cumsum(rng.normal(size=(50, 3)), axis=0),
+        np.zeros((7, 2)),  # still: one point
+        np.ones((1, 2)),  # a single sample
+        np.linspace([0.0, 0.0], [0.1, 0.0], 5),  # short: the minimum
+    ]
+    for x in trajectories:
+        placed = support_points(x, 2.0, 3, max_support)
+        assert support_point_count(x, 2.0, 3, max_support) == len(placed)

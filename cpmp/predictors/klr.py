@@ -28,7 +28,7 @@ from cpmp.predictors.base import (
     soft_bce,
 )
 from cpmp.predictors.newton import NewtonInfo, SolverOptions, newton_fit
-from cpmp.progress import support_count, support_points
+from cpmp.progress import support_point_count, support_points
 
 
 @dataclass
@@ -227,13 +227,8 @@ class KLRPredictor(ProgressPredictor):
 
     def _support_total(self, data: list[NodeData]) -> int:
         """Support points :meth:`_supports_for` would place, counted without placing them."""
-        scale, least, most = self._support_rule()
-        total = 0
-        for node in data:
-            for a in node.activations:
-                length = float(np.abs(np.diff(a, axis=0)).sum()) if len(a) > 1 else 0.0
-                total += support_count(length, scale, least, most) if length > 0 else 1
-        return total
+        rule = self._support_rule()
+        return sum(support_point_count(a, *rule) for node in data for a in node.activations)
 
     def _check_support_budget(self, data: list[NodeData]) -> None:
         total = self._support_total(data)
