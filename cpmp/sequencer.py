@@ -844,8 +844,6 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
     misses their own targets by more than :data:`UNSEPARATED_MAE` on average."""
     out = []
     with torch.no_grad():
-        logits = predictor.logits(torch.cat([node.x for node in data]))  # one batched call
-        offsets = np.cumsum([0] + [int(node.x.shape[0]) for node in data])
         for i, node in enumerate(data):
             v, mp = node.key
             if mp.startswith(START_PREFIX):
@@ -859,7 +857,7 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
                     "this MP runs"
                 )
                 continue
-            logit = logits[offsets[i] : offsets[i + 1], i]
+            logit = predictor.node_logits(node.x, i)
             mae = float((torch.sigmoid(logit) - node.target).abs().mean())
             if mae > UNSEPARATED_MAE:
                 out.append(

@@ -214,6 +214,11 @@ class ProgressPredictor(nn.Module):
         other nodes' work."""
         return self.logits(z)[:, :heads]
 
+    def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``; banks override
+        this to skip the other nodes' work (e.g. to score each node on its own samples)."""
+        return self.logits(z)[:, i]
+
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Data-dependent set-up before training (support points, initial weights)."""
 

@@ -295,6 +295,9 @@ class KLRPredictor(ProgressPredictor):
         sq = sq + ((x * x) @ a)[:, None]
         return torch.exp(-sq.clamp_min(0.0)) * self.support_mask[i]
 
+    def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        return self._node_kernel(i, z) @ self.weight[i] + self.bias[i]
+
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
         return self._penalised_loss(data, self._node_kernels(data))
 
