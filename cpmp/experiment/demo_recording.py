@@ -115,7 +115,9 @@ def record_demo_rrd(
             box, ReplayPolicy(demo), task, max_time=max_time, expected=demo, on_tick=logger
         )
         logger.flush(result.duration)
-        recorder.log_outcome(result.duration, result.outcome, result.reason)
+        recorder.log_outcome(
+            result.duration, result.outcome, result.reason, success=result.outcome == "complete"
+        )
     except BaseException:
         recorder.abort()
         raise

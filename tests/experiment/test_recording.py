@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -10,7 +9,14 @@ import numpy as np
 import pytest
 
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError, DataError, UnknownMPError
-from cpmp.experiment.recording import EpisodeRecorder, format_summary, read_recording
+from cpmp.experiment.recording import (
+    MAX_SERIES_PER_PANEL,
+    EpisodeRecorder,
+    format_summary,
+    group_features,
+    read_recording,
+    read_views,
+)
 
 MP_NAMES = {"left_pos": ["approach", "grasp", "lift"], "right_fingers": ["open", "close"]}
 FEATURES = ["box_x", "box_z"]
@@ -248,16 +254,9 @@ def test_invalid_arguments(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-def _inspect_main():
-    script = Path(__file__).resolve().parents[2] / "scripts" / "inspect_rrd.py"
-    spec = importlib.util.spec_from_file_location("inspect_rrd", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
-
-
 def test_inspect_rrd_cli(episode_file: Path, tmp_path: Path, capsys) -> None:
-    main = _inspect_main()
+    from cpmp.experiment.cli import inspect_rrd_main as main
+
     assert main([str(episode_file)]) == 0
     out = capsys.readouterr().out
     assert "right_fingers: open -> close (p=0.55)" in out
@@ -302,3 +301,193 @@ def test_recovery_transitions_and_notes_round_trip(tmp_path: Path) -> None:
     assert summary.notes[0].text == "approach -> grasp held: right_fingers=open"
     assert summary.notes[1].t == pytest.approx(0.2, abs=TIME_TOL)
     assert "hold" in format_summary(summary) and "[recovery]" in format_summary(summary)
+
+
+# Feature names shaped like the simulator's (box, each hand, touch flags, goal distances), made
+# up here: the grouping rule must find the panels from the names alone.
+ROBOT_FEATURES = [
+    *(f"box_{a}" for a in ("width", "depth", "x", "z")),
+    *(f"{side}_ee_{a}" for side in ("left", "right") for a in ("x", "y", "z")),
+    "left_palm_contact",
+    "right_palm_contact",
+    "box_supported",
+    *(f"dist.{side}_{mp}" for side in ("left", "right") for mp in ("rot.home", "fingers.grasp")),
+    *(f"dist.{side}_fingers.{mp}" for side in ("left", "right") for mp in ("relax", "release")),
+    *(f"dist.{side}_fingers.preshape" for side in ("left", "right")),
+    *(f"dist.{side}_rot.down" for side in ("left", "right")),
+]
+ROBOT_MPS = {
+    "left_pos": ["home", "reach", "lift"],
+    "right_fingers": ["relax", "grasp", "release"],
+}
+
+
+def _write_robot_episode(path: Path) -> Path:
+    """6 ticks; right_fingers grasps at tick 2 and releases at tick 4 (p = 0.68), then a
+    deadlock ends the episode."""
+    with EpisodeRecorder(
+        path, feature_names=ROBOT_FEATURES, mp_names=ROBOT_MPS, episode="D3_episode_004"
+    ) as recorder:
+        for tick in range(6):
+            fingers = ["relax", "relax", "grasp", "grasp", "release", "release"][tick]
+            recorder.log_tick(
+                tick * DT,
+                np.full(len(ROBOT_FEATURES), float(tick)),
+                progress={"right_fingers": {fingers: 0.2 * tick}},
+                active={"left_pos": "reach" if tick else "home", "right_fingers": fingers},
+                transition_probs={"right_fingers": {"release": 0.1 * tick}},
+            )
+            if tick == 2:
+                recorder.log_transition(tick * DT, "right_fingers", "relax", "grasp", 0.9)
+            if tick == 4:
+                recorder.log_transition(tick * DT, "right_fingers", "grasp", "release", 0.68)
+                recorder.log_note(tick * DT, "hold", "left_pos", "reach -> lift held")
+        recorder.log_outcome(0.6, "incomplete", "deadlock", success=False)
+    return path
+
+
+@pytest.fixture
+def robot_file(tmp_path: Path) -> Path:
+    return _write_robot_episode(tmp_path / "robot.rrd")
+
+
+def test_group_features_panels_from_names() -> None:
+    groups = group_features(ROBOT_FEATURES)
+    assert list(groups) == ["box", "left", "right", "touch", "dist.left", "dist.right"]
+    assert groups["touch"] == ["left_palm_contact", "right_palm_contact", "box_supported"]
+    assert groups["left"] == ["left_ee_x", "left_ee_y", "left_ee_z"]
+    assert all(name.startswith("dist.left_") for name in groups["dist.left"])
+    # A partition of the names, in their order, at most MAX_SERIES_PER_PANEL per panel.
+    flat = [name for members in groups.values() for name in members]
+    assert sorted(flat) == sorted(ROBOT_FEATURES)
+    assert all(len(members) <= MAX_SERIES_PER_PANEL for members in groups.values())
+    for members in groups.values():
+        assert members == sorted(members, key=ROBOT_FEATURES.index)
+
+
+def test_group_features_splits_and_merges() -> None:
+    joints = [f"arm_q_{i}" for i in range(11)]
+    groups = group_features(joints, max_series=4)
+    assert list(groups) == ["arm_q 1", "arm_q 2", "arm_q 3"]
+    assert [len(m) for m in groups.values()] == [4, 4, 3]
+    assert group_features(["x", "y", "hand_a", "hand_b"]) == {
+        "other": ["x", "y"],
+        "hand": ["hand_a", "hand_b"],
+    }
+    assert group_features(["grip_force", "pos"]) == {"touch": ["grip_force"], "pos": ["pos"]}
+    with pytest.raises(ConfigError, match="max_series"):
+        group_features(["a"], max_series=0)
+
+
+def test_explicit_feature_groups(tmp_path: Path) -> None:
+    path = tmp_path / "g.rrd"
+    with EpisodeRecorder(
+        path, feature_names=["a", "b", "c"], mp_names=MP_NAMES, feature_groups={"ab": ["a", "b"]}
+    ) as recorder:
+        recorder.log_tick(0.0, [1.0, 2.0, 3.0], {}, {})
+    assert read_recording(path).feature_groups == {"ab": ["a", "b"], "other": ["c"]}
+    for groups, message in (
+        ({"ab": ["a", "z"]}, "unknown features"),
+        ({"x": ["a"], "y": ["a"]}, "several groups"),
+        ({"x": []}, "needs a name"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            EpisodeRecorder(
+                tmp_path / "bad.rrd",
+                feature_names=["a", "b", "c"],
+                mp_names=MP_NAMES,
+                feature_groups=groups,
+            )
+    assert not (tmp_path / "bad.rrd").exists()
+
+
+def test_feature_panels_in_blueprint(robot_file: Path) -> None:
+    """Every feature group is a time-series panel named after it, showing its features only."""
+    groups = group_features(ROBOT_FEATURES)
+    assert read_recording(robot_file).feature_groups == groups
+    panels = {v.name: v for v in read_views(robot_file) if v.origin == "features"}
+    assert set(panels) == set(groups)
+    for group, members in groups.items():
+        assert panels[group].kind == "TimeSeries"
+        assert panels[group].contents == [f"+ features/{name}" for name in members]
+    # Each feature's series is named by the feature (legend text), not by its entity path.
+    _, names = _column(robot_file, "features/dist.left_fingers.grasp", "SeriesLines:names")
+    assert names == [["dist.left_fingers.grasp"]]
+
+
+def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> None:
+    """What the viewer shows without scrolling: the transition sentence as the events log's
+    first column, the active MPs (status document, state lanes) and the outcome at the end."""
+    _, texts = _column(robot_file, "events/transitions", "TextLog:text")
+    assert [t[0] for t in texts] == [
+        "right_fingers: relax -> grasp (p=0.90)",
+        "right_fingers: grasp -> release (p=0.68)",
+    ]
+    outcome_times, outcome = _column(robot_file, "events/outcome", "TextLog:text")
+    assert outcome == [["outcome: incomplete (deadlock)"]]
+    assert outcome_times == pytest.approx([0.6], abs=TIME_TOL)
+    _, level = _column(robot_file, "events/outcome", "TextLog:level")
+    assert level == [["WARN"]]
+
+    _, states = _column(robot_file, "active/right_fingers", "StateChange:state")
+    assert [s[0] for s in states] == ["relax", "grasp", "release"]
+
+    times, status = _column(robot_file, "status", "TextDocument:text")
+    documents = [d[0] for d in status]
+    # The latest document at t = 0.3 s (what the viewer shows there): grasp active, and the
+    # transition that made it so.
+    at_03 = [d for t, d in zip(times, documents, strict=True) if t <= 0.3 + TIME_TOL][-1]
+    assert "| right_fingers | grasp |" in at_03 and "| left_pos | reach |" in at_03
+    assert "right_fingers: relax -> grasp (p=0.90)" in at_03
+    final = documents[-1]
+    assert "| right_fingers | release |" in final
+    assert "right_fingers: grasp -> release (p=0.68)" in final
+    assert "outcome: incomplete (deadlock)" in final
+
+    views = {v.name: v for v in read_views(robot_file)}
+    assert views["status"].kind == "TextDocument" and views["status"].origin == "status"
+    assert views["active MPs"].kind == "StateTimeline" and views["active MPs"].origin == "active"
+    assert "+ events/outcome" in views["events"].contents
+    assert "+ events/notes" in views["events"].contents
+    # The full time panel is open (3 = expanded): its rows mark each event, the outcome at
+    # the episode end included.
+    assert _blueprint_column(robot_file, "TimePanelBlueprint:state") == [[3]]
+
+
+def _blueprint_column(path: Path, column: str) -> list:
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    values = []
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        if column in batch.schema.names:
+            values += batch.column(column).to_pylist()
+    return values
+
+
+def test_text_logs_show_the_text_first(robot_file: Path) -> None:
+    """The events and active-MP logs show the message body as their first column and hide the
+    entity path (which used to fill the visible width)."""
+    columns = _blueprint_column(robot_file, "TextLogColumns:text_log_columns")
+    assert len(columns) == 2  # events and the active-MP log
+    for cells in columns:
+        assert cells[0] == {"kind": 3, "visible": True}  # 3 = Body
+        assert {"kind": 1, "visible": False} in cells  # 1 = EntityPath
+
+
+def test_public_names_importable_from_recording() -> None:
+    from cpmp.experiment import recording, recording_reader, recording_writer
+
+    assert recording.EpisodeRecorder is recording_writer.EpisodeRecorder
+    assert recording.read_recording is recording_reader.read_recording
+    assert set(recording.__all__) == set(recording_writer.__all__) | set(recording_reader.__all__)
+
+
+def test_read_views_of_bad_files(tmp_path: Path) -> None:
+    with pytest.raises(CpmpFileError, match=r"^recording .*missing\.rrd does not exist$"):
+        read_views(tmp_path / "missing.rrd")
+    garbage = tmp_path / "garbage.rrd"
+    garbage.write_bytes(b"not a rerun file" * 20)
+    with pytest.raises(CpmpFileError, match="rerun recording"):
+        read_views(garbage)
