@@ -1,7 +1,9 @@
 """Offline evaluation of a fitted sequencer on recorded demonstrations (no simulator needed).
 
 * Progress prediction (paper Fig. 6): predicted φ against expected progress (eq. 1) for every
-  MP activation of held-out demonstrations.
+  MP activation of held-out demonstrations (a stateful predictor, such as ``dtw``, is fed each
+  demonstration tick by tick). Whatever labels a predictor was trained on (``time_phase``:
+  normalised time), it is scored against eq. 1.
 * Replay: the sequencer runs open-loop over each recorded feature stream; per variable we check
   that it reproduces the demonstrated MP sequence and measure the switch-state distance.
 
@@ -54,7 +56,7 @@ def activation_progress(
     index = {key: i for i, key in enumerate(seq.node_keys)}
     for m, demo in enumerate(demos):
         _check_features(seq, demo)
-        phi = seq.progress(demo.features)
+        phi = stream_progress(seq, demo.features)
         scaled = seq.predictor.scaler.transform(demo.features)
         for v in sorted(seq.graphs):
             for seg in demo.segments(v):
@@ -72,6 +74,21 @@ def activation_progress(
                     )
                 )
     return out
+
+
+def stream_progress(seq: ConcurrentSequencer, features: np.ndarray) -> np.ndarray:
+    """φ ``(n, K)`` of every node along one recorded trajectory ``features (n, d)``.
+
+    A stateless predictor takes the whole trajectory in one batched call. A stateful one
+    (``dtw``: it aligns a window of recent features) is restarted as one stream and fed the
+    trajectory tick by tick, as the sequencer feeds it in closed loop; this resets the
+    predictor's streams, so do not interleave it with a running sequencer on the same model.
+    """
+    x = np.asarray(features, dtype=np.float64)
+    if not seq.predictor.stateful:
+        return seq.progress(x)
+    seq.predictor.reset_state(1)
+    return np.concatenate([seq.progress(row[None]) for row in x], axis=0)
 
 
 def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:

@@ -123,3 +123,47 @@ def support_points(
     frac = np.divide(targets - cum[idx], seg, out=np.zeros_like(targets), where=seg > 0)
     frac = np.clip(frac, 0.0, 1.0)
     return x[idx] + frac[:, None] * (x[idx + 1] - x[idx])
+
+
+LABELS = ("path", "time")
+"""Kinds of training label: ``path`` (eq. 1, the L1 line integral) or ``time`` (normalised
+elapsed time, the usual phase variable; the label ablation of eq. 1)."""
+
+
+def time_labels(time: np.ndarray) -> np.ndarray:
+    """Normalised elapsed time ``(n,)`` in [0, 1] of one activation sampled at ``time (n,)`` [s].
+
+    ``(t - t_0) / (t_{n-1} - t_0)``: linear in time, first value 0 and last value 1 (for
+    ``n >= 2``), whatever the features did. A single sample has ``[1.0]`` (as in
+    :func:`expected_progress`); a zero time span falls back to the normalised sample index.
+    """
+    t = np.asarray(time, dtype=np.float64)
+    if t.ndim != 1 or t.shape[0] == 0:
+        raise DataError(f"time must have shape (n,) with n >= 1, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise DataError("time contains NaN or inf; clean or drop those samples")
+    n = t.shape[0]
+    if n == 1:
+        return np.ones(1)
+    span = t[-1] - t[0]
+    if span <= 0.0:
+        return np.linspace(0.0, 1.0, n)
+    phase = (t - t[0]) / span
+    phase[-1] = 1.0
+    return phase
+
+
+def progress_labels(features: np.ndarray, time: np.ndarray, kind: str = "path") -> np.ndarray:
+    """Training labels ``(n,)`` of one activation ``features (n, d)``, ``time (n,)`` [s]:
+    :func:`expected_progress` for ``kind="path"``, :func:`time_labels` for ``kind="time"``."""
+    if kind == "path":
+        return expected_progress(features, time)
+    if kind == "time":
+        labels = time_labels(time)
+        if labels.shape[0] != _as_trajectory(features).shape[0]:
+            raise DataError(
+                f"time has {labels.shape[0]} samples but features have "
+                f"{np.shape(features)[0]}; they must match"
+            )
+        return labels
+    raise ConfigError(f"progress labels must be one of {', '.join(LABELS)}, got {kind!r}")

@@ -1,7 +1,8 @@
 """Progress predictors: ``torch.nn.Module`` banks mapping features ``(..., d)`` to ``(..., K)``.
 
-Use :func:`make_predictor` to build one by name (``klr``, ``klr_full``, ``klr_sparse``, ``mlp``)
-and :func:`predictor_from_spec` to rebuild a saved one.
+Use :func:`make_predictor` to build one by name (``klr``, ``klr_full``, ``klr_sparse``, ``mlp``,
+and the baselines ``sklearn_klr``, ``regression_clip``, ``time_phase``, ``dtw``) and
+:func:`predictor_from_spec` to rebuild a saved one.
 """
 
 from __future__ import annotations
@@ -19,6 +20,15 @@ from cpmp.predictors.base import (
     ProgressPredictor,
     soft_bce,
 )
+from cpmp.predictors.baselines import (
+    RegressionClipConfig,
+    RegressionClipPredictor,
+    SklearnKLRConfig,
+    SklearnKLRPredictor,
+    TimePhaseConfig,
+    TimePhasePredictor,
+)
+from cpmp.predictors.dtw import DTWConfig, DTWPredictor
 from cpmp.predictors.klr import (
     FullKLRPredictor,
     KLRConfig,
@@ -29,7 +39,17 @@ from cpmp.predictors.klr import (
 from cpmp.predictors.mlp import MLPConfig, MLPPredictor
 
 PREDICTORS: dict[str, type[ProgressPredictor]] = {
-    cls.kind: cls for cls in (KLRPredictor, FullKLRPredictor, SparseKLRPredictor, MLPPredictor)
+    cls.kind: cls
+    for cls in (
+        KLRPredictor,
+        FullKLRPredictor,
+        SparseKLRPredictor,
+        MLPPredictor,
+        SklearnKLRPredictor,
+        RegressionClipPredictor,
+        TimePhasePredictor,
+        DTWPredictor,
+    )
 }
 
 
@@ -78,6 +98,8 @@ def predictor_from_spec(spec: dict[str, Any]) -> ProgressPredictor:
 __all__ = [
     "PREDICTORS",
     "START_PREFIX",
+    "DTWConfig",
+    "DTWPredictor",
     "FeatureScaler",
     "FullKLRPredictor",
     "KLRConfig",
@@ -88,8 +110,14 @@ __all__ = [
     "NodeKey",
     "PredictorConfig",
     "ProgressPredictor",
+    "RegressionClipConfig",
+    "RegressionClipPredictor",
+    "SklearnKLRConfig",
+    "SklearnKLRPredictor",
     "SparseKLRConfig",
     "SparseKLRPredictor",
+    "TimePhaseConfig",
+    "TimePhasePredictor",
     "make_config",
     "make_predictor",
     "predictor_from_spec",

@@ -168,6 +168,12 @@ class ProgressPredictor(nn.Module):
     kind: ClassVar[str] = ""
     config_class: ClassVar[type[PredictorConfig]] = PredictorConfig
     convex: ClassVar[bool] = False
+    labels: ClassVar[str] = "path"
+    """Training labels (:data:`cpmp.progress.LABELS`): ``path`` (eq. 1) or ``time``."""
+    stateful: ClassVar[bool] = False
+    """A stateful bank treats the rows of each forward call as :meth:`reset_state`'s
+    ``n_streams`` independent streams, each advancing one tick per call (e.g. ``dtw``, which
+    aligns a window of recent features); feed such a bank one tick at a time."""
 
     def __init__(self, node_keys: list[NodeKey], n_features: int, config: PredictorConfig) -> None:
         super().__init__()
@@ -218,6 +224,9 @@ class ProgressPredictor(nn.Module):
         """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``; banks override
         this to skip the other nodes' work (e.g. to score each node on its own samples)."""
         return self.logits(z)[:, i]
+
+    def reset_state(self, n_streams: int) -> None:
+        """Start ``n_streams`` fresh input streams (stateful banks); a no-op for the others."""
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Data-dependent set-up before training (support points, initial weights)."""

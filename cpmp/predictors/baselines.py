@@ -1,0 +1,235 @@
+"""Baselines on the kernel features of ``klr``: what a user would compare cpmp's predictor with.
+
+All three use ``klr``'s support rule, γ and feature weighting (they subclass
+:class:`~cpmp.predictors.klr.KLRPredictor`), so only the fit or the labels differ:
+
+``sklearn_klr``     the same soft-label KLR problem solved by scikit-learn's
+                    ``LogisticRegression`` on the RBF features, each sample entering as two
+                    weighted copies (target 1 with weight φ, target 0 with weight 1 − φ); an
+                    independent cross-check of the soft-label loss.
+``regression_clip`` kernel ridge regression of the progress labels on the same features, its
+                    output clipped to [0, 1] (the alternative the paper argues against).
+``time_phase``      the same KLR trained on normalised elapsed time instead of the L1 line
+                    integral (the label ablation of eq. 1).
+
+The fitted coefficients live in the module's parameters: prediction is a torch call and a
+checkpoint holds tensors only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+
+from cpmp.errors import ConfigError
+from cpmp.predictors.base import NodeData
+from cpmp.predictors.klr import KLRConfig, KLRPredictor
+from cpmp.predictors.newton import NewtonInfo, SolverOptions, penalised_loss
+
+SKLEARN_SOLVERS = ("newton-cholesky", "lbfgs", "newton-cg")
+"""scikit-learn solvers that leave the intercept unpenalised, as ``klr`` does."""
+
+
+@dataclass
+class SklearnKLRConfig(KLRConfig):
+    """Options of ``sklearn_klr`` (on top of :class:`~cpmp.predictors.klr.KLRConfig`, whose
+    ``gamma``, support rule, ``l2``, ``bias`` and feature weighting mean the same).
+
+    ``l2`` becomes scikit-learn's ``C = 1 / (n · l2)`` for a node of ``n`` samples (``C = inf``,
+    no penalty, for ``l2 = 0``): scikit-learn minimises ``C Σ_i s_i ℓ_i + ½ ||w||²``, which for
+    the two weighted copies is ``1 / l2`` times ``klr``'s ``mean BCE + ½ l2 ||w||²``.
+
+    Attributes:
+        sklearn_solver: ``newton-cholesky`` (default), ``lbfgs`` or ``newton-cg``.
+        sklearn_tol: scikit-learn's stopping tolerance.
+        sklearn_max_iter: scikit-learn's iteration cap per node.
+    """
+
+    sklearn_solver: str = "newton-cholesky"
+    sklearn_tol: float = 1e-10
+    sklearn_max_iter: int = 200
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.sklearn_solver not in SKLEARN_SOLVERS:
+            raise ConfigError(
+                f"sklearn_solver must be one of {', '.join(SKLEARN_SOLVERS)}, "
+                f"got {self.sklearn_solver!r}"
+            )
+        self._integer("sklearn_max_iter")
+        self._positive("sklearn_tol", "sklearn_max_iter")
+
+
+@dataclass
+class RegressionClipConfig(KLRConfig):
+    """Options of ``regression_clip``: those of :class:`~cpmp.predictors.klr.KLRConfig`, with
+    ``l2`` the ridge penalty: each node minimises ``½ mean (K w + b − φ)² + ½ l2 ||w||²``
+    (the intercept ``b`` unpenalised)."""
+
+
+@dataclass
+class TimePhaseConfig(KLRConfig):
+    """Options of ``time_phase``: exactly those of :class:`~cpmp.predictors.klr.KLRConfig`;
+    only the labels differ (normalised elapsed time)."""
+
+
+class SklearnKLRPredictor(KLRPredictor):
+    """``sklearn_klr``: ``klr``'s model, its weights fitted by scikit-learn.
+
+    scikit-learn replaces the trainer's Newton solve (``solver: newton``, the default); with
+    ``solver: lbfgs`` torch's LBFGS minimises the same loss, as for ``klr``.
+    """
+
+    kind: ClassVar[str] = "sklearn_klr"
+    config_class = SklearnKLRConfig
+    config: SklearnKLRConfig
+
+    def solve_convex(
+        self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
+    ) -> list[NewtonInfo]:
+        """Fit each node's weights and bias with ``LogisticRegression`` on its kernel features
+        ``(P, S)`` (two weighted copies per sample); report scikit-learn's iterations and the
+        max-norm of the gradient of ``klr``'s loss at the result."""
+        from sklearn.linear_model import LogisticRegression
+
+        c = self.config
+        kernels = self._node_kernels(data) if kernels is None else kernels
+        weight = torch.zeros_like(self.weight, requires_grad=False)
+        bias = self.bias.detach().clone()
+        infos = []
+        for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
+            mask = self.support_mask[i]
+            k = kern[:, mask].detach().to(torch.float64)
+            phi = node.target.detach().to(torch.float64)
+            n = k.shape[0]
+            features = torch.cat([k, k]).numpy()
+            classes = np.concatenate([np.ones(n), np.zeros(n)])
+            sample_weight = torch.cat([phi, 1.0 - phi]).numpy()
+            model = LogisticRegression(
+                C=1.0 / (n * c.l2) if c.l2 > 0 else np.inf,
+                fit_intercept=c.bias,
+                solver=c.sklearn_solver,
+                tol=c.sklearn_tol,
+                max_iter=c.sklearn_max_iter,
+            )
+            model.fit(features, classes, sample_weight=sample_weight)
+            w = torch.as_tensor(model.coef_[0], dtype=torch.float64)
+            b = float(model.intercept_[0]) if c.bias else float(self.bias[i])
+            weight[i, mask] = w.to(weight.dtype)
+            bias[i] = b
+            iterations = int(np.max(model.n_iter_))
+            infos.append(self._report(k, phi, w, b, iterations))
+        with torch.no_grad():
+            self.weight.copy_(weight)
+            self.bias.copy_(bias)
+        return infos
+
+    def _report(
+        self, k: torch.Tensor, phi: torch.Tensor, w: torch.Tensor, b: float, iterations: int
+    ) -> NewtonInfo:
+        """The solver outcome in the terms of :class:`NewtonInfo` (no Newton decrement)."""
+        l2 = self.config.l2
+        c = torch.full_like(phi, 1.0 / phi.shape[0])
+        residual = c * (torch.sigmoid(k @ w + b) - phi)
+        grad = k.T @ residual + l2 * w
+        if self.config.bias:
+            grad = torch.cat([grad, residual.sum()[None]])
+        loss = float(penalised_loss(k, phi, c, w, b, l2))
+        converged = iterations < self.config.sklearn_max_iter
+        return NewtonInfo(iterations, float(grad.abs().max()), float("nan"), loss, converged)
+
+    def summary(self) -> dict[str, Any]:
+        out = super().summary()
+        out["sklearn_solver"] = self.config.sklearn_solver
+        return out
+
+
+class RegressionClipPredictor(KLRPredictor):
+    """``regression_clip``: kernel ridge regression of progress, clipped to [0, 1].
+
+    The bank's logits are ``logit(clip(K w + b, 0, 1))``, ``±inf`` at the clip bounds, so the
+    sigmoid of :meth:`forward` returns exactly 0 and 1 there and the clipped value in between
+    (to rounding); far from every support point the output tends to the node's intercept. The
+    fit is closed-form (trainer ``solver: newton``, the default) or LBFGS on the same ridge loss
+    (``solver: lbfgs``).
+    """
+
+    kind: ClassVar[str] = "regression_clip"
+    config_class = RegressionClipConfig
+    config: RegressionClipConfig
+
+    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        return _clipped_logit(super().head_logits(z, heads))
+
+    def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        return _clipped_logit(super().node_logits(z, i))
+
+    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+        """Sum over nodes of ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (unclipped output)."""
+        total = torch.zeros((), dtype=self.dtype_)
+        for i, (node, kern) in enumerate(zip(data, self._node_kernels(data), strict=True)):
+            w = self.weight[i] * self.support_mask[i]
+            residual = kern @ w + self.bias[i] - node.target
+            total = total + 0.5 * (residual * residual).mean()
+            total = total + 0.5 * self.config.l2 * (w * w).sum()
+        return total
+
+    def solve_convex(
+        self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
+    ) -> list[NewtonInfo]:
+        """Closed-form ridge solution per node: ``(XᵀX / n + R) θ = Xᵀ φ / n`` with
+        ``X = [K, 1]`` and ``R = diag(l2, ..., l2, 0)``; one Cholesky solve (least squares if
+        the system is singular, e.g. for ``l2 = 0`` with repeated supports)."""
+        kernels = self._node_kernels(data) if kernels is None else kernels
+        weight = torch.zeros_like(self.weight, requires_grad=False)
+        bias = self.bias.detach().clone()
+        infos = []
+        for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
+            mask = self.support_mask[i]
+            k = kern[:, mask].detach().to(torch.float64)
+            y = node.target.detach().to(torch.float64)
+            n = k.shape[0]
+            offset = 0.0 if self.config.bias else float(self.bias[i])
+            x = torch.cat([k, torch.ones(n, 1, dtype=torch.float64)], 1) if self.config.bias else k
+            reg = torch.full((x.shape[1],), float(self.config.l2), dtype=torch.float64)
+            if self.config.bias:
+                reg[-1] = 0.0
+            gram = x.T @ x / n + torch.diag(reg)
+            rhs = x.T @ (y - offset) / n
+            chol, info = torch.linalg.cholesky_ex(gram)
+            if int(info) == 0:
+                theta = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
+            else:
+                theta = torch.linalg.lstsq(gram, rhs[:, None], driver="gelsd").solution[:, 0]
+            s = int(mask.sum())
+            weight[i, mask] = theta[:s].to(weight.dtype)
+            b = float(theta[-1]) if self.config.bias else offset
+            bias[i] = b
+            residual = x @ theta + offset - y
+            grad = x.T @ residual / n + reg * theta
+            loss = 0.5 * float((residual * residual).mean()) + 0.5 * self.config.l2 * float(
+                theta[:s] @ theta[:s]
+            )
+            infos.append(NewtonInfo(1, float(grad.abs().max()), float("nan"), loss, True))
+        with torch.no_grad():
+            self.weight.copy_(weight)
+            self.bias.copy_(bias)
+        return infos
+
+
+def _clipped_logit(raw: torch.Tensor) -> torch.Tensor:
+    """``logit(clip(raw, 0, 1))``: ``-inf`` at or below 0, ``+inf`` at or above 1."""
+    return torch.logit(raw.clamp(0.0, 1.0))
+
+
+class TimePhasePredictor(KLRPredictor):
+    """``time_phase``: ``klr`` trained on normalised elapsed time (:func:`cpmp.progress.
+    time_labels`) instead of the L1 line integral of eq. 1."""
+
+    kind: ClassVar[str] = "time_phase"
+    config_class = TimePhaseConfig
+    config: TimePhaseConfig
+    labels: ClassVar[str] = "time"

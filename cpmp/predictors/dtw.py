@@ -1,0 +1,349 @@
+"""``dtw``: progress by dynamic-time-warping alignment of the recent features to training data.
+
+A stateful baseline: for every input stream the bank keeps the features of the last
+``window`` ticks. At each tick the window's points (the newest tick and every ``stride``-th
+tick before it, oldest first) are aligned by open-begin, open-end DTW (dtw-python, step pattern
+``asymmetric``: the reference may advance by 0, 1 or 2 samples per window point) to each
+node's training activations, thinned to every ``stride``-th sample (at most ``max_reference``
+per activation). The node's progress is the
+expected progress (eq. 1) of the reference sample matched to the newest tick in the activation
+that matches best (lowest accumulated cost).
+
+All nodes are aligned in *one* dtw-python call per stream and tick: the training activations
+of all nodes are laid side by side in one reference, two columns of infinite cost between
+activations so that no warping path crosses from one into the next (a path can skip at most
+one column per step). The last row of the cumulative cost matrix then holds, for every
+reference sample, the cost of the best window alignment ending there; each node takes the
+argmin over its own columns, as dtw-python's open end does over a whole reference.
+
+Units: ``window`` and ``stride`` count control ticks (at the simulator's 100 Hz the defaults,
+50 and 10, put 5 points into the last 0.5 s); distances are Euclidean in the scaled feature
+space (``feature_scaling``). A tick costs one cost matrix of ``ceil(window / stride)`` rows by
+(kept training samples + 2 per activation) columns per stream.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from cpmp.errors import ConfigError, DataError
+from cpmp.predictors.base import (
+    START_PREFIX,
+    NodeData,
+    NodeKey,
+    PredictorConfig,
+    ProgressPredictor,
+)
+from cpmp.predictors.newton import NewtonInfo, SolverOptions
+from cpmp.progress import expected_progress
+
+SEPARATOR = 2
+"""Columns of infinite cost between two activations in the joint reference (the asymmetric
+step pattern skips at most one)."""
+
+
+@dataclass
+class DTWConfig(PredictorConfig):
+    """Options of ``dtw``.
+
+    Attributes:
+        window: ticks of recent features aligned at each tick (50: 0.5 s at 100 Hz).
+        stride: ticks between two window points, and between two kept samples of each training
+            activation (so both are sampled alike); the window holds ``ceil(window / stride)``
+            points.
+        max_reference: samples kept per training activation at most (after the stride, longer
+            activations are thinned evenly); bounds the cost of a tick.
+    """
+
+    window: int = 50
+    stride: int = 10
+    max_reference: int = 30
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._integer("window", "stride", "max_reference")
+        self._positive("window", "stride")
+        if self.max_reference < 2:
+            raise ConfigError(
+                f"predictor option max_reference must be >= 2, got {self.max_reference!r}"
+            )
+
+
+def window_ticks(newest: int, window: int, stride: int) -> np.ndarray:
+    """Ticks of the window points at tick ``newest``, oldest first: ``newest`` and every
+    ``stride``-th tick before it, within the last ``window`` ticks and not before tick 0."""
+    return np.arange(newest, max(newest - window, -1), -stride)[::-1]
+
+
+class _Streams:
+    """Distances of the last ``span`` ticks of ``n`` streams to every reference sample, in a
+    ring buffer ``(n, span, R)``."""
+
+    def __init__(self, n: int, span: int, n_reference: int) -> None:
+        self.rows = np.zeros((n, span, n_reference))
+        self.ticks = 0
+
+    @property
+    def n(self) -> int:
+        return self.rows.shape[0]
+
+    def push(self, dist: np.ndarray) -> None:
+        """Append one tick: ``dist (n, R)``."""
+        self.rows[:, self.ticks % self.rows.shape[1]] = dist
+        self.ticks += 1
+
+    def window(self, stride: int) -> np.ndarray:
+        """Ring slots of the newest tick's window points, oldest first."""
+        span = self.rows.shape[1]
+        return window_ticks(self.ticks - 1, span, stride) % span
+
+
+class DTWPredictor(ProgressPredictor):
+    """``dtw``: open-end DTW of each stream's recent features against the training activations.
+
+    Stateful (:attr:`stateful`): each :meth:`forward` call is one tick of
+    :meth:`reset_state`'s ``n_streams`` streams, one row each (a first call without a reset
+    starts as many streams as it has rows). Nothing is trained: :meth:`initialize` stores the
+    thinned activations and their expected progress as buffers. Logits are ``logit(φ)``
+    (``±inf`` at φ = 0 and 1, which the sigmoid of :meth:`forward` maps back exactly).
+    """
+
+    kind: ClassVar[str] = "dtw"
+    config_class = DTWConfig
+    convex: ClassVar[bool] = True
+    stateful: ClassVar[bool] = True
+    config: DTWConfig
+
+    def __init__(
+        self, node_keys: list[NodeKey], n_features: int, config: DTWConfig, n_reference: int = 1
+    ) -> None:
+        super().__init__(node_keys, n_features, config)
+        dt = self.dtype_
+        self.register_buffer("reference", torch.zeros(n_reference, n_features, dtype=dt))
+        self.register_buffer("reference_progress", torch.zeros(n_reference, dtype=dt))
+        self.register_buffer("column", torch.arange(n_reference, dtype=torch.long))
+        self.register_buffer("head_range", torch.zeros(self.n_nodes, 2, dtype=torch.long))
+        self._streams: _Streams | None = None
+        self._loss_cache: tuple[list[NodeData], torch.Tensor] | None = None
+        self._layout_cache: tuple[tuple[int, int], tuple[np.ndarray, ...]] | None = None
+
+    def shape_spec(self) -> dict[str, Any]:
+        return {"n_reference": int(self.reference.shape[0])}
+
+    # ----------------------------------------------------------------------------- fitting
+    def _thin(self, n: int) -> np.ndarray:
+        """Indices of the kept samples of an activation of ``n`` samples: every ``stride``-th
+        and the last, at most ``max_reference`` (evenly thinned)."""
+        c = self.config
+        idx = np.arange(0, n, c.stride)
+        if idx[-1] != n - 1:
+            idx = np.append(idx, n - 1)
+        if len(idx) > c.max_reference:
+            idx = np.unique(np.round(np.linspace(0, n - 1, c.max_reference)).astype(np.int64))
+        return idx
+
+    def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        """Store every node's thinned activations (scaled features) and their expected
+        progress; start heads share their node's reference."""
+        refs, progress, columns, ranges = [], [], [], []
+        seen: dict[NodeKey, tuple[int, int]] = {}
+        count = column = 0
+        for node in data:
+            base = (node.key[0], node.key[1].removeprefix(START_PREFIX))
+            if base not in seen:
+                start = count
+                for act in node.activations:
+                    idx = self._thin(len(act))
+                    refs.append(np.asarray(act)[idx])
+                    progress.append(expected_progress(act)[idx])
+                    columns.append(column + np.arange(len(idx)))
+                    column += len(idx) + SEPARATOR
+                    count += len(idx)
+                if count == start:
+                    raise DataError(f"node {base[0]}/{base[1]} has no activation data for dtw")
+                seen[base] = (start, count)
+            ranges.append(seen[base])
+        dt = self.dtype_
+        self.reference = torch.as_tensor(np.concatenate(refs), dtype=dt)
+        self.reference_progress = torch.as_tensor(np.concatenate(progress), dtype=dt)
+        self.column = torch.as_tensor(np.concatenate(columns), dtype=torch.long)
+        self.head_range = torch.as_tensor(ranges, dtype=torch.long)
+        self._streams = None
+        self._loss_cache = None
+        self._layout_cache = None
+
+    def solve_convex(self, data: list[NodeData], solver: SolverOptions) -> list[NewtonInfo]:
+        """Nothing to solve: the references were stored by :meth:`initialize`."""
+        return []
+
+    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+        """Sum over nodes of the mean soft BCE (eq. 5) of φ against expected progress when each
+        training activation is replayed (as a fresh stream) against the node's own references,
+        scored at every ``stride``-th tick and the last one (:meth:`replay`). Cached for the
+        same ``data`` list (the fit asks twice)."""
+        if self._loss_cache is not None and self._loss_cache[0] is data:
+            return self._loss_cache[1]
+        total = torch.zeros((), dtype=self.dtype_)
+        for i, node in enumerate(data):
+            phi, target = [], []
+            for act in node.activations:
+                z = torch.as_tensor(np.asarray(act), dtype=self.dtype_)
+                ticks = self._scored_ticks(len(act))
+                phi.append(torch.as_tensor(self.replay(z, i, ticks), dtype=self.dtype_))
+                target.append(torch.as_tensor(expected_progress(act)[ticks], dtype=self.dtype_))
+            total = total + F.binary_cross_entropy(torch.cat(phi), torch.cat(target))
+        self._loss_cache = (data, total)
+        return total
+
+    def _scored_ticks(self, n: int) -> np.ndarray:
+        """Every ``stride``-th tick of ``n`` and the last one."""
+        ticks = np.arange(0, n, self.config.stride)
+        return ticks if ticks[-1] == n - 1 else np.append(ticks, n - 1)
+
+    # ----------------------------------------------------------------------------- inference
+    def reset_state(self, n_streams: int) -> None:
+        """Start ``n_streams`` fresh streams (empty windows)."""
+        if isinstance(n_streams, bool) or not isinstance(n_streams, int) or n_streams < 1:
+            raise ConfigError(f"n_streams must be a whole number >= 1, got {n_streams!r}")
+        self._streams = _Streams(n_streams, self.config.window, self.reference.shape[0])
+
+    @property
+    def n_streams(self) -> int | None:
+        """Streams of the current state (``None`` before the first tick or reset)."""
+        return None if self._streams is None else self._streams.n
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        """One tick of every stream: scaled features ``z (n_streams, d)`` -> ``(n_streams, K)``
+        logits ``logit(φ)``."""
+        if self._streams is None:
+            self.reset_state(int(z.shape[0]))
+        streams = self._streams
+        if z.shape[0] != streams.n:
+            raise DataError(
+                f"the dtw predictor runs {streams.n} stream(s) and takes one row per stream "
+                f"and tick, got {z.shape[0]} rows; call reset_state({z.shape[0]}) to start "
+                "that many streams, or feed a trajectory one tick at a time"
+            )
+        streams.push(self._distances(z))
+        slots = streams.window(self.config.stride)
+        starts, segment, head_segment = self._layout()
+        columns = self.column.numpy()
+        width = int(columns[-1]) + 1
+        progress = self.reference_progress.numpy()
+        phi = np.stack(
+            [
+                self._align(streams.rows[b, slots], columns, width, starts, segment, progress)
+                for b in range(streams.n)
+            ]
+        )
+        return torch.logit(torch.as_tensor(phi[:, head_segment], dtype=self.dtype_))
+
+    def _layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The heads' reference ranges as segments: first sample of each distinct range
+        ``(U,)``, segment of each reference sample ``(R,)`` and of each head ``(K,)`` (start
+        heads share their node's). Cached until ``head_range`` changes."""
+        key = (id(self.head_range), self.head_range._version)
+        if self._layout_cache is None or self._layout_cache[0] != key:
+            ranges = self.head_range.numpy()
+            distinct, head_segment = np.unique(ranges, axis=0, return_inverse=True)
+            segment = np.repeat(np.arange(len(distinct)), distinct[:, 1] - distinct[:, 0])
+            self._layout_cache = (key, (distinct[:, 0], segment, head_segment.reshape(-1)))
+        return self._layout_cache[1]
+
+    def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        """Logits ``(B,)`` of node ``i`` when the rows of ``z (B, d)`` are the consecutive
+        ticks of one fresh stream (the live streams are left alone). A self-check for long
+        training sets, so aligned only at every ``stride``-th tick and the last one, each
+        value held until the next aligned tick."""
+        ticks = self._scored_ticks(int(z.shape[0])) if z.shape[0] else np.zeros(0, np.int64)
+        phi = self.replay(z, i, ticks)
+        held = np.searchsorted(ticks, np.arange(z.shape[0]), side="right") - 1
+        return torch.logit(torch.as_tensor(phi[held], dtype=self.dtype_))
+
+    def _distances(self, z: torch.Tensor, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Euclidean distances ``(B, R)`` of ``z (B, d)`` to the reference samples ``lo:hi``."""
+        dist = torch.cdist(
+            z.to(self.dtype_),
+            self.reference[lo:hi],
+            compute_mode="donot_use_mm_for_euclid_dist",
+        )
+        return dist.to(torch.float64).numpy()
+
+    def replay(self, z: torch.Tensor, i: int, ticks: np.ndarray | None = None) -> np.ndarray:
+        """φ of node ``i`` at ``ticks`` (default: every tick) of one fresh stream whose
+        consecutive ticks are the rows of ``z (B, d)`` (scaled features), aligned against node
+        ``i``'s references only; the live streams are left alone. Returns ``(len(ticks),)``."""
+        lo, hi = self.head_range[i].tolist()
+        columns = self.column[lo:hi].numpy()
+        columns = columns - columns[0]
+        width = int(columns[-1]) + 1
+        ticks = np.arange(z.shape[0]) if ticks is None else np.asarray(ticks, dtype=np.int64)
+        needed = np.unique(
+            np.concatenate(
+                [window_ticks(int(t), self.config.window, self.config.stride) for t in ticks]
+                or [np.zeros(0, np.int64)]
+            )
+        )
+        dist = np.zeros((z.shape[0], hi - lo))
+        if len(needed):
+            dist[needed] = self._distances(z[torch.as_tensor(needed)], lo, hi)
+        progress = self.reference_progress[lo:hi].numpy()
+        starts, segment = np.zeros(1, np.int64), np.zeros(hi - lo, np.int64)
+        return np.array(
+            [
+                self._align(
+                    dist[window_ticks(int(t), self.config.window, self.config.stride)],
+                    columns,
+                    width,
+                    starts,
+                    segment,
+                    progress,
+                )[0]
+                for t in ticks
+            ]
+        )
+
+    @staticmethod
+    def _align(
+        dist: np.ndarray,
+        columns: np.ndarray,
+        width: int,
+        starts: np.ndarray,
+        segment: np.ndarray,
+        progress: np.ndarray,
+    ) -> np.ndarray:
+        """φ ``(U,)`` per segment of reference samples (contiguous, in order: first samples
+        ``starts (U,)``, ``segment (R,)`` of each sample): the ``progress (R,)`` of the sample
+        where the cheapest open-begin, open-end alignment of the window ``dist (n_w, R)``
+        (distances of the window points, oldest first, to the reference samples laid out at
+        ``columns (R,)`` of a ``width``-column cost matrix) ends within that segment."""
+        from dtw import asymmetric, dtw
+
+        local = np.full((dist.shape[0], width), np.inf)
+        local[:, columns] = dist
+        result = dtw(
+            local,
+            step_pattern=asymmetric,
+            open_begin=True,
+            open_end=True,
+            distance_only=True,
+            keep_internals=True,
+        )
+        ends = result.costMatrix[-1][columns]
+        hit = np.flatnonzero(ends == np.minimum.reduceat(ends, starts)[segment])
+        _, first = np.unique(segment[hit], return_index=True)
+        return progress[hit[first]]
+
+    def summary(self) -> dict[str, Any]:
+        out = super().summary()
+        out["n_reference"] = int(self.reference.shape[0])
+        out["window"] = self.config.window
+        out["stride"] = self.config.stride
+        out["window_points"] = math.ceil(self.config.window / self.config.stride)
+        return out
