@@ -94,7 +94,8 @@ class SparseKLRConfig(KLRConfig):
         l1: weight of the sparsity penalty ``l1 * mean|w|`` per node.
         learn_positions: also move the support points.
         learn_lengthscales: learn one length-scale per node and feature (ARD).
-        epochs: Adam steps (full batch).
+        epochs: Adam steps (full batch) at most (the budget); the trainer's early stopping
+            usually ends the sparsity phase sooner, once the training loss stops improving.
         lr: Adam learning rate.
         prune_tol: prune supports with ``|w| < prune_tol * max|w|`` of their node.
         refit: re-fit the surviving weights to convergence (the trainer's convex solver,
@@ -107,7 +108,7 @@ class SparseKLRConfig(KLRConfig):
     learn_positions: bool = False
     learn_lengthscales: bool = False
     epochs: int = 400
-    lr: float = 0.05
+    lr: float = 0.1
     prune_tol: float = 0.02
     refit: bool = True
 

@@ -27,7 +27,8 @@ class MLPConfig(PredictorConfig):
     Attributes:
         hidden: hidden layer widths.
         activation: ``tanh``, ``relu`` or ``silu``.
-        epochs: full-batch Adam steps.
+        epochs: full-batch Adam steps at most (the budget); the trainer's early stopping
+            usually ends the fit sooner, once the training loss stops improving.
         lr: Adam learning rate.
         weight_decay: L2 penalty on all weights, added to each node's mean loss.
     """
@@ -35,7 +36,7 @@ class MLPConfig(PredictorConfig):
     hidden: tuple[int, ...] = (32, 32)
     activation: str = "tanh"
     epochs: int = 600
-    lr: float = 0.01
+    lr: float = 0.03
     weight_decay: float = 1e-4
 
     def __post_init__(self) -> None:
@@ -94,8 +95,8 @@ class MLPPredictor(ProgressPredictor):
                 h = self._act(h)
         return h[..., 0]
 
-    def _node_logits(self, i: int, x: torch.Tensor) -> torch.Tensor:
-        h = x
+    def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        h = z
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             h = h @ w[i] + b[i]
@@ -106,7 +107,7 @@ class MLPPredictor(ProgressPredictor):
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
         total = torch.zeros((), dtype=self.dtype_)
         for i, node in enumerate(data):
-            total = total + soft_bce(self._node_logits(i, node.x), node.target)
+            total = total + soft_bce(self.node_logits(node.x, i), node.target)
             penalty = sum((w[i] * w[i]).sum() for w in self.weights)
             total = total + 0.5 * self.config.weight_decay * penalty
         return total
