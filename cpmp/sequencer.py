@@ -11,6 +11,8 @@ demonstrated, and resolve stalls (:mod:`cpmp.switching`).
 
 ``ConcurrentSequencer.fit(demos)`` with no options gives cpmp's recommended configuration;
 ``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` the paper's method.
+``seq.batched(n)`` (:class:`BatchedSequencer`) runs ``n`` independent episodes of a fitted
+sequencer with one predictor call per tick for all of them (many rollouts at once).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from cpmp.predictors import (
     predictor_from_spec,
     predictor_options,
 )
-from cpmp.progress import expected_progress, path_length
+from cpmp.progress import path_length, progress_labels
 from cpmp.switching import (
     COUPLINGS,
     SWITCH_RULES,
@@ -275,6 +277,10 @@ def _split_options(options: dict[str, Any], kind: str) -> tuple[dict, dict, dict
     return pred, seq, trainer, rest
 
 
+_PlanRow = tuple[str, str, list[str], list[int], int, list[int], list[tuple[int, int, float]]]
+"""One variable's row of :meth:`ConcurrentSequencer._transition_plan`."""
+
+
 class ConcurrentSequencer:
     """Concurrent sequence graphs with learned progress predictors.
 
@@ -334,16 +340,8 @@ class ConcurrentSequencer:
                 f"feature_range has {self.feature_range.size} entries for "
                 f"{len(self.feature_names)} features"
             )
-        self.active: dict[str, str] = {}
-        self.events: list[TransitionEvent] = []
-        self.notes: list[SequencerNote] = []
-        self.last_tick: TickInfo | None = None
-        self._rules = {v: self._new_rule() for v in self.graphs}
-        self._stall = StallDetector(
-            self.feature_range, self.config.stall_time, self.config.rest_speed
-        )
-        self._holding: dict[str, str | None] = {}
-        self._last_t: float | None = None
+        self._coupled = self.config.coupling == "context"
+        self._episode = SequencerEpisode(self)
 
     def _new_rule(self) -> SwitchRule:
         c = self.config
@@ -453,36 +451,9 @@ class ConcurrentSequencer:
         demonstrated combination of initial nodes with the highest summed log entry probability
         when ``start_rule="joint"``)."""
         t = self._check_t(t)
+        self.predictor.reset_state(1)
         phi = self._heads(np.asarray(x, dtype=np.float64).reshape(-1))
-        if not np.isfinite(phi).all():
-            raise DataError(
-                "the progress predictor gave a non-finite φ at reset; the model is broken "
-                "(check its parameters) or the features are far outside the training data"
-            )
-        if self.config.start_rule == "joint" and self.initial_combinations:
-            entry = np.clip(1.0 - phi, 1e-12, 1.0)
-            scores = [
-                sum(np.log(entry[self._start_index[(v, mp)]]) for v, mp in combo.items())
-                for combo in self.initial_combinations
-            ]
-            self.active = dict(self.initial_combinations[int(np.argmax(scores))])
-        else:
-            self.active = {}
-            for v in sorted(self.graphs):
-                initial = sorted(self.graphs[v].initial_nodes)
-                entry_v = [1.0 - phi[self._start_index[(v, mp)]] for mp in initial]
-                self.active[v] = initial[int(np.argmax(entry_v))]
-        self.events = []
-        self.notes = []
-        for rule in self._rules.values():
-            rule.reset()
-        self._holding = {v: None for v in self.graphs}
-        self._stall.reset(float(t), np.asarray(x, dtype=np.float64).reshape(-1))
-        self._last_t = float(t)
-        self.last_tick = TickInfo(
-            float(t), self._phi_dict(phi), {v: {} for v in self.graphs}, dict(self.active)
-        )
-        return dict(self.active)
+        return self._episode.start(t, x, phi)
 
     @staticmethod
     def _check_t(t: float) -> float:
@@ -493,97 +464,77 @@ class ConcurrentSequencer:
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
-        if not self.active:
-            raise NotFittedError("call reset(t, x) before step(t, x)")
-        t = self._check_t(t)
-        if self._last_t is not None and t < self._last_t:
-            raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
-        self._last_t = t
+        t = self._episode.check_time(t)
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        phi = self.progress(state).tolist()
-        c = self.config
-        if not all(map(math.isfinite, phi)):
-            bad = [
-                f"{v}/{mp}"
-                for (v, mp), f in zip(self._keys, phi, strict=True)
-                if not math.isfinite(f)
+        phi = self.progress(state)
+        return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()))
+
+    def batched(self, n: int) -> BatchedSequencer:
+        """``n`` independent episodes of this sequencer, stepped together (see
+        :class:`BatchedSequencer`)."""
+        return BatchedSequencer(self, n)
+
+    @property
+    def active(self) -> dict[str, str]:
+        """Variable -> active MP of the current episode (empty before :meth:`reset`)."""
+        return self._episode.active
+
+    @property
+    def events(self) -> list[TransitionEvent]:
+        """The transitions of the current episode, in order."""
+        return self._episode.events
+
+    @property
+    def notes(self) -> list[SequencerNote]:
+        """The notes of the current episode (held transitions, recoveries, non-finite φ)."""
+        return self._episode.notes
+
+    @property
+    def last_tick(self) -> TickInfo | None:
+        """What the last :meth:`reset` or :meth:`step` computed (``None`` before a reset)."""
+        return self._episode.last_tick
+
+    def _initial_mps(self, phi: np.ndarray) -> dict[str, str]:
+        """The start rule (see :meth:`reset`) on every head's φ ``(H,)``: variable -> MP."""
+        if self.config.start_rule == "joint" and self.initial_combinations:
+            entry = np.clip(1.0 - phi, 1e-12, 1.0)
+            scores = [
+                sum(np.log(entry[self._start_index[(v, mp)]]) for v, mp in combo.items())
+                for combo in self.initial_combinations
             ]
-            text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
-            if c.nonfinite == "raise":
-                raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
-            if not self.notes or self.notes[-1].kind != "nonfinite":
-                self.notes.append(SequencerNote(t, "nonfinite", "", text))
-            self.last_tick = TickInfo(t, self._phi_dict(phi), {}, dict(self.active))
-            return dict(self.active)
-        self._stall.observe(t, state)
-        context = dict(self.active)
-        coupled = c.coupling == "context"
-        done = {u: phi[self._index[(u, mp)]] for u, mp in context.items()}
-        probs: dict[str, dict[str, float]] = {}
-        held: dict[str, str] = {}
-        candidates: list[tuple[str, str, str, float, int]] = []
-        fired = False
+            return dict(self.initial_combinations[int(np.argmax(scores))])
+        active = {}
+        for v in sorted(self.graphs):
+            initial = sorted(self.graphs[v].initial_nodes)
+            entry_v = [1.0 - phi[self._start_index[(v, mp)]] for mp in initial]
+            active[v] = initial[int(np.argmax(entry_v))]
+        return active
+
+    def _transition_plan(self, context: Mapping[str, str]) -> list[_PlanRow]:
+        """What every tick needs while the active MPs are ``context``: per variable with
+        successors (sorted), ``(variable, current MP, successors, their φ columns, the current
+        MP's φ column, unseen, checks)`` (:meth:`~cpmp.switching.Coupling.gates`): per
+        successor the number of other variables running an MP never seen at that switch, and
+        ``(successor, φ column, bound)`` for every φ that adds one inconsistency while below
+        its bound."""
+        margin = self.config.progress_margin
+        plan = []
         for v in sorted(self.graphs):
             current = context[v]
             names, idx = self._successor_idx[(v, current)]
             if not names:
-                probs[v] = {}
                 continue
-            exit_p = phi[self._index[(v, current)]]
-            p = [exit_p * (1.0 - phi[i]) for i in idx]
-            probs[v] = dict(zip(names, p, strict=True))
-            why = [
-                self.coupling.inconsistent((v, current, s), context, done, c.progress_margin)
-                for s in names
-            ]
-            bad = [len(w) for w in why]
-            candidates += [(v, current, s, q, b) for s, q, b in zip(names, p, bad, strict=True)]
-            gate = exit_p > c.min_exit
-            allowed = [gate and (not coupled or b == 0) for b in bad]
-            k = self._rules[v].update(t, p, allowed)
-            top = max(range(len(p)), key=p.__getitem__)
-            if coupled and gate and p[top] > c.threshold and not allowed[top] and k != top:
-                held[v] = names[top]
-                if self._holding.get(v) != names[top]:
-                    self.notes.append(
-                        SequencerNote(
-                            t,
-                            "hold",
-                            v,
-                            f"{v}: {current} -> {names[top]} held (p={p[top]:.2f}): "
-                            + "; ".join(why[top])
-                            + ", never seen at this switch",
-                        )
-                    )
-            self._holding[v] = held.get(v)
-            if k is not None:
-                self._switch(t, v, names[k], p[k], state, "switch")
-                fired = True
-        if not fired and c.recovery and self._stall.stalled(t):
-            choice = recovery_choice(candidates, c.recovery_threshold)
-            if choice is not None:
-                v, source, target, p_rec = choice
-                self._switch(t, v, target, p_rec, state, "recovery")
-                self.notes.append(
-                    SequencerNote(
-                        t,
-                        "recovery",
-                        v,
-                        f"stall of {c.stall_time:g} s resolved: {v}: {source} -> {target} "
-                        f"(p={p_rec:.2f})",
-                    )
-                )
-        self.last_tick = TickInfo(t, self._phi_dict(phi), probs, dict(self.active), held)
-        return dict(self.active)
-
-    def _switch(
-        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: str
-    ) -> None:
-        self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
-        self.active[v] = target
-        self._rules[v].reset()
-        self._holding[v] = None
-        self._stall.switched(t)
+            unseen_counts, checks = [], []
+            for k, s in enumerate(names):
+                unseen, bounds = self.coupling.gates((v, current, s), context, margin)
+                unseen_counts.append(len(unseen))
+                checks += [
+                    (k, self._index[(u, context[u])], bound)
+                    for u, _, bound in bounds
+                    if u in context
+                ]
+            plan.append((v, current, names, idx, self._index[(v, current)], unseen_counts, checks))
+        return plan
 
     def _phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
         """Per-node φ ``(K,)`` as variable -> MP -> φ (start heads left out)."""
@@ -756,6 +707,330 @@ class ConcurrentSequencer:
         return self.graphs[variable]
 
 
+class SequencerEpisode:
+    """The state of one episode of a :class:`ConcurrentSequencer`: the active MPs, the events,
+    the notes, the switching rules' histories and the stall detector.
+
+    :class:`ConcurrentSequencer` drives one, :class:`BatchedSequencer` many; both evaluate the
+    predictor themselves and hand each episode its φ, so one episode decides the same way in
+    either.
+    """
+
+    def __init__(self, seq: ConcurrentSequencer) -> None:
+        self.seq = seq
+        self.active: dict[str, str] = {}
+        """Variable -> active MP (empty before :meth:`start`)."""
+        self.events: list[TransitionEvent] = []
+        self.notes: list[SequencerNote] = []
+        self._rules = {v: seq._new_rule() for v in seq.graphs}
+        c = seq.config
+        self._stall = StallDetector(seq.feature_range, c.stall_time, c.rest_speed)
+        self._holding: dict[str, str | None] = {}
+        self._last_t: float | None = None
+        self._plan: tuple[dict[str, str], list[_PlanRow]] | None = None
+        self._tick: TickInfo | None = None
+        self._pending: tuple | None = None
+
+    @property
+    def last_tick(self) -> TickInfo | None:
+        """What the last tick computed (built on first access after the tick)."""
+        if self._pending is not None:
+            t, phi, rows, active, held = self._pending
+            seq = self.seq
+            probs: dict[str, dict[str, float]] = {v: {} for v in sorted(seq.graphs)}
+            for v, _, names, p, _ in rows:
+                probs[v] = dict(zip(names, p, strict=True))
+            self._tick = TickInfo(t, seq._phi_dict(phi), probs, active, held)
+            self._pending = None
+        return self._tick
+
+    def start(self, t: float, x: np.ndarray, phi: np.ndarray) -> dict[str, str]:
+        """Begin the episode at time ``t`` [s] with features ``x (d,)`` and every head's φ
+        ``(H,)``; returns the initial MPs."""
+        if not np.isfinite(phi).all():
+            raise DataError(
+                "the progress predictor gave a non-finite φ at reset; the model is broken "
+                "(check its parameters) or the features are far outside the training data"
+            )
+        seq = self.seq
+        self.active = seq._initial_mps(phi)
+        self.events = []
+        self.notes = []
+        for rule in self._rules.values():
+            rule.reset()
+        self._holding = {v: None for v in seq.graphs}
+        self._stall.reset(t, np.asarray(x, dtype=np.float64).reshape(-1))
+        self._last_t = t
+        self._plan = None
+        self._pending = None
+        self._tick = TickInfo(t, seq._phi_dict(phi), {v: {} for v in seq.graphs}, dict(self.active))
+        return dict(self.active)
+
+    def check_time(self, t: float) -> float:
+        """``t`` [s] as a float; raises unless the episode was started and ``t`` is finite and
+        does not go back in time."""
+        if not self.active:
+            raise NotFittedError("call reset(t, x) before step(t, x)")
+        t = self.seq._check_t(t)
+        if self._last_t is not None and t < self._last_t:
+            raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
+        return t
+
+    def advance(
+        self, t: float, state: np.ndarray, phi: list[float], finite: bool
+    ) -> dict[str, str]:
+        """One tick at time ``t`` [s]: features ``state (d,)``, the nodes' φ ``(K,)`` as a list
+        and whether all of them are finite. Returns the active MPs after the tick."""
+        seq = self.seq
+        c = seq.config
+        self._last_t = t
+        if not finite:
+            bad = [
+                f"{v}/{mp}"
+                for (v, mp), f in zip(seq._keys, phi, strict=True)
+                if not math.isfinite(f)
+            ]
+            text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
+            if c.nonfinite == "raise":
+                raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
+            if not self.notes or self.notes[-1].kind != "nonfinite":
+                self.notes.append(SequencerNote(t, "nonfinite", "", text))
+            self._tick = TickInfo(t, seq._phi_dict(phi), {}, dict(self.active))
+            self._pending = None
+            return dict(self.active)
+        self._stall.observe(t, state)
+        if self._plan is None:
+            context = dict(self.active)
+            self._plan = (context, seq._transition_plan(context))
+        context, plan = self._plan
+        coupled = seq._coupled
+        held: dict[str, str] = {}
+        rows = []
+        fired = False
+        for v, current, names, idx, exit_i, unseen, checks in plan:
+            exit_p = phi[exit_i]
+            p = [exit_p * (1.0 - phi[i]) for i in idx]
+            bad = unseen
+            if checks:
+                bad = list(unseen)
+                for successor, j, bound in checks:
+                    if phi[j] < bound:
+                        bad[successor] += 1
+            rows.append((v, current, names, p, bad))
+            gate = exit_p > c.min_exit
+            allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
+            k = self._rules[v].update(t, p, allowed)
+            if coupled and gate and not all(allowed):
+                top = 0 if len(p) == 1 else max(range(len(p)), key=p.__getitem__)
+                if p[top] > c.threshold and not allowed[top] and k != top:
+                    held[v] = names[top]
+                    if self._holding.get(v) != names[top]:
+                        self._note_hold(t, v, current, names[top], p[top], context, phi)
+            self._holding[v] = held.get(v)
+            if k is not None:
+                self._switch(t, v, names[k], p[k], state, "switch")
+                fired = True
+        if not fired and c.recovery and self._stall.stalled(t):
+            candidates = [
+                (v, current, s, q, b)
+                for v, current, names, p, bad in rows
+                for s, q, b in zip(names, p, bad, strict=True)
+            ]
+            choice = recovery_choice(candidates, c.recovery_threshold)
+            if choice is not None:
+                v, source, target, p_rec = choice
+                self._switch(t, v, target, p_rec, state, "recovery")
+                self.notes.append(
+                    SequencerNote(
+                        t,
+                        "recovery",
+                        v,
+                        f"stall of {c.stall_time:g} s resolved: {v}: {source} -> {target} "
+                        f"(p={p_rec:.2f})",
+                    )
+                )
+        active = dict(self.active)
+        self._pending = (t, phi, rows, active, held)
+        return dict(active)
+
+    def _note_hold(
+        self,
+        t: float,
+        v: str,
+        current: str,
+        target: str,
+        p: float,
+        context: dict[str, str],
+        phi: list[float],
+    ) -> None:
+        """Note a transition the coupling holds back, with the reasons."""
+        seq = self.seq
+        done = {u: phi[seq._index[(u, mp)]] for u, mp in context.items()}
+        why = seq.coupling.inconsistent(
+            (v, current, target), context, done, seq.config.progress_margin
+        )
+        self.notes.append(
+            SequencerNote(
+                t,
+                "hold",
+                v,
+                f"{v}: {current} -> {target} held (p={p:.2f}): "
+                + "; ".join(why)
+                + ", never seen at this switch",
+            )
+        )
+
+    def _switch(
+        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: str
+    ) -> None:
+        self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
+        self.active[v] = target
+        self._rules[v].reset()
+        self._holding[v] = None
+        self._stall.switched(t)
+        self._plan = None
+
+
+class EpisodeBatch:
+    """What every batched policy shares: ``episodes``, one object per episode with its
+    ``active`` MPs, ``events`` and ``notes``, and per-episode views of them."""
+
+    episodes: list[Any]
+
+    @property
+    def n_episodes(self) -> int:
+        """N, the number of episodes."""
+        return len(self.episodes)
+
+    def __len__(self) -> int:
+        return len(self.episodes)
+
+    @property
+    def active(self) -> list[dict[str, str]]:
+        """Per episode, variable -> active MP (empty before its first reset)."""
+        return [dict(ep.active) for ep in self.episodes]
+
+    @property
+    def events(self) -> list[list[TransitionEvent]]:
+        """Per episode, its transitions."""
+        return [ep.events for ep in self.episodes]
+
+    @property
+    def notes(self) -> list[list[SequencerNote]]:
+        """Per episode, its notes."""
+        return [ep.notes for ep in self.episodes]
+
+
+class BatchedSequencer(EpisodeBatch):
+    """``n`` independent episodes of one fitted :class:`ConcurrentSequencer`, stepped together.
+
+    Every tick evaluates all nodes' predictors in one call over the features ``(N, d)`` of the
+    live episodes; each episode then decides exactly as a :class:`ConcurrentSequencer` of its
+    own would (same events, notes and tick information; φ may differ in the last bits, ~1e-14,
+    where the predictor rounds a batch of rows differently). Build one with
+    ``seq.batched(n)`` or ``BatchedSequencer(seq, n)``::
+
+        batch = seq.batched(len(x0))
+        active = batch.reset(0.0, x0)  # x0 (N, d) -> one dict variable -> MP per episode
+        active = batch.step(0.01, x1, live=running)  # running: (N,) bool, others skipped
+        batch.episodes[i].events, batch.episodes[i].notes, batch.episodes[i].last_tick
+
+    ``live`` (optional, ``(N,)`` bool) leaves the other episodes untouched (finished
+    rollouts). A stateful predictor (``predictor.stateful``, e.g. ``dtw``) runs one stream
+    per episode: :meth:`reset` restarts all ``N`` streams and every call evaluates all
+    ``N`` rows (so every row must hold finite features), whatever ``live`` says.
+    """
+
+    def __init__(self, seq: ConcurrentSequencer, n: int) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
+        self.sequencer = seq
+        self.episodes = [SequencerEpisode(seq) for _ in range(int(n))]
+        """One :class:`SequencerEpisode` per episode (``active``, ``events``, ``notes``,
+        ``last_tick``)."""
+
+    def reset(
+        self,
+        t: float | np.ndarray,
+        x: np.ndarray | torch.Tensor,
+        live: np.ndarray | Sequence[bool] | None = None,
+    ) -> list[dict[str, str]]:
+        """Start the ``live`` episodes (default: all) at time ``t`` [s] (scalar or ``(N,)``)
+        with features ``x (N, d)``; returns every episode's active MPs."""
+        seq = self.sequencer
+        ts, xn, rows = self._inputs(t, x, live)
+        stateful = getattr(seq.predictor, "stateful", False)
+        if stateful:
+            seq.predictor.reset_state(len(self.episodes))
+        if rows:
+            phi = seq._heads(xn if stateful else xn[rows])
+            for j, i in enumerate(rows):
+                self.episodes[i].start(ts[i], xn[i], phi[i if stateful else j])
+        return self.active
+
+    def step(
+        self,
+        t: float | np.ndarray,
+        x: np.ndarray | torch.Tensor,
+        live: np.ndarray | Sequence[bool] | None = None,
+    ) -> list[dict[str, str]]:
+        """Advance the ``live`` episodes (default: all) one tick at time ``t`` [s] (scalar or
+        ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs."""
+        seq = self.sequencer
+        ts, xn, rows = self._inputs(t, x, live)
+        for i in rows:
+            try:
+                self.episodes[i].check_time(ts[i])
+            except CpmpError as err:
+                raise type(err)(f"episode {i}: {err}") from err
+        if not rows:
+            return self.active
+        stateful = getattr(seq.predictor, "stateful", False)
+        phi = seq.progress(xn if stateful else xn[rows])
+        if stateful:
+            phi = phi[rows]
+        finite = np.isfinite(phi).all(axis=1).tolist()
+        for i, row, ok in zip(rows, phi.tolist(), finite, strict=True):
+            try:
+                self.episodes[i].advance(ts[i], xn[i], row, ok)
+            except CpmpError as err:
+                raise type(err)(f"episode {i}: {err}") from err
+        return self.active
+
+    def _inputs(
+        self,
+        t: float | np.ndarray,
+        x: np.ndarray | torch.Tensor,
+        live: np.ndarray | Sequence[bool] | None,
+    ) -> tuple[list[float], np.ndarray, list[int]]:
+        """Checked times ``(N,)`` as floats, features ``(N, d)`` float64 and live rows."""
+        n, d = len(self.episodes), len(self.sequencer.feature_names)
+        if isinstance(x, torch.Tensor):
+            x = x.detach().cpu().numpy()
+        xn = np.asarray(x, dtype=np.float64)
+        if xn.shape != (n, d):
+            raise DataError(
+                f"a batch of {n} episodes needs features of shape ({n}, {d}), got {tuple(xn.shape)}"
+            )
+        try:
+            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
+        except ValueError as err:
+            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
+        if not np.isfinite(times).all():
+            raise DataError(f"time must be finite, got t={t}")
+        if live is None:
+            rows = list(range(n))
+        else:
+            mask = np.asarray(live)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise DataError(
+                    f"live must be a boolean mask of shape ({n},), got {mask.dtype} of shape "
+                    f"{mask.shape}"
+                )
+            rows = np.flatnonzero(mask).tolist()
+        return times.tolist(), xn, rows
+
+
 def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
     """Keys of the start heads: ``(variable, START_PREFIX + mp)`` per initial node."""
     return [
@@ -766,8 +1041,9 @@ def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
 def node_training_data(
     graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
 ) -> list[NodeData]:
-    """Per-node training samples (scaled features) and expected-progress targets, in the
-    predictor's node order; ``subsample`` keeps every k-th sample (and the last) for the loss."""
+    """Per-node training samples (scaled features) and progress targets (eq. 1, or normalised
+    time for a predictor with ``labels = "time"``), in the predictor's node order;
+    ``subsample`` keeps every k-th sample (and the last) for the loss."""
     out = []
     for v, key_mp in predictor.node_keys:
         mp = key_mp.removeprefix(START_PREFIX)
@@ -775,7 +1051,8 @@ def node_training_data(
         if not acts:
             raise DataError(f"node {v}/{mp} has no activation data to train on")
         scaled = [predictor.scaler.transform(a.features) for a in acts]
-        targets = [expected_progress(f, a.time) for f, a in zip(scaled, acts, strict=True)]
+        labels = predictor.labels
+        targets = [progress_labels(f, a.time, labels) for f, a in zip(scaled, acts, strict=True)]
         keep = [_stride(len(f), subsample) for f in scaled]
         x = np.concatenate([f[k] for f, k in zip(scaled, keep, strict=True)])
         y = np.concatenate([y[k] for y, k in zip(targets, keep, strict=True)])

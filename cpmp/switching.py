@@ -61,6 +61,9 @@ class SwitchRule(Protocol):
 
 
 def _best(p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+    """Index of the highest allowed ``p`` (the first of equals), ``None`` if none is allowed."""
+    if len(p) == 1:
+        return 0 if allowed[0] else None
     best = None
     for i, (value, ok) in enumerate(zip(p, allowed, strict=True)):
         if ok and (best is None or value > p[best]):
@@ -84,13 +87,14 @@ class PaperRule:
         history = self._history
         history.append((t, list(p)))
         # Keep exactly one entry at or before t - patience: the reference tick.
-        while len(history) >= 2 and history[1][0] <= t - self.patience + _EPS_T:
+        reference = t - self.patience + _EPS_T
+        while len(history) >= 2 and history[1][0] <= reference:
             history.popleft()
         best = _best(p, allowed)
         if best is None or p[best] <= self.threshold:
             return None
         t_ref, p_ref = history[0]
-        if t_ref > t - self.patience + _EPS_T:
+        if t_ref > reference:
             return None  # the node has not been active for `patience` yet
         return best if p[best] <= p_ref[best] + self.min_improvement else None
 
@@ -203,19 +207,39 @@ class Coupling:
         each variable's predicted progress of its active MP, and a ``margin``) whose MP is
         more than ``margin`` less advanced than at any demonstrated switch. Empty: consistent
         (also for an edge that was never demonstrated)."""
-        out = []
-        for u, mps in (self.contexts.get(edge) or {}).items():
-            if u in active and active[u] not in mps:
-                out.append(f"{u} runs {active[u]}")
-        if phi is None or margin is None:
-            return out
-        for u, seen in (self.progress.get(edge) or {}).items():
-            mp = active.get(u)
-            if mp in seen and u in phi and phi[u] < seen[mp] - margin:
+        unseen, bounds = self.gates(edge, active, None if phi is None else margin)
+        out = [f"{u} runs {active[u]}" for u in unseen]
+        for u, least, bound in bounds:
+            if u in phi and phi[u] < bound:
                 out.append(
-                    f"{u} has {mp} at progress {phi[u]:.2f} (demonstrated >= {seen[mp]:.2f})"
+                    f"{u} has {active[u]} at progress {phi[u]:.2f} (demonstrated >= {least:.2f})"
                 )
         return out
+
+    def gates(
+        self, edge: Edge, active: Mapping[str, str], margin: float | None = None
+    ) -> tuple[list[str], list[tuple[str, float, float]]]:
+        """The part of :meth:`inconsistent` that depends on the other variables' MPs only
+        (fixed between switches, so a sequencer computes it once per context).
+
+        Returns ``unseen``: the other variables that run an MP never seen at this switch; and
+        ``bounds``: ``(variable, least, least - margin)`` for every other variable whose MP had
+        a least demonstrated progress ``least`` at this switch (empty when ``margin`` is
+        ``None``). The transition is inconsistent once per ``unseen`` variable and once per
+        bound whose variable's φ is below ``least - margin``.
+        """
+        unseen = [
+            u
+            for u, mps in (self.contexts.get(edge) or {}).items()
+            if u in active and active[u] not in mps
+        ]
+        bounds = []
+        if margin is not None:
+            for u, seen in (self.progress.get(edge) or {}).items():
+                mp = active.get(u)
+                if mp in seen:
+                    bounds.append((u, seen[mp], seen[mp] - margin))
+        return unseen, bounds
 
     def describe(self, variable: str) -> list[str]:
         """One line per switch of ``variable``: the other variables' demonstrated MPs (and
@@ -310,14 +334,13 @@ class StallDetector:
         Motion is a displacement of any feature by more than ``rest_speed * stall_time`` of
         its range from where the features were when motion was last seen (a dead band: contact
         jitter that goes back and forth never adds up to motion, a slow drift does)."""
-        x = np.array(x, dtype=np.float64)
         if self._x is None:
-            self._x = x
+            self._x = np.array(x, dtype=np.float64)
             return
-        moved = float(np.max(np.abs(x - self._x) * self.inv_range, initial=0.0))
+        moved = float((np.abs(x - self._x) * self.inv_range).max(initial=0.0))
         if moved > self.rest_speed * self.stall_time:
             self.last_motion = t
-            self._x = x
+            self._x = np.array(x, dtype=np.float64)
 
     def switched(self, t: float) -> None:
         self.last_switch = t

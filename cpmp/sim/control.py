@@ -1,9 +1,10 @@
 """MP execution: task-space attractors -> damped-least-squares resolved-rate IK -> joint targets.
 
-Per control tick (:meth:`MPController.update`):
+Per control tick (:meth:`MPController.update`, or :func:`update_controllers` for the
+controllers of many simulations at once):
 
 1. pose and Jacobian of both arms' *reference* configuration (one batched pytorch-kinematics
-   call);
+   call for every arm of every controller);
 2. each active MP's goal in the world (box-relative goals read the measured box position);
 3. attractor velocities ``v = K (g - x)``, speed-limited, and for orientation
    ``w = K log(R_g R^T)``;
@@ -19,10 +20,12 @@ joints) for the IK keeps the loop free of wind-up when a palm presses on the box
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import mujoco
 import numpy as np
 
+from cpmp.errors import ConfigError
 from cpmp.sim.config import TaskConfig
 from cpmp.sim.kinematics import ArmKinematics
 from cpmp.sim.mps import HELD_MPS, MP
@@ -102,13 +105,18 @@ class MPController:
         self._latched.clear()
         self._previous.clear()
 
-    def update(self, active: dict[str, MP], box_pos: np.ndarray) -> None:
+    def update(self, active: Mapping[str, MP], box_pos: np.ndarray) -> None:
         """Advance the references one control tick for the ``active`` MPs.
 
         box_pos: measured box centre (3,) [m].
         """
-        cfg = self.cfg
-        pos, rot, jac = self.kin.fk_jacobian(self.q_ref)
+        update_controllers([self], [active], np.asarray(box_pos)[None])
+
+    def _twist(
+        self, active: Mapping[str, MP], pos: np.ndarray, rot: np.ndarray, box_pos: np.ndarray
+    ) -> np.ndarray:
+        """Commanded twists (2, 6) [m/s; rad/s] of both hands, rows (left, right), from the
+        reference poses ``pos`` (2, 3) [m] and ``rot`` (2, 3, 3) and the box centre (3,) [m]."""
         self.ref_pos, self.ref_rot = pos, rot
         twist = np.empty((2, 6))
         right = self._velocity(active["right_pos"], RIGHT, pos, box_pos, None)
@@ -116,8 +124,11 @@ class MPController:
         twist[LEFT, :3] = self._velocity(active["left_pos"], LEFT, pos, box_pos, right)
         twist[LEFT, 3:] = rotation_error(active["left_rot"].target, rot[LEFT])
         twist[RIGHT, 3:] = rotation_error(active["right_rot"].target, rot[RIGHT])
-        twist[:, 3:] *= cfg.rot_gain
-        self.q_ref = self._resolve(jac, twist, cfg.control_dt)
+        twist[:, 3:] *= self.cfg.rot_gain
+        return twist
+
+    def _follow_fingers(self, active: Mapping[str, MP]) -> None:
+        """Fingers' exponential step towards the active finger MPs' goals; remember the MPs."""
         for hand in HANDS:
             goal = active[f"{hand}_fingers"].target
             self.fingers_ref[hand] = goal + (self.fingers_ref[hand] - goal) * self._finger_decay
@@ -164,28 +175,56 @@ class MPController:
         elif mp.frame == "right_ee" and (previous != mp.name or mp.variable not in self._latched):
             self._latched[mp.variable] = pos[LEFT] - pos[RIGHT]
 
-    def _resolve(self, jac: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """One DLS resolved-rate step of both arms. jac (2, 6, 7), twist (2, 6) -> q (2, 7).
+    def _resolve(self, q: np.ndarray, jac: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """One DLS resolved-rate step of both arms of N robots sharing this controller's
+        limits and gains: q (N, 2, 7) [rad], jac (N, 2, 6, 7), twist (N, 2, 6) -> q (N, 2, 7).
 
         ``J^T (J J^T + l^2 I)^-1 v + (I - J^T (J J^T + e I)^-1 J) s`` is evaluated as
-        ``s + J^T (a - b)``: ``a`` and ``b`` solve both arms' damped and null-space grams
+        ``s + J^T (a - b)``: ``a`` and ``b`` solve each robot's damped and null-space grams
         (4, 6, 6, symmetric positive definite through their regularisers) against ``v`` and
         ``J s`` with MuJoCo's dense Cholesky, cheaper per call than ``np.linalg.solve`` at this
-        size.
+        size. Every matrix is solved on its own, so a robot's step does not depend on N.
         """
         cfg = self.cfg
-        q = self.q_ref
-        jt = np.swapaxes(jac, 1, 2)
+        jt = np.swapaxes(jac, -1, -2)
         gram = jac @ jt
         push = np.maximum(self._band_lo - q, 0.0) + np.minimum(self._band_hi - q, 0.0)
         secondary = cfg.posture_gain * (self.q_home - q) + self._push_gain * push
-        rhs = np.concatenate((twist, (jac @ secondary[:, :, None])[:, :, 0]))
-        grams = np.concatenate((gram, gram)) + self._gram_diag
-        sol = np.empty((4, 6))
-        for g, x, b in zip(grams, sol, rhs, strict=True):
+        rhs = np.concatenate((twist, (jac @ secondary[..., None])[..., 0]), axis=-2)
+        grams = np.concatenate((gram, gram), axis=-3) + self._gram_diag
+        sol = np.empty(rhs.shape)
+        for g, x, b in zip(
+            grams.reshape(-1, 6, 6), sol.reshape(-1, 6), rhs.reshape(-1, 6), strict=True
+        ):
             mujoco.mju_cholFactor(g, 0.0)
             mujoco.mju_cholSolve(x, g, b)
-        dq = (jt @ (sol[:2] - sol[2:])[:, :, None])[:, :, 0] + secondary
-        peak = np.abs(dq).max(axis=1, keepdims=True)
+        dq = (jt @ (sol[:, :2] - sol[:, 2:])[..., None])[..., 0] + secondary
+        peak = np.abs(dq).max(axis=-1, keepdims=True)
         dq *= cfg.max_joint_speed / np.maximum(peak, cfg.max_joint_speed)
-        return np.minimum(np.maximum(q + dq * dt, self.lo), self.hi)
+        return np.minimum(np.maximum(q + dq * cfg.control_dt, self.lo), self.hi)
+
+
+def update_controllers(
+    controllers: Sequence[MPController],
+    active: Sequence[Mapping[str, MP]],
+    box_pos: np.ndarray,
+) -> None:
+    """Advance N controllers one control tick together, each exactly as its own
+    :meth:`MPController.update` would: one batched pose/Jacobian call and one batched DLS step
+    for all arms.
+
+    controllers: of N simulations of one robot and task config; active: per controller, the
+    active MP per variable; box_pos: (N, 3) measured box centres [m].
+    """
+    first = controllers[0]
+    for c in controllers[1:]:
+        if c.kin is not first.kin or (c.cfg is not first.cfg and c.cfg != first.cfg):
+            raise ConfigError("controllers updated together must share kinematics and config")
+    q = np.stack([c.q_ref for c in controllers])
+    pos, rot, jac = first.kin.fk_jacobian(q)
+    rows = zip(controllers, active, pos, rot, box_pos, strict=True)
+    twist = np.stack([c._twist(a, p, r, b) for c, a, p, r, b in rows])
+    q_new = first._resolve(q, jac, twist)
+    for c, a, q_ref in zip(controllers, active, q_new, strict=True):
+        c.q_ref = q_ref
+        c._follow_fingers(a)

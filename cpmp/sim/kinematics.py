@@ -2,15 +2,19 @@
 
 One :class:`pytorch_kinematics.SerialChain` per arm runs from the arm's mount body to its
 end-effector site (``left_ee`` / ``right_ee``). Both arms are built from the same link and joint
-layout in world-aligned mount frames, so :meth:`ArmKinematics.fk_jacobian` evaluates both arms in
-one batched call of the right chain and shifts each result by its mount position.
+layout in world-aligned mount frames, so :meth:`ArmKinematics.fk_jacobian` evaluates both arms
+(of one robot, or of N robots in N simulations) in one batched call of the right chain and shifts
+each result by its mount position. Every row of that call is computed on its own: a row's result
+does not depend on the batch it is in, to the last bit (tested), so batched rollouts reproduce
+one-at-a-time rollouts exactly.
 
 That call runs every control tick. pytorch-kinematics' ``jacobian_tensor`` is written to be
 ``torch.compile``-able (fullgraph); compiled (inductor with its C++ wrapper), the same
 pytorch-kinematics Jacobian costs about 0.17 ms per tick inside the simulation loop instead of
 0.43 ms eager (about 70 small tensor calls whose dispatch code MuJoCo's stepping evicts from the
-CPU caches every tick). Compiling takes ~15 s on a cold inductor cache (~4 s warm) and needs a
-C++ compiler; without one, or with ``compile=False``, the eager call is used.
+CPU caches every tick). It is compiled once for every batch size (a dynamic batch dimension).
+Compiling takes ~15 s on a cold inductor cache (~4 s warm) and needs a C++ compiler; without one,
+or with ``compile=False``, the eager call is used.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import pytorch_kinematics as pk
 import torch
 from pytorch_kinematics import mjcf as pk_mjcf
 
+from cpmp.errors import DataError
 from cpmp.sim.scene import ARM_JOINTS, HANDS
 
 
@@ -83,7 +88,7 @@ class ArmKinematics:
     def _make_jacobian(
         self, compile: bool
     ) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
-        """The batched pose-and-Jacobian function ``(2, 7) -> ((2, 6, 7), (2, 4, 4))``."""
+        """The batched pose-and-Jacobian function ``(B, 7) -> ((B, 6, 7), (B, 4, 4))``."""
         chain = self.chains["right"]
 
         def eager(th: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,7 +99,7 @@ class ArmKinematics:
         probe = torch.linspace(-1.5, 1.5, 14, dtype=torch.float64).reshape(2, 7)
         try:
             compiled = torch.compile(
-                eager, fullgraph=True, dynamic=False, options={"cpp_wrapper": True}
+                eager, fullgraph=True, dynamic=True, options={"cpp_wrapper": True}
             )
             with torch.no_grad():
                 got, want = compiled(probe), eager(probe)
@@ -124,14 +129,20 @@ class ArmKinematics:
         return pos, mat[:, :3, :3]
 
     def fk_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Poses and Jacobians of both arms in one batched call.
+        """Poses and Jacobians of both arms of one or many robots in one batched call.
 
-        q: (2, 7) joint angles [rad], rows in :data:`HANDS` order (left, right).
-        Returns ``pos`` (2, 3) [m], ``rot`` (2, 3, 3) and ``jac`` (2, 6, 7) with rows
-        (linear [m/rad]; angular [rad/rad]) in the world frame (mount frames are world-aligned).
+        q: (..., 2, 7) joint angles [rad], the arms in :data:`HANDS` order (left, right).
+        Returns ``pos`` (..., 2, 3) [m], ``rot`` (..., 2, 3, 3) and ``jac`` (..., 2, 6, 7) with
+        rows (linear [m/rad]; angular [rad/rad]) in the world frame (mount frames are
+        world-aligned). Each robot's result is the same, bit for bit, as from a call of its own.
         """
-        th = torch.from_numpy(np.ascontiguousarray(q, dtype=np.float64))
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        if q.shape[-2:] != (2, 7):
+            raise DataError(f"q must have shape (..., 2, 7), got {q.shape}")
+        lead = q.shape[:-2]
+        th = torch.from_numpy(q.reshape(-1, 7))
         with torch.no_grad():
             jac, pose = self._jacobian(th)
-        mat = pose.numpy()
-        return mat[:, :3, 3] + self.mount_pos, mat[:, :3, :3], jac.numpy()
+        mat = pose.numpy().reshape(*lead, 2, 4, 4)
+        pos = mat[..., :3, 3] + self.mount_pos
+        return pos, mat[..., :3, :3], jac.numpy().reshape(*lead, 2, 6, 7)

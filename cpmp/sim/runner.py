@@ -1,20 +1,22 @@
-"""Recording scripted demonstrations and running policies closed-loop."""
+"""Recording scripted demonstrations and running policies closed-loop: one episode
+(:func:`run_episode`) or many boxes together (:func:`run_episodes`, one batched IK and one
+batched policy call per tick, the same results as one box at a time)."""
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from cpmp.data import Demonstration
-from cpmp.errors import UnknownMPError
+from cpmp.errors import ConfigError, UnknownMPError
 from cpmp.sim.config import TaskConfig
 from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.scene import Box, correct_strategy
-from cpmp.sim.simulation import Simulation
+from cpmp.sim.simulation import Simulation, prepare_steps
 
 OUTCOMES: tuple[str, ...] = ("complete", "wrong_start", "incomplete", "diverged")
 STILL_SPEED = 0.02
@@ -27,6 +29,52 @@ class Policy(Protocol):
     def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
 
     def step(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
+
+
+class BatchedPolicy(Protocol):
+    """What :func:`run_episodes` drives: N episodes at once, e.g.
+    :class:`~cpmp.sequencer.BatchedSequencer`. ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool
+    marks the episodes still running (the others' rows are to be ignored); the result holds
+    one mapping variable -> MP per episode."""
+
+    def __len__(self) -> int: ...
+
+    def reset(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> Sequence[Mapping[str, str]]: ...
+
+    def step(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> Sequence[Mapping[str, str]]: ...
+
+
+class PolicyList:
+    """N single :class:`Policy` objects as one :class:`BatchedPolicy`: each live episode's
+    policy is called in turn with its own row of ``x``."""
+
+    def __init__(self, policies: Sequence[Policy]) -> None:
+        self.policies = list(policies)
+
+    def __len__(self) -> int:
+        return len(self.policies)
+
+    def reset(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> list[Mapping[str, str]]:
+        return self._call("reset", t, x, live)
+
+    def step(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> list[Mapping[str, str]]:
+        return self._call("step", t, x, live)
+
+    def _call(
+        self, name: str, t: float, x: np.ndarray, live: np.ndarray | None
+    ) -> list[Mapping[str, str]]:
+        return [
+            getattr(policy, name)(t, row) if live is None or live[i] else {}
+            for i, (policy, row) in enumerate(zip(self.policies, x, strict=True))
+        ]
 
 
 @dataclass(frozen=True)
@@ -185,76 +233,237 @@ def run_episode(
     tick with the feature vector ``x`` (d,). expected: the demonstrator's recording for ``box``
     (recorded here if None). Physics divergence ends the episode with outcome "diverged"; it
     never raises. An unknown MP name raises :class:`~cpmp.errors.UnknownMPError`.
+    :func:`run_episodes` with one box (the same loop).
+    """
+    return run_episodes(
+        [box],
+        PolicyList([policy]),
+        cfg,
+        expected=[expected],
+        max_time=max_time,
+        on_tick=[on_tick],
+    )[0]
+
+
+def run_episodes(
+    boxes: Sequence[Box],
+    policy: Policy | BatchedPolicy | Sequence[Policy],
+    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    expected: Sequence[Demonstration | None] | None = None,
+    max_time: float | None = None,
+    on_tick: Sequence[Callable[[TickInfo], None] | None] | None = None,
+    on_result: Callable[[int, EpisodeResult], None] | None = None,
+) -> list[EpisodeResult]:
+    """Execute one closed-loop episode per box, all together; the results are those of
+    :func:`run_episode` on each box alone (same outcomes, transitions and times).
+
+    Every control tick: one batched pose/Jacobian and IK call over the running episodes'
+    robots, MuJoCo stepping each episode's own model, and one batched policy call ``(N, d)``
+    with the running episodes marked ``live``. An episode that ends (outcome decided) is left
+    out of the following ticks.
+
+    policy: a policy with ``batched(N)`` (a fitted :class:`~cpmp.sequencer.ConcurrentSequencer`,
+        batched here), a :class:`BatchedPolicy` of ``N`` episodes (e.g. your own
+        ``seq.batched(N)``, to read each episode's events and notes afterwards), a sequence of
+        ``N`` single :class:`Policy` objects (one per box, e.g. scripted baselines), or, for one
+        box, a single :class:`Policy`.
+    expected: per box, the demonstrator's recording (recorded here where ``None``).
+    on_tick: per box, a callback as in :func:`run_episode` (or ``None``).
+    on_result: called with ``(index, result)`` as each episode ends (e.g. a progress bar).
     """
     cfg = _as_config(cfg)
+    boxes = list(boxes)
+    n = len(boxes)
+    if n == 0:
+        return []
     max_time = cfg.max_time if max_time is None else float(max_time)
-    if expected is None:
-        expected = record_demonstration(box, cfg)
-    want = mp_sequences(expected)
-    sim = Simulation(cfg, box)
-    x = sim.features()
+    batch = _as_batched(policy, n)
+    expected = _per_episode(expected, n, "expected")
+    callbacks = _per_episode(on_tick, n, "on_tick")
+    runs = [
+        _Rollout(
+            i,
+            box,
+            cfg,
+            record_demonstration(box, cfg) if demo is None else demo,
+            tick,
+            on_result,
+        )
+        for i, (box, demo, tick) in enumerate(zip(boxes, expected, callbacks, strict=True))
+    ]
+    x = np.stack([run.x for run in runs])
     start = time.perf_counter()
-    active = _normalise(policy.reset(0.0, x), sim.variables)
-    policy_time = time.perf_counter() - start
-    sim.set_active(active)
-    initial = dict(active)
-    sequences = {v: [m] for v, m in active.items()}
-    transitions: list[Transition] = []
+    initial = batch.reset(0.0, x)
+    share = (time.perf_counter() - start) / n
+    for run in runs:
+        run.policy_time += share
+        run.start(initial[run.index])
+    live = np.zeros(n, dtype=bool)
+    for k in range(round(max_time / cfg.control_dt)):
+        running = [run for run in runs if run.result is None]
+        if not running:
+            break
+        for run in running:
+            run.before_tick()
+        prepare_steps([run.sim for run in running])
+        stepped = [run for run in running if run.physics_step()]
+        if not stepped:
+            continue
+        t = (k + 1) * cfg.control_dt
+        live[:] = False
+        for run in stepped:
+            run.x = run.sim.features()
+            x[run.index] = run.x
+            live[run.index] = True
+        start = time.perf_counter()
+        new = batch.step(t, x, live=live)
+        share = (time.perf_counter() - start) / len(stepped)
+        for run in stepped:
+            run.policy_time += share
+            run.after_tick(t, new[run.index])
+    for run in runs:
+        if run.result is None:
+            run.finish("incomplete", f"time-out after {max_time:.1f} s")
+    return [run.result for run in runs]
 
-    def result(outcome: str, reason: str) -> EpisodeResult:
-        timing = dict(sim.timing, policy=policy_time)
-        return EpisodeResult(
+
+def _per_episode(values: Sequence[Any] | None, n: int, name: str) -> list[Any]:
+    """``values`` as a list of ``n`` (``None``: ``n`` times ``None``)."""
+    if values is None:
+        return [None] * n
+    values = list(values)
+    if len(values) != n:
+        raise ConfigError(f"{name} must hold one entry per box ({n}), got {len(values)}")
+    return values
+
+
+def _as_batched(policy: Policy | BatchedPolicy | Sequence[Policy], n: int) -> BatchedPolicy:
+    """The batched policy :func:`run_episodes` drives for ``n`` boxes."""
+    if isinstance(policy, Sequence):
+        batch: BatchedPolicy = PolicyList(policy)
+    elif hasattr(policy, "batched"):
+        batch = policy.batched(n)
+    elif hasattr(policy, "n_episodes") or isinstance(policy, PolicyList):
+        batch = policy
+    elif n == 1:
+        batch = PolicyList([policy])
+    else:
+        raise ConfigError(
+            f"run_episodes needs one policy per box ({n}), a batched policy of {n} episodes or "
+            "a policy with batched(n) (a ConcurrentSequencer); got one single-episode policy"
+        )
+    if len(batch) != n:
+        raise ConfigError(f"the batched policy runs {len(batch)} episodes, there are {n} boxes")
+    return batch
+
+
+class _Rollout:
+    """One episode of :func:`run_episodes`: its simulation, the MP sequences so far and the
+    checks that end it (the closed loop of :func:`run_episode`, one tick at a time)."""
+
+    def __init__(
+        self,
+        index: int,
+        box: Box,
+        cfg: TaskConfig,
+        expected: Demonstration,
+        on_tick: Callable[[TickInfo], None] | None,
+        on_result: Callable[[int, EpisodeResult], None] | None,
+    ) -> None:
+        self.index = index
+        self.on_result = on_result
+        self.box = box
+        self.cfg = cfg
+        self.want = mp_sequences(expected)
+        self.on_tick = on_tick
+        self.sim = Simulation(cfg, box)
+        self.x = self.sim.features()
+        self.active: dict[str, str] = {}
+        self.initial: dict[str, str] = {}
+        self.sequences: dict[str, list[str]] = {}
+        self.transitions: list[Transition] = []
+        self.last_switch = 0.0
+        self.policy_time = 0.0
+        self.result: EpisodeResult | None = None
+
+    def finish(self, outcome: str, reason: str) -> None:
+        """End the episode with ``outcome`` (the state of the simulation now)."""
+        sim = self.sim
+        ok = outcome != "diverged"
+        self.result = EpisodeResult(
             outcome=outcome,
             reason=reason,
-            sequences=sequences,
-            transitions=transitions,
-            initial=initial,
+            sequences=self.sequences,
+            transitions=self.transitions,
+            initial=self.initial,
             duration=sim.t,
-            box_in_container=sim.box_in_container() if outcome != "diverged" else False,
-            hands_home=sim.hands_home() if outcome != "diverged" else False,
-            expected=want,
-            timing=timing,
+            box_in_container=sim.box_in_container() if ok else False,
+            hands_home=sim.hands_home() if ok else False,
+            expected=self.want,
+            timing=dict(sim.timing, policy=self.policy_time),
         )
+        if self.on_result is not None:
+            self.on_result(self.index, self.result)
 
-    wrong = [v for v in sim.variables if active[v] != want[v][0]]
-    if wrong:
-        got = {v: active[v] for v in wrong}
-        exp = {v: want[v][0] for v in wrong}
-        strategy = correct_strategy(box, cfg)
-        return result("wrong_start", f"initial MPs {got} differ from strategy {strategy!r}: {exp}")
+    def start(self, active: Mapping[str, str]) -> None:
+        """Take the policy's initial MPs; a wrong start ends the episode."""
+        sim, want = self.sim, self.want
+        self.active = _normalise(active, sim.variables)
+        sim.set_active(self.active)
+        self.initial = dict(self.active)
+        self.sequences = {v: [m] for v, m in self.active.items()}
+        wrong = [v for v in sim.variables if self.active[v] != want[v][0]]
+        if wrong:
+            got = {v: self.active[v] for v in wrong}
+            exp = {v: want[v][0] for v in wrong}
+            strategy = correct_strategy(self.box, self.cfg)
+            reason = f"initial MPs {got} differ from strategy {strategy!r}: {exp}"
+            self.finish("wrong_start", reason)
 
-    last_switch = 0.0
-    n_max = round(max_time / cfg.control_dt)
-    for k in range(n_max):
-        if on_tick is not None:
-            on_tick(TickInfo(sim.t, x, dict(active), sim.body_poses()))
-        sim.set_active(active)
-        if not sim.step():
-            return result("diverged", f"physics diverged at t={sim.t:.2f} s (NaN or unstable)")
-        x = sim.features()
-        t = (k + 1) * cfg.control_dt
-        start = time.perf_counter()
-        new = _normalise(policy.step(t, x), sim.variables)
-        policy_time += time.perf_counter() - start
+    def before_tick(self) -> None:
+        """The ``on_tick`` callback, then the active MPs to the simulation."""
+        sim = self.sim
+        if self.on_tick is not None:
+            self.on_tick(TickInfo(sim.t, self.x, dict(self.active), sim.body_poses()))
+        sim.set_active(self.active)
+
+    def physics_step(self) -> bool:
+        """One control tick of physics; False (and the episode ended) if it diverged."""
+        if self.sim.step():
+            return True
+        reason = f"physics diverged at t={self.sim.t:.2f} s (NaN or unstable)"
+        self.finish("diverged", reason)
+        return False
+
+    def after_tick(self, t: float, active: Mapping[str, str]) -> None:
+        """Record the policy's MPs at time ``t`` [s]; end the episode on a wrong transition,
+        on completion or on a deadlock."""
+        sim, want, old = self.sim, self.want, self.active
+        new = _normalise(active, sim.variables)
         for variable in sim.variables:
-            if new[variable] == active[variable]:
+            if new[variable] == old[variable]:
                 continue
-            transitions.append(Transition(t, variable, active[variable], new[variable], x.copy()))
-            sequences[variable].append(new[variable])
-            last_switch = t
-            n = len(sequences[variable])
-            if sequences[variable] != want[variable][:n]:
+            self.transitions.append(
+                Transition(t, variable, old[variable], new[variable], self.x.copy())
+            )
+            sequence = self.sequences[variable]
+            sequence.append(new[variable])
+            self.last_switch = t
+            n = len(sequence)
+            if sequence != want[variable][:n]:
                 sim.set_active(new)
                 should = want[variable][n - 1] if n <= len(want[variable]) else "no switch"
-                return result(
-                    "incomplete",
-                    f"wrong transition {variable}: {active[variable]} -> {new[variable]} at "
-                    f"t={t:.2f} s (expected {should})",
+                reason = (
+                    f"wrong transition {variable}: {old[variable]} -> {new[variable]} at "
+                    f"t={t:.2f} s (expected {should})"
                 )
-        active = new
-        if sequences == want and sim.box_in_container() and sim.hands_home():
-            sim.set_active(active)
-            return result("complete", "box in container, hands home, sequences as demonstrated")
-        if t - last_switch > cfg.deadlock_time and sim.robot_speed() < STILL_SPEED:
-            return result("incomplete", f"deadlock: no transition for {t - last_switch:.1f} s")
-    return result("incomplete", f"time-out after {max_time:.1f} s")
+                self.finish("incomplete", reason)
+                return
+        self.active = new
+        if self.sequences == want and sim.box_in_container() and sim.hands_home():
+            sim.set_active(new)
+            reason = "box in container, hands home, sequences as demonstrated"
+            self.finish("complete", reason)
+        elif t - self.last_switch > self.cfg.deadlock_time and sim.robot_speed() < STILL_SPEED:
+            reason = f"deadlock: no transition for {t - self.last_switch:.1f} s"
+            self.finish("incomplete", reason)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import mujoco
 import numpy as np
 
-from cpmp.errors import UnknownMPError
+from cpmp.errors import CpmpError, UnknownMPError
 from cpmp.sim.config import TaskConfig
-from cpmp.sim.control import MPController
+from cpmp.sim.control import MPController, update_controllers
 from cpmp.sim.features import GoalDistances, box_size_features, compute_features, feature_names
 from cpmp.sim.kinematics import ArmKinematics
 from cpmp.sim.mps import MP, VARIABLES, build_library, container_center
@@ -128,6 +128,7 @@ class Simulation:
         self._goal_distances = GoalDistances(self.library, cfg)
         self.controller = MPController(cfg, self.kin, self.arm_limits, self.q_home)
         self.active: dict[str, str] = {}
+        self._control: np.ndarray | None = None
         self.timing = {"physics": 0.0, "kinematics": 0.0}
         self.reset()
 
@@ -150,6 +151,7 @@ class Simulation:
         mujoco.mj_forward(m, d)
         self.controller.reset(q, fingers)
         self.active = {}
+        self._control = None
         self.t = 0.0
         self.timing = {"physics": 0.0, "kinematics": 0.0}
 
@@ -168,28 +170,40 @@ class Simulation:
         unknown = sorted(set(active) - set(self.variables))
         if unknown:
             raise UnknownMPError(f"unknown control variable(s) {unknown}; known: {self.variables}")
+        if self._control is not None:
+            raise CpmpError(
+                "set_active() changed the MPs after prepare_steps() computed this tick's control;"
+                " set the MPs first, then prepare_steps(), then step()"
+            )
         self.active = {v: str(active[v]) for v in self.variables}
 
     def step(self) -> bool:
-        """Run the active MPs for one control tick. Returns False if the physics diverged."""
+        """Run the active MPs for one control tick. Returns False if the physics diverged.
+
+        Applies the control that :func:`prepare_steps` computed for this tick (together with
+        other simulations'), or computes it here.
+        """
         if not self.active:
             raise UnknownMPError("call set_active() before step()")
+        if self._control is None:
+            prepare_steps([self])
         d = self.data
+        d.ctrl[self._ctrl_index] = self._control
+        self._control = None
         start = time.perf_counter()
-        active = self.active
-        ctl = self.controller
-        ctl.update({v: self.library[v][name] for v, name in active.items()}, self.box_pos())
-        adhesion = [1.0 if active[f"{h}_fingers"] == "grasp" else 0.0 for h in HANDS]
-        d.ctrl[self._ctrl_index] = np.concatenate(
-            [ctl.q_ref.ravel()] + [ctl.fingers_ref[h] for h in HANDS] + [adhesion]
-        )
-        middle = time.perf_counter()
         mujoco.mj_step(self.model, d, nstep=self.n_substeps)
         mujoco.mj_kinematics(self.model, d)
-        self.timing["kinematics"] += middle - start
-        self.timing["physics"] += time.perf_counter() - middle
+        self.timing["physics"] += time.perf_counter() - start
         self.t += self.cfg.control_dt
         return not self.diverged()
+
+    def _control_vector(self) -> np.ndarray:
+        """Actuator targets of the controller's references, in ``_ctrl_index`` order."""
+        ctl = self.controller
+        adhesion = [1.0 if self.active[f"{h}_fingers"] == "grasp" else 0.0 for h in HANDS]
+        return np.concatenate(
+            [ctl.q_ref.ravel()] + [ctl.fingers_ref[h] for h in HANDS] + [adhesion]
+        )
 
     def diverged(self) -> bool:
         """True if the state holds NaN/inf, MuJoCo flagged bad accelerations, or speeds blew up."""
@@ -325,3 +339,25 @@ class Simulation:
                 }
             )
         return out
+
+
+def prepare_steps(sims: Sequence[Simulation]) -> None:
+    """Compute the next control tick of every simulation in ``sims`` together: one batched
+    pose/Jacobian call and one batched IK step for all of them (see
+    :func:`~cpmp.sim.control.update_controllers`); each :meth:`Simulation.step` then applies its
+    own, exactly what it would have computed alone. The wall time counts as ``kinematics``,
+    shared equally. ``sims`` must share one task config (any boxes)."""
+    start = time.perf_counter()
+    for sim in sims:
+        if not sim.active:
+            raise UnknownMPError("call set_active() before step()")
+    update_controllers(
+        [sim.controller for sim in sims],
+        [{v: sim.library[v][name] for v, name in sim.active.items()} for sim in sims],
+        np.stack([sim.box_pos() for sim in sims]),
+    )
+    for sim in sims:
+        sim._control = sim._control_vector()
+    share = (time.perf_counter() - start) / len(sims)
+    for sim in sims:
+        sim.timing["kinematics"] += share
