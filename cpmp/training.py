@@ -200,7 +200,7 @@ def _lightning_module(
     every epoch); ``rate``: Adam's learning rate (``None`` for convex predictors)."""
     import lightning as L
 
-    newton = predictor.convex and cfg.solver == "newton"
+    newton = _solver(predictor, cfg) == "newton"
 
     class ProgressModule(L.LightningModule):
         """Wraps a predictor bank; one training step = the full-batch loss over all nodes.
@@ -258,6 +258,16 @@ def _lightning_module(
     return ProgressModule()
 
 
+def _solver(predictor: ProgressPredictor, cfg: TrainerConfig) -> str:
+    """``adam`` for gradient-trained banks; for convex ones ``cfg.solver``, except that a bank
+    without trainable parameters (e.g. ``dtw``) always uses its own :meth:`solve_convex`."""
+    if not predictor.convex:
+        return "adam"
+    if not any(p.requires_grad for p in predictor.parameters()):
+        return "newton"
+    return cfg.solver
+
+
 def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
     """Option ``name`` of the predictor's config, which its solver needs (Adam: ``epochs``,
     ``lr``; LBFGS: ``max_iter``)."""
@@ -298,7 +308,7 @@ def fit_predictor(
     generator = torch.Generator().manual_seed(seed)
     start = time.perf_counter()
     predictor.initialize(data, generator)
-    solver = cfg.solver if predictor.convex else "adam"
+    solver = _solver(predictor, cfg)
     rate: float | None = None
     if solver == "adam":
         rate = cfg.lr if cfg.lr is not None else float(_predictor_option(predictor, "lr"))

@@ -15,6 +15,7 @@ from cpmp.graph import build_graphs
 from cpmp.predictors import make_config, make_predictor
 from cpmp.progress import expected_progress, time_labels
 from cpmp.sequencer import ConcurrentSequencer, node_training_data
+from cpmp.synthetic import make_demonstrations
 
 BASELINES = ["sklearn_klr", "regression_clip", "time_phase", "dtw"]
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -245,3 +246,13 @@ def test_stateless_predictors_ignore_reset_state(fitted, test_demos):
     seq.predictor.reset_state(5)
     assert not seq.predictor.stateful
     assert np.array_equal(seq.progress(x), before)
+
+
+@pytest.mark.parametrize("kind", ["sklearn_klr", "regression_clip", "time_phase", "dtw"])
+def test_baseline_fits_with_the_lbfgs_trainer(kind: str) -> None:
+    """``trainer.solver=lbfgs`` must work for every predictor (dtw has nothing to optimise and
+    keeps its own fit)."""
+    demos = make_demonstrations(2, seed=0)
+    seq = ConcurrentSequencer.fit(demos, predictor=kind, seed=0, solver="lbfgs", logger=None)
+    phi = seq.progress(demos[0].features[::20])
+    assert np.isfinite(phi).all() and ((phi >= 0) & (phi <= 1)).all()
