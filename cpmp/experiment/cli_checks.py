@@ -1,0 +1,447 @@
+"""Checking a cpmp command line before anything heavy is imported (used by
+:mod:`cpmp.experiment.cli`).
+
+:func:`check_command_line` parses the command line with Hydra's own parser and composes the
+configuration as Hydra will (for a multirun: every job of the sweep) with Hydra and OmegaConf
+only; an unknown group option or key, an override Hydra cannot parse, a value of the wrong type
+(against the type of its default), an interpolation that does not resolve, a required path that
+is unset or names no file become one-line :class:`~cpmp.errors.ConfigError` /
+:class:`~cpmp.errors.CpmpFileError` messages naming the override. :func:`check_jobs` then runs
+the command's own value checks (which import torch) on every job, before the first starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+
+CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+"""The Hydra config directory: ``conf/`` of the repository this package is installed from."""
+
+
+@dataclass(frozen=True)
+class Command:
+    """A Hydra command: its config ``conf/<name>.yaml`` (also the job's name, so runs go to
+    ``logs/<name>/<timestamp>/``), the job and the checks that run before it.
+
+    Attributes:
+        name: config and job name.
+        job: ``job(cfg, run_dir) -> output path``; imports its heavy parts itself.
+        check: the job's own value checks ``check(cfg)`` (may import torch), or ``None``.
+        required: keys that must be set (a path each).
+        files: keys naming a file that must exist (when set).
+        dirs: keys naming a directory that must exist (when set).
+        positive: keys holding a count that must be >= 1.
+    """
+
+    name: str
+    job: Callable[[Any, Path], Path]
+    check: Callable[[Any], None] | None = None
+    required: tuple[str, ...] = ()
+    files: tuple[str, ...] = ()
+    dirs: tuple[str, ...] = ()
+    positive: tuple[str, ...] = ()
+
+
+# ------------------------------------------------------------------- composing the config
+def _parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    """``argv`` parsed by Hydra's own command-line parser; a bad flag is a :class:`ConfigError`
+    (argparse would print its usage and exit)."""
+    from hydra._internal.utils import get_args_parser
+
+    def error(message: str) -> None:
+        raise ConfigError(f"{message} (see --help)")
+
+    parser = get_args_parser()
+    parser.error = error  # type: ignore[method-assign]
+    return parser.parse_args(list(argv))
+
+
+def _one_line(text: str) -> str:
+    """A Hydra/OmegaConf message as one line: search paths, documentation links and
+    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined."""
+    lines: list[str] = []
+    options: list[str] = []
+    for raw in str(text).splitlines():
+        line = raw.strip()
+        if re.match(r"(Config search path|Search path):", line):
+            break
+        if not line or line.startswith(("See https://", "full_key:", "object_type=")):
+            continue
+        if raw.startswith("\t"):
+            options.append(line)
+            continue
+        if options:
+            lines[-1] += " " + ", ".join(options)
+            options = []
+        lines.append(line.rstrip("."))
+    if options and lines:
+        lines[-1] += " " + ", ".join(options)
+    return "; ".join(lines)
+
+
+def _parse_overrides(overrides: Sequence[str]) -> list[Any]:
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    parser = OverridesParser.create()
+    parsed = []
+    for line in overrides:
+        try:
+            parsed.append(parser.parse_override(line))
+        except HydraException as err:
+            raise ConfigError(
+                f"cannot parse the override {line!r}: {_one_line(str(err))} (Hydra's override "
+                "syntax: key=value, +new_key=value, ~key; quote values with spaces or commas)"
+            ) from None
+    return parsed
+
+
+def _composition_error(
+    err: Exception, overrides: Sequence[Any], config_name: str, config_dir: str | None
+) -> ConfigError:
+    """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
+    from hydra.errors import MissingConfigException
+
+    text = str(err)
+    missing = re.search(r"Could not find '([^']+)/([^']+)'", text)
+    if isinstance(err, MissingConfigException) and missing:
+        group, option = missing.groups()
+        found = re.search(r"Available options in '[^']+':\n((?:\t.*\n?)*)", text)
+        choices = found.group(1).split() if found else []
+        close = difflib.get_close_matches(option, choices, n=1)
+        hint = f" (did you mean {group}={close[0]}?)" if close else ""
+        return ConfigError(
+            f"{group}={option}: no such option{hint}; choose one of {', '.join(choices)}"
+        )
+    key = re.match(r"Could not override '([^']+)'", text)
+    if key:
+        name = key.group(1)
+        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
+        others = [o.input_line for o in overrides if "." not in o.key_or_group]
+        hint = _key_hint(name, config_name, others, config_dir)
+        return ConfigError(
+            f"{line}: the {config_name} config has no key {name!r}{hint}; "
+            f"to add a new key write +{line}"
+        )
+    exists = re.match(r"Could not append to config. An item is already at '([^']+)'", text)
+    if exists:
+        name = exists.group(1)
+        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
+        return ConfigError(f"{line}: {name} exists already; set it without the +: {line[1:]}")
+    if "Ambiguous value for argument" in text or "requires --multirun" in text:
+        line = re.search(r"'([^']+)'", text)
+        return ConfigError(
+            f"{line.group(1) if line else 'an override'} lists several values: add -m "
+            "(--multirun) to run one job per value; for a list write key=[a,b], for a string "
+            "with commas quote it: key='a,b'"
+        )
+    if "Cannot find primary config" in text:
+        return ConfigError(f"{_one_line(text)}; the configs live in {CONF_DIR}")
+    if "Primary config directory not found" in text:
+        return ConfigError(
+            f"cpmp's config directory {CONF_DIR} is missing: the cpmp commands run from a "
+            "source checkout installed with pip install -e ."
+        )
+    cause = err.__cause__
+    detail = f": {_one_line(str(cause))}" if cause is not None and str(cause) else ""
+    return ConfigError(f"{_one_line(text)}{detail}")
+
+
+def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
+    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it in the config
+    composed with ``groups`` (the overrides of groups and top-level keys)."""
+    from omegaconf import DictConfig, OmegaConf
+
+    parent, _, leaf = key.rpartition(".")
+    try:
+        cfg = _compose(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
+    except CpmpError:
+        return ""
+    node = OmegaConf.select(cfg, parent) if parent else cfg
+    names = [str(k) for k in node if k != "hydra"] if isinstance(node, DictConfig) else []
+    close = difflib.get_close_matches(leaf, names, n=1)
+    return f" (did you mean {'.'.join([*filter(None, [parent]), close[0]])!r}?)" if close else ""
+
+
+def _compose(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
+    """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``, raising
+    :class:`ConfigError` for anything Hydra cannot compose."""
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = list(overrides)
+    if config_dir is not None:
+        overrides = _with_search_path(overrides, config_dir)
+    parsed = _parse_overrides(overrides)
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose(config_name, overrides=overrides, return_hydra_config=True)
+    except (HydraException, OmegaConfBaseException, ValueError) as err:
+        raise _composition_error(err, parsed, config_name, config_dir) from None
+
+
+def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:
+    """``overrides`` with ``--config-dir`` added to ``hydra.searchpath`` (as Hydra adds it)."""
+    path = Path(config_dir).absolute()
+    if not path.is_dir():
+        raise CpmpFileError(f"--config-dir {config_dir}: no such directory")
+    rest, searchpath = [], []
+    for override, line in zip(_parse_overrides(overrides), overrides, strict=True):
+        if override.get_key_element() == "hydra.searchpath":
+            searchpath = [str(v) for v in override.value()]
+        else:
+            rest.append(line)
+    entries = ",".join(f"'{p}'" for p in [*searchpath, f"file://{path}"])
+    return [*rest, f"hydra.searchpath=[{entries}]"]
+
+
+# ------------------------------------------------------------------------ checking values
+_KINDS = ((bool, "a boolean"), (int, "an integer"), (float, "a number"), (str, "a string"))
+_ACCEPTS = {
+    "a boolean": {"a boolean"},
+    "an integer": {"an integer"},
+    "a number": {"an integer", "a number"},
+    "a string": {"a string"},
+    "a list": {"a list"},
+    "a mapping": {"a mapping"},
+}
+
+
+def _kind(value: Any) -> str | None:
+    """The kind of a config value (``None`` for null): a YAML default written as an integer is
+    an integer option, one written with a decimal point a number."""
+    from omegaconf import DictConfig, ListConfig
+
+    if value is None:
+        return None
+    if isinstance(value, (list, tuple, ListConfig)):
+        return "a list"
+    if isinstance(value, (dict, DictConfig)):
+        return "a mapping"
+    return next((name for types, name in _KINDS if isinstance(value, types)), None)
+
+
+def _check_type(key: str, value: Any, default: Any) -> None:
+    """``value`` (set on the command line) must be of the kind of ``default``: an integer
+    where the default is an integer, a number where it is a float, and so on; null is always
+    accepted (the job's own checks say whether null is allowed)."""
+    want, got = _kind(default), _kind(value)
+    if want is None or got is None:
+        return
+    if got not in _ACCEPTS[want]:
+        raise ConfigError(f"{key}={value!r}: expected {want} (the default is {default!r})")
+    if want == "a list" and len(default):
+        kinds = {_kind(v) for v in default}
+        if len(kinds) == 1 and None not in kinds:
+            (element,) = kinds
+            for v in value:
+                if v is not None and _kind(v) not in _ACCEPTS[element]:
+                    raise ConfigError(
+                        f"{key}: element {v!r} should be {element} (the default is "
+                        f"{list(default)!r})"
+                    )
+
+
+def _resolved(cfg: Any) -> dict[str, Any]:
+    """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved."""
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    hydra_config = HydraConfig.instance()  # for ${hydra:...}; restored after
+    previous = hydra_config.cfg
+    hydra_config.set_config(cfg)
+    job = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])
+    try:
+        return OmegaConf.to_container(job, resolve=True)  # type: ignore[return-value]
+    except OmegaConfBaseException as err:
+        key = getattr(err, "full_key", None)
+        raise ConfigError(f"{key or 'config'}: {_one_line(str(err))}") from None
+    finally:
+        hydra_config.cfg = previous
+
+
+def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
+    node: Any = cfg
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return False, None
+        node = node[part]
+    return True, node
+
+
+def _check_values(
+    command: Command, job: dict[str, Any], base: dict[str, Any], parsed: list[Any]
+) -> None:
+    """Types of the overridden values against the defaults (``base``: the config composed with
+    the same group options and no value override), the seed and counts, then the command's
+    required paths, files and directories."""
+    for override in parsed:
+        if override.is_delete() or override.is_hydra_override():
+            continue
+        key = override.get_key_element().lstrip("+")
+        (in_job, value), (in_base, default) = _select(job, key), _select(base, key)
+        if in_job and in_base:
+            _check_type(key, value, default)
+    if "seed" in job:
+        seed = job["seed"]
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ConfigError(f"seed={seed!r}: the seed must be a non-negative integer")
+    for key in command.positive:
+        value = _select(job, key)[1]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(f"{key}={value!r}: must be an integer >= 1")
+    for key in command.required:
+        if _select(job, key)[1] in (None, ""):
+            raise ConfigError(f"{key} is required: add {key}=<path> to the command line")
+    for key in command.files:
+        value = _select(job, key)[1]
+        if value not in (None, "") and not Path(str(value)).is_file():
+            raise CpmpFileError(f"{key}={value}: no such file (relative to {Path.cwd()})")
+    for key in command.dirs:
+        value = _select(job, key)[1]
+        if value not in (None, "") and not Path(str(value)).is_dir():
+            raise CpmpFileError(f"{key}={value}: no such directory (relative to {Path.cwd()})")
+
+
+# --------------------------------------------------------------------------- the checks
+@dataclass
+class CheckedJob:
+    """One job of a command line, composed and checked.
+
+    Attributes:
+        overrides: the job's overrides (a multirun's jobs each get one value of each sweep).
+        cfg: the composed config, without its ``hydra`` node (as the job gets it).
+    """
+
+    overrides: list[str]
+    cfg: Any
+
+
+def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob]:
+    """Compose and check the configuration of ``command`` for the command line ``argv``
+    (without the program name) with light imports only (Hydra, OmegaConf; never torch,
+    Lightning or MuJoCo). Returns one :class:`CheckedJob` per job (several for a multirun
+    sweep); none for ``--help``, ``--cfg``, ``--info`` and the like, which run no job (the
+    configuration of ``--cfg`` and ``--info`` is composed, not checked further).
+
+    Raises:
+        ConfigError: unknown group option or key, unparsable override, a value of the wrong
+            type, an interpolation that does not resolve, an unset required path.
+        CpmpFileError: a path that names no file or directory.
+    """
+    from omegaconf import OmegaConf
+
+    args = _parse_args(argv)
+    if args.help or args.hydra_help or args.shell_completion or args.experimental_rerun:
+        return []
+    inspection = args.cfg is not None or args.info is not None
+    if args.config_path is not None:
+        raise ConfigError(
+            f"--config-path is not supported: cpmp's configs are in {CONF_DIR}; add a "
+            "directory of your own config options with --config-dir DIR"
+        )
+    config_name = args.config_name or command.name
+    overrides = list(args.overrides)
+    parsed = _parse_overrides(overrides)
+    multirun = args.multirun or any(
+        o.get_key_element() == "hydra.mode" and str(o.value()) == "MULTIRUN" for o in parsed
+    )
+    jobs = _sweep(parsed) if multirun else [overrides]
+    checked: list[CheckedJob] = []
+    bases: dict[tuple[str, ...], dict[str, Any]] = {}
+    for job_overrides in jobs:
+        try:
+            cfg = _compose(config_name, job_overrides, args.config_dir)
+            if inspection:
+                continue
+            job_parsed = _parse_overrides(job_overrides)
+            choices = set(cfg.hydra.runtime.choices)
+            groups = tuple(
+                line
+                for line, o in zip(job_overrides, job_parsed, strict=True)
+                if o.key_or_group in choices or o.is_hydra_override()
+            )
+            if groups not in bases:
+                bases[groups] = _resolved(_compose(config_name, list(groups), args.config_dir))
+            job = _resolved(cfg)
+            _check_values(command, job, bases[groups], job_parsed)
+        except CpmpError as err:
+            raise _in_job(err, job_overrides, len(jobs)) from None
+        checked.append(
+            CheckedJob(job_overrides, OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
+        )
+    return checked
+
+
+def _sweep(parsed: list[Any]) -> list[list[str]]:
+    """The job override lists of a multirun (Hydra's basic sweeper: every combination)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.errors import HydraException
+
+    hydra_lines, task = [], []
+    for o in parsed:
+        if o.is_hydra_override():
+            if o.is_sweep_override():
+                raise ConfigError(f"{o.input_line}: Hydra's own settings cannot be swept")
+            hydra_lines.append(o.input_line)
+        else:
+            task.append(o)
+    try:
+        (batch,) = BasicSweeper.split_arguments(task, max_batch_size=None)
+    except HydraException as err:
+        raise ConfigError(_one_line(str(err))) from None
+    return [[*hydra_lines, *job] for job in batch]
+
+
+def _in_job(err: CpmpError, overrides: list[str], n_jobs: int) -> CpmpError:
+    """``err`` with the job named when a sweep has several."""
+    if n_jobs == 1:
+        return err
+    return type(err)(f"{err} (in the sweep's job {' '.join(overrides)})")
+
+
+def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
+    """Run ``command``'s own value checks on every job (imports torch; MuJoCo for the
+    task); raises the job's :class:`CpmpError`, naming the override it is about and the job
+    of a sweep."""
+    from omegaconf.errors import OmegaConfBaseException
+
+    check = command.check
+    if check is None:
+        return
+    for job in jobs:
+        error: CpmpError
+        try:
+            check(job.cfg)
+        except OmegaConfBaseException as err:  # a section removed with ~group
+            error = ConfigError(
+                f"{getattr(err, 'full_key', None) or 'config'}: {_one_line(str(err))}"
+            )
+        except CpmpError as err:
+            error = _with_override(err, job.overrides)
+        else:
+            continue
+        raise _in_job(error, job.overrides, len(jobs)) from None
+
+
+def _with_override(err: CpmpError, overrides: Sequence[str]) -> CpmpError:
+    """``err`` prefixed with the one override whose key it names by its last part only
+    (``task.max_time=-1: max_time must be ...``)."""
+    text = str(err)
+    named = []
+    for line in overrides:
+        key = line.split("=", 1)[0].lstrip("+~")
+        leaf = key.rpartition(".")[2]
+        if key not in text and re.search(rf"\b{re.escape(leaf)}\b", text):
+            named.append(line)
+    return type(err)(f"{named[0]}: {text}") if len(named) == 1 else err
