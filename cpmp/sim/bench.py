@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import torch
 
+from cpmp.data import Demonstration
+from cpmp.errors import ConfigError
 from cpmp.sim.collect import sample_boxes
 from cpmp.sim.config import TaskConfig
-from cpmp.sim.runner import Policy, ReplayPolicy, record_demonstration, run_episode
+from cpmp.sim.runner import (
+    Policy,
+    ReplayPolicy,
+    record_demonstration,
+    run_episode,
+    run_episodes,
+)
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import shared_kinematics
 
@@ -23,22 +32,67 @@ LEARNED_POLICY = {"predictor": "klr"}
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` options."""
 
 
-def _time_episode(box: Box, policy: Policy, cfg: TaskConfig, expected: Any) -> dict[str, Any]:
-    """Run one closed-loop episode; real-time factor, per-tick cost [ms] and wall-time shares."""
+def time_rollouts(
+    boxes: Sequence[Box],
+    policy: Any,
+    cfg: TaskConfig,
+    expected: Sequence[Demonstration],
+    batched: bool = False,
+    max_time: float | None = None,
+) -> dict[str, Any]:
+    """Run one closed-loop episode per box and time them: one at a time with
+    :func:`run_episode`, or all together with :func:`run_episodes` (``batched``).
+
+    ``policy``: a fitted sequencer (batched with ``policy.batched(N)``), or one
+    single-episode policy per box (a sequence); ``expected[i]``: the demonstrator's recording
+    of ``boxes[i]``, recorded beforehand so that it is not timed.
+
+    Returns simulated and wall time [s] summed over the episodes, the real-time factor, cost
+    per episode-tick [ms] and wall-time shares of physics, kinematics (IK + features), policy
+    and the rest (bookkeeping), and the outcomes in box order.
+    """
+    if len(expected) != len(boxes):
+        raise ConfigError(
+            f"time_rollouts needs one expected demonstration per box: {len(boxes)} boxes, "
+            f"{len(expected)} demonstrations"
+        )
     start = time.perf_counter()
-    result = run_episode(box, policy, cfg, expected=expected)
+    if batched:
+        results = run_episodes(boxes, policy, cfg, expected=expected, max_time=max_time)
+    else:
+        policies = policy if isinstance(policy, Sequence) else [policy] * len(boxes)
+        results = [
+            run_episode(box, single, cfg, max_time=max_time, expected=demo)
+            for box, single, demo in zip(boxes, policies, expected, strict=True)
+        ]
     wall = time.perf_counter() - start
-    timing = dict(result.timing, other=wall - sum(result.timing.values()))
-    ticks = max(round(result.duration / cfg.control_dt), 1)
+    timing: dict[str, float] = {}
+    for result in results:
+        for key, value in result.timing.items():
+            timing[key] = timing.get(key, 0.0) + value
+    timing["other"] = wall - sum(timing.values())
+    sim_time = float(sum(r.duration for r in results))
+    ticks = max(sum(round(r.duration / cfg.control_dt) for r in results), 1)
     return {
-        "outcome": result.outcome,
-        "sim_time_s": result.duration,
+        "n_episodes": len(results),
+        "batched": batched,
+        "outcomes": [r.outcome for r in results],
+        "sim_time_s": sim_time,
         "wall_time_s": wall,
-        "real_time_factor": result.duration / wall,
-        "meets_target": result.duration / wall >= TARGET_REAL_TIME_FACTOR,
+        "real_time_factor": sim_time / wall,
+        "meets_target": sim_time / wall >= TARGET_REAL_TIME_FACTOR,
         "ms_per_tick": {k: 1e3 * v / ticks for k, v in timing.items()},
         "share": {k: v / wall for k, v in timing.items()},
     }
+
+
+def _time_episode(box: Box, policy: Policy, cfg: TaskConfig, expected: Any) -> dict[str, Any]:
+    """One closed-loop episode timed by :func:`time_rollouts`, with its ``outcome``."""
+    report = time_rollouts([box], policy, cfg, [expected])
+    report["outcome"] = report["outcomes"][0]
+    for key in ("n_episodes", "batched", "outcomes"):
+        del report[key]
+    return report
 
 
 def benchmark(

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from cpmp.sim.bench import TARGET_REAL_TIME_FACTOR, benchmark
+from cpmp.sim.bench import TARGET_REAL_TIME_FACTOR, benchmark, time_rollouts
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -57,3 +57,36 @@ def test_script_prints_json(capsys):
 def test_script_rejects_a_bad_box(capsys):
     assert bench_sim.main(["--width", "-0.1", "--demos", "0"]) == 2
     assert "Box.width must be a positive length" in capsys.readouterr().err
+
+
+def test_batched_rollouts_time_the_same_episodes(cfg, demos):
+    """Replaying each box's demonstration, one at a time and batched: the same outcomes and
+    simulated time, and each report's shares and real-time factor add up."""
+    from cpmp.sim import Box
+    from cpmp.sim.runner import ReplayPolicy
+
+    order = ["right", "left"]
+    expected = [demos[s] for s in order]
+    boxes = [Box(*(d.metadata[f"box_{k}"] for k in ("width", "depth", "height"))) for d in expected]
+    reports = [
+        time_rollouts(boxes, [ReplayPolicy(d) for d in expected], cfg, expected, batched=b)
+        for b in (False, True)
+    ]
+    single, batched = reports
+    assert single["outcomes"] == batched["outcomes"] == ["complete", "complete"]
+    assert single["sim_time_s"] == pytest.approx(batched["sim_time_s"], abs=1e-9)
+    assert (single["batched"], batched["batched"]) == (False, True)
+    for report in reports:
+        assert report["n_episodes"] == 2
+        assert sum(report["share"].values()) == pytest.approx(1.0)
+        ticks = round(report["sim_time_s"] / cfg.control_dt)
+        total = sum(report["ms_per_tick"].values()) * ticks / 1e3
+        assert total == pytest.approx(report["wall_time_s"], rel=1e-6)
+
+
+def test_rollouts_need_one_expected_demo_per_box(cfg, demos, boxes):
+    from cpmp.errors import ConfigError
+    from cpmp.sim.runner import ReplayPolicy
+
+    with pytest.raises(ConfigError, match="one expected demonstration per box: 1 boxes, 0"):
+        time_rollouts([boxes["right"]], [ReplayPolicy(demos["right"])], cfg, [])
