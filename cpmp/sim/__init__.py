@@ -11,12 +11,15 @@ from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.mps import VARIABLES, mp_names
 from cpmp.sim.runner import (
     OUTCOMES,
+    BatchedPolicy,
     EpisodeResult,
+    PolicyList,
     TickInfo,
     Transition,
     mp_sequences,
     record_demonstration,
     run_episode,
+    run_episodes,
 )
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
 from cpmp.sim.simulation import Simulation
@@ -25,8 +28,10 @@ __all__ = [
     "OUTCOMES",
     "STRATEGIES",
     "VARIABLES",
+    "BatchedPolicy",
     "Box",
     "EpisodeResult",
+    "PolicyList",
     "ScriptedDemonstrator",
     "Simulation",
     "TaskConfig",
@@ -37,5 +42,6 @@ __all__ = [
     "mp_sequences",
     "record_demonstration",
     "run_episode",
+    "run_episodes",
     "sample_box",
 ]
