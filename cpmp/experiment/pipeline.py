@@ -79,6 +79,9 @@ class ExperimentSettings:
         feature_noise: std of Gaussian noise added to the training demonstrations' features,
             as a fraction of each feature's range over the training set (0: none); the test
             demonstrations and the closed loop stay noise-free.
+        workers: worker processes running the seeds' collection and training sizes in
+            parallel (``None``: min(cores, seeds); 1: everything in this process). The report's
+            numbers do not depend on it.
     """
 
     name: str = "quick"
@@ -93,6 +96,7 @@ class ExperimentSettings:
     record_demos: bool = False
     max_time: float | None = None
     feature_noise: float = 0.0
+    workers: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
@@ -139,6 +143,13 @@ class ExperimentSettings:
             raise ConfigError(f"experiment.feature_noise must be finite, got {noise}")
         if self.max_time is not None and self.max_time <= 0:
             raise ConfigError(f"experiment.max_time must be > 0, got {self.max_time}")
+        workers = self.workers
+        if workers is not None and (
+            isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+        ):
+            raise ConfigError(
+                f"experiment.workers must be an integer >= 1 or null (auto), got {workers!r}"
+            )
 
     @classmethod
     def from_cfg(cls, cfg: Any) -> ExperimentSettings:
@@ -225,15 +236,24 @@ def fit_sequencer(
     log_dir: str | Path | None = None,
 ) -> ConcurrentSequencer:
     """Fit a :class:`ConcurrentSequencer` from config groups (``predictor``, ``sequencer``,
-    ``trainer``)."""
+    ``trainer``); a ``sequencer`` entry with ``kind: goal_nearest`` fits the
+    :class:`~cpmp.goal_nearest.GoalNearestSequencer` baseline instead (no predictor, no
+    trainer)."""
     from cpmp.sequencer import ConcurrentSequencer
 
+    sequencer_options = to_dict(sequencer_cfg)
+    if sequencer_options.get("kind") is not None:
+        from cpmp.goal_nearest import KIND, GoalNearestSequencer
+
+        if sequencer_options.pop("kind") != KIND:
+            raise ConfigError(f"sequencer.kind must be {KIND!r} or absent (the learned sequencer)")
+        return GoalNearestSequencer.fit(list(demos), seed=seed, **sequencer_options)
     kind, options = predictor_options(predictor_cfg)
     trainer = to_dict(trainer_cfg)
     if log_dir is not None:
         trainer["log_dir"] = str(log_dir)
     return ConcurrentSequencer.fit(
-        list(demos), predictor=kind, seed=seed, **options, **to_dict(sequencer_cfg), **trainer
+        list(demos), predictor=kind, seed=seed, **options, **sequencer_options, **trainer
     )
 
 
@@ -318,19 +338,24 @@ def reproduce(
     """Run ``seq`` closed-loop on every box; classify outcomes and measure switch distances.
 
     ``expected[i]`` is the demonstrator's recording of ``boxes[i]``: its switch states are the
-    "desired states" of Table Ib.
+    "desired states" of Table Ib. All boxes run together (:func:`cpmp.sim.runner.run_episodes`
+    with ``seq.batched``); every number equals a run of one box at a time.
     """
     from cpmp.experiment.recording import EpisodeRecorder
-    from cpmp.sim import Simulation, correct_strategy, run_episode
+    from cpmp.sim import Simulation, correct_strategy
+    from cpmp.sim.runner import run_episodes
 
-    out = []
+    out: list[EpisodeRecord] = []
+    if not boxes:
+        return out
     if record_dir is not None and record != "none":
         record_dir.mkdir(parents=True, exist_ok=True)
-    pairs = list(zip(boxes, expected, strict=True))
-    for i, (box, demo) in enumerate(progress_bar(pairs, f"{label}episodes")):
-        rrd = None
-        recorder = None
-        callback = None
+    batch = seq.batched(len(boxes))
+    paths: list[Path | None] = []
+    recorders: list[Any] = []
+    callbacks: list[EpisodeLogger | None] = []
+    for i, box in enumerate(boxes):
+        rrd = recorder = callback = None
         if record_dir is not None and (
             record in ("all", "failures") or (record == "first" and i == 0)
         ):
@@ -344,18 +369,37 @@ def reproduce(
                 geoms=sim.geoms(),
                 metadata={"box_width": box.width, "box_depth": box.depth},
             )
-            callback = EpisodeLogger(recorder, seq)
-        try:
-            result = run_episode(box, seq, task, max_time=max_time, expected=demo, on_tick=callback)
-        except BaseException:
+            callback = EpisodeLogger(recorder, batch.episodes[i])
+        paths.append(rrd)
+        recorders.append(recorder)
+        callbacks.append(callback)
+    bar = progress_bar(list(boxes), f"{label}episodes")
+    try:
+        results = run_episodes(
+            boxes,
+            batch,
+            task,
+            expected=expected,
+            max_time=max_time,
+            on_tick=callbacks,
+            on_result=lambda i, result: bar.update(1),
+        )
+    except BaseException:
+        for recorder in recorders:
             if recorder is not None:
                 recorder.abort()
-            raise
+        raise
+    finally:
+        bar.close()
+    for i, (box, demo, result) in enumerate(zip(boxes, expected, results, strict=True)):
+        rrd, recorder, episode = paths[i], recorders[i], batch.episodes[i]
         if recorder is not None and record == "failures" and i > 0 and result.outcome == "complete":
             recorder.abort()  # nothing to look at: keep the disk for the failures
             rrd = None
         elif recorder is not None:
-            recorder.log_outcome(result.duration, result.outcome, result.reason)
+            recorder.log_outcome(
+                result.duration, result.outcome, result.reason, success=result.outcome == "complete"
+            )
             recorder.close()
         distances: list[float] = []
         continuous: list[float] = []
@@ -375,8 +419,8 @@ def reproduce(
                 duration=result.duration,
                 distances=distances,
                 distances_continuous=continuous,
-                recoveries=sum(e.kind == "recovery" for e in seq.events),
-                holds=sum(n.kind == "hold" for n in seq.notes),
+                recoveries=sum(e.kind == "recovery" for e in episode.events),
+                holds=sum(n.kind == "hold" for n in episode.notes),
                 rrd=str(rrd) if rrd else None,
             )
         )

@@ -4,7 +4,6 @@ own HDF5 file (no simulator)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -17,6 +16,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from cpmp.data import load_demonstrations, save_demonstrations
+from cpmp.experiment.cli import inspect_rrd_main
 from cpmp.experiment.jobs import evaluate_checkpoint, run_experiment, train_from_file
 from cpmp.experiment.recording import read_recording
 from cpmp.synthetic import make_demonstrations
@@ -33,13 +33,6 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 def compose_cfg(config_name: str, overrides: list[str]) -> Any:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         return compose(config_name, overrides=overrides)
-
-
-def load_inspect_rrd() -> Any:
-    spec = importlib.util.spec_from_file_location("inspect_rrd", ROOT / "scripts/inspect_rrd.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def without_timings(obj: Any) -> Any:
@@ -151,7 +144,7 @@ def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
     summaries = {path: read_recording(path) for path in paths}
     # the demo replay always switches MPs; the sequencer's episodes may not (wrong start)
     assert summaries[str(demo_rrd)].transitions
-    assert load_inspect_rrd().main(paths) == 0
+    assert inspect_rrd_main(paths) == 0
     out = capsys.readouterr().out
     blocks = out.split("== ")[1:]
     assert len(blocks) == len(paths)
@@ -308,3 +301,56 @@ def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
     assert len(first) == len(second) > 0
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a.predicted, b.predicted)
+
+
+# -------------------------------------------------------- experiment.workers (parallel jobs)
+@pytest.mark.parametrize("bad", ["0", "-2", "1.5", "true"])
+def test_bad_worker_count_is_a_config_error(bad):
+    from cpmp.errors import ConfigError
+    from cpmp.experiment.pipeline import ExperimentSettings
+
+    cfg = compose_cfg("experiment", ["experiment=tiny", f"experiment.workers={bad}"])
+    with pytest.raises(ConfigError, match=r"experiment\.workers must be an integer >= 1"):
+        ExperimentSettings.from_cfg(cfg.experiment)
+
+
+def test_default_workers_is_cores_or_seeds():
+    import os
+
+    from cpmp.experiment.jobs import default_workers
+
+    cores = len(os.sched_getaffinity(0))
+    assert default_workers(1) == 1
+    assert default_workers(cores + 3) == cores
+    for name in ("quick", "full", "tiny"):
+        assert compose_cfg("experiment", [f"experiment={name}"]).experiment.workers is None
+
+
+@pytest.mark.slow
+def test_two_workers_give_the_serial_report(tmp_path, caplog):
+    """Two seeds of ``experiment=tiny`` run serially and on two worker processes: every
+    number of the report and of every episode is the same; the workers' log lines reach
+    this process, prefixed with their job."""
+    import logging
+
+    overrides = ["experiment=tiny", "experiment.seeds=[0,1]", "experiment.record=none"]
+    runs = {}
+    for workers in (1, 2):
+        cfg = compose_cfg("experiment", [*overrides, f"experiment.workers={workers}"])
+        with caplog.at_level(logging.INFO, logger="cpmp"):
+            runs[workers] = run_experiment(cfg, tmp_path / f"workers_{workers}").parent
+    reports = [json.loads((runs[w] / "report.json").read_text()) for w in (1, 2)]
+    assert [r["seed"] for r in reports[1]["per_seed"]] == [0, 1]
+    assert without_timings(reports[0]) == without_timings(reports[1])
+    assert (runs[1] / "report.md").read_text() == (runs[2] / "report.md").read_text()
+    episodes = [json.loads((runs[w] / "episodes.json").read_text()) for w in (1, 2)]
+    assert len(episodes[0]) == 4  # 2 seeds x 2 boxes
+    assert without_timings(episodes[0]) == without_timings(episodes[1])
+    timings = [json.loads((runs[w] / "timings.json").read_text()) for w in (1, 2)]
+    assert [t["workers"] for t in timings] == [1, 2]
+    for seed in (0, 1):
+        assert (runs[2] / f"seed_{seed}" / "model_D3.pt").is_file()
+        assert (runs[2] / f"seed_{seed}" / "lightning" / "D3").is_dir()
+    messages = [record.getMessage() for record in caplog.records]
+    assert any(m.startswith("[seed 1 D=3] ") and "reproduce" in m for m in messages)
+    assert any(m.startswith("[seed 0] ") and "collect" in m for m in messages)
