@@ -47,7 +47,7 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path
 from cpmp.predictors.base import SCALINGS, FeatureScaler
 from cpmp.progress import expected_progress
-from cpmp.sequencer import TickInfo, TransitionEvent
+from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent
 from cpmp.switching import indicator_features
 
 if TYPE_CHECKING:
@@ -542,7 +542,7 @@ class GoalNearestSequencer:
             ) from err
 
 
-class GoalNearestBatch:
+class GoalNearestBatch(EpisodeBatch):
     """``N`` independent episodes of one fitted :class:`GoalNearestSequencer` (build with
     ``seq.batched(n)``), with the interface of :class:`~cpmp.sequencer.BatchedSequencer`:
     ``reset``/``step`` take ``t`` (scalar or ``(N,)``) [s], features ``x (N, d)`` and an
@@ -552,25 +552,6 @@ class GoalNearestBatch:
 
     def __init__(self, episodes: Sequence[GoalNearestSequencer]) -> None:
         self.episodes = list(episodes)
-
-    @property
-    def n_episodes(self) -> int:
-        return len(self.episodes)
-
-    def __len__(self) -> int:
-        return len(self.episodes)
-
-    @property
-    def active(self) -> list[dict[str, str]]:
-        return [dict(ep.active) for ep in self.episodes]
-
-    @property
-    def events(self) -> list[list[TransitionEvent]]:
-        return [ep.events for ep in self.episodes]
-
-    @property
-    def notes(self) -> list[list[Any]]:
-        return [ep.notes for ep in self.episodes]
 
     def reset(
         self, t: float | np.ndarray, x: np.ndarray, live: Sequence[bool] | None = None
