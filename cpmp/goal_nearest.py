@@ -47,7 +47,7 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path
 from cpmp.predictors.base import SCALINGS, FeatureScaler
 from cpmp.progress import expected_progress
-from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent
+from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent, checked_features
 from cpmp.switching import indicator_features
 
 if TYPE_CHECKING:
@@ -355,17 +355,7 @@ class GoalNearestSequencer:
             return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
 
     def _features(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        if isinstance(x, torch.Tensor):
-            x = x.detach().cpu().numpy()
-        xn = np.asarray(x, dtype=np.float64)
-        if xn.ndim == 0 or xn.shape[-1] != len(self.feature_names):
-            raise DataError(
-                f"expected features with {len(self.feature_names)} entries "
-                f"({', '.join(self.feature_names[:4])}, ...), got shape {tuple(xn.shape)}"
-            )
-        if not np.isfinite(xn).all():
-            raise DataError("features contain NaN or inf; the sequencer needs finite features")
-        return xn
+        return checked_features(x, self.feature_names)
 
     @staticmethod
     def _nearest(z: np.ndarray, candidates: Sequence[np.ndarray]) -> int:

@@ -423,16 +423,7 @@ class ConcurrentSequencer:
     def _heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
         """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
         ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others)."""
-        if isinstance(x, torch.Tensor):
-            x = x.detach().cpu().numpy()
-        xn = np.asarray(x, dtype=np.float64)
-        if xn.ndim == 0 or xn.shape[-1] != len(self.feature_names):
-            raise DataError(
-                f"expected features with {len(self.feature_names)} entries "
-                f"({', '.join(self.feature_names[:4])}, ...), got shape {tuple(xn.shape)}"
-            )
-        if not np.isfinite(xn).all():
-            raise DataError("features contain NaN or inf; the sequencer needs finite features")
+        xn = checked_features(x, self.feature_names)
         with torch.no_grad():
             return self.predictor(torch.from_numpy(np.ascontiguousarray(xn)), heads).numpy()
 
@@ -1029,6 +1020,22 @@ class BatchedSequencer(EpisodeBatch):
                 )
             rows = np.flatnonzero(mask).tolist()
         return times.tolist(), xn, rows
+
+
+def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:
+    """Features ``x (..., d)`` as a float64 array, checked against ``feature_names`` (d of them)
+    and for finiteness; :class:`~cpmp.errors.DataError` says what is wrong."""
+    if isinstance(x, torch.Tensor):
+        x = x.detach().cpu().numpy()
+    xn = np.asarray(x, dtype=np.float64)
+    if xn.ndim == 0 or xn.shape[-1] != len(feature_names):
+        raise DataError(
+            f"expected features with {len(feature_names)} entries "
+            f"({', '.join(list(feature_names)[:4])}, ...), got shape {tuple(xn.shape)}"
+        )
+    if not np.isfinite(xn).all():
+        raise DataError("features contain NaN or inf; the sequencer needs finite features")
+    return xn
 
 
 def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
