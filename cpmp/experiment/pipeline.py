@@ -250,6 +250,9 @@ def fit_sequencer(
         return GoalNearestSequencer.fit(list(demos), seed=seed, **sequencer_options)
     kind, options = predictor_options(predictor_cfg)
     trainer = to_dict(trainer_cfg)
+    lr = trainer.pop("lr", None)  # the trainer's Adam rate, when set, overrides the predictor's
+    if lr is not None:
+        options["lr"] = lr
     if log_dir is not None:
         trainer["log_dir"] = str(log_dir)
     return ConcurrentSequencer.fit(

@@ -319,3 +319,19 @@ def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path):
     # Failed during validation, before the (slow) collection of demonstrations.
     assert not (run_dir / "seed_0" / "demos.h5").exists()
     assert not (run_dir / "report.json").exists()
+
+
+@pytest.mark.parametrize("predictor", ["mlp", "klr_sparse"])
+def test_fit_sequencer_with_the_default_trainer_config(predictor):
+    """The trainer's ``lr`` (null by default) and an Adam predictor's own ``lr`` must not clash;
+    a trainer ``lr`` that is set overrides the predictor's."""
+    from cpmp.experiment.pipeline import fit_sequencer
+    from cpmp.synthetic import make_demonstrations
+
+    demos = make_demonstrations(2, seed=0)
+    overrides = [f"predictor={predictor}", "trainer.logger=null", "trainer.max_epochs=2"]
+    cfg = compose_cfg("train", overrides)
+    seq = fit_sequencer(demos, cfg.predictor, None, cfg.trainer)
+    assert seq.predictor.config.lr == cfg.predictor.lr
+    cfg = compose_cfg("train", [*overrides, "trainer.lr=0.005"])
+    assert fit_sequencer(demos, cfg.predictor, None, cfg.trainer).predictor.config.lr == 0.005
