@@ -32,7 +32,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import pickle
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +43,7 @@ from torch import nn
 
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph, build_graphs
-from cpmp.io import atomic_path
+from cpmp.io import atomic_path, load_checkpoint
 from cpmp.predictors.base import SCALINGS, FeatureScaler
 from cpmp.progress import expected_progress
 from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent, checked_features
@@ -483,15 +482,14 @@ class GoalNearestSequencer:
     @classmethod
     def load(cls, path: str | Path) -> GoalNearestSequencer:
         """Load a checkpoint written by :meth:`save`."""
-        path = Path(path)
-        if not path.is_file():
-            raise CpmpFileError(f"checkpoint {path} does not exist")
-        try:
-            payload = torch.load(path, map_location="cpu", weights_only=True)
-        except (pickle.UnpicklingError, RuntimeError, EOFError, OSError) as err:
-            raise CpmpFileError(f"{path} is not a readable goal_nearest checkpoint: {err}") from err
-        if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-            raise CpmpFileError(f"{path} is not a goal_nearest checkpoint")
+        payload = load_checkpoint(
+            path,
+            CHECKPOINT_FORMAT,
+            label="goal_nearest",
+            kind="goal_nearest",
+            remedy="fit it again with GoalNearestSequencer.fit, or load only files you wrote "
+            "with GoalNearestSequencer.save",
+        )
         if payload.get("version") != CHECKPOINT_VERSION:
             raise CpmpFileError(
                 f"{path} has goal_nearest checkpoint version {payload.get('version')}; this cpmp "

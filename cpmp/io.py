@@ -134,3 +134,41 @@ def to_builtin(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
+
+
+def load_checkpoint(
+    path: str | os.PathLike[str], fmt: str, label: str, kind: str, remedy: str
+) -> dict:
+    """The payload dict of a checkpoint written by ``torch.save``, loaded with
+    ``weights_only=True``; every failure is a :class:`CpmpFileError`.
+
+    ``fmt``: the payload's ``"format"`` entry; ``label``: how messages name an unreadable file
+    (``"a readable {label} checkpoint"``); ``kind``: how they name a payload of another format;
+    ``remedy``: what to do instead (a missing or untrusted file). A file holding Python objects
+    is refused as untrusted, never with torch's hint to switch the protection off. Version
+    checks stay with the caller.
+    """
+    import pickle
+
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise CpmpFileError(f"checkpoint {path} does not exist; {remedy}")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as err:
+        if "global" not in str(err).lower():  # not a refused class: a damaged file
+            raise CpmpFileError(
+                f"{path} is not a readable {label} checkpoint (the file is damaged or of "
+                "another kind)"
+            ) from err
+        raise CpmpFileError(
+            f"{path} is not a trusted {label} checkpoint: it holds Python objects that a cpmp "
+            f"checkpoint never contains, so it was not loaded; {remedy}"
+        ) from err
+    except Exception as err:
+        raise CpmpFileError(f"{path} is not a readable {label} checkpoint: {err}") from err
+    if not isinstance(payload, dict) or payload.get("format") != fmt:
+        raise CpmpFileError(f"{path} is not a {kind} checkpoint")
+    return payload

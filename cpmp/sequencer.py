@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import pickle
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +37,7 @@ from cpmp.errors import (
     UnknownMPError,
 )
 from cpmp.graph import SequenceGraph, build_graphs
-from cpmp.io import atomic_path, to_builtin
+from cpmp.io import atomic_path, load_checkpoint, to_builtin
 from cpmp.predictors import (
     START_PREFIX,
     NodeData,
@@ -574,28 +573,14 @@ class ConcurrentSequencer:
     @classmethod
     def load(cls, path: str | Path) -> ConcurrentSequencer:
         """Load a checkpoint written by :meth:`save`."""
-        path = Path(path)
-        if not path.is_file():
-            raise CpmpFileError(
-                f"checkpoint {path} does not exist; train one with scripts/train.py"
-            )
-        try:
-            payload = torch.load(path, map_location="cpu", weights_only=True)
-        except pickle.UnpicklingError as err:
-            if "global" not in str(err).lower():  # not a refused class: a damaged file
-                raise CpmpFileError(
-                    f"{path} is not a readable cpmp checkpoint (the file is damaged or of "
-                    "another kind)"
-                ) from err
-            raise CpmpFileError(
-                f"{path} is not a trusted cpmp checkpoint: it holds Python objects that a cpmp "
-                "checkpoint never contains, so it was not loaded; retrain the model with "
-                "scripts/train.py or load only files you wrote with ConcurrentSequencer.save"
-            ) from err
-        except Exception as err:
-            raise CpmpFileError(f"{path} is not a readable cpmp checkpoint: {err}") from err
-        if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-            raise CpmpFileError(f"{path} is not a cpmp sequencer checkpoint")
+        payload = load_checkpoint(
+            path,
+            CHECKPOINT_FORMAT,
+            label="cpmp",
+            kind="cpmp sequencer",
+            remedy="retrain the model with scripts/train.py, or load only files you wrote with "
+            "ConcurrentSequencer.save",
+        )
         version = payload.get("version")
         if version not in (1, CHECKPOINT_VERSION):
             raise CpmpFileError(

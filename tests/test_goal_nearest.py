@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
@@ -184,3 +185,12 @@ def test_errors_say_what_to_fix(two_successors, tmp_path):
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(CpmpFileError, match="goal_nearest checkpoint"):
         GoalNearestSequencer.load(tmp_path / "junk.pt")
+
+
+def test_load_refuses_untrusted_pickles(tmp_path):
+    """A file holding Python objects is refused as untrusted, like a sequencer checkpoint,
+    without torch's hint to switch the protection off."""
+    torch.save({"format": "x", "obj": GoalNearestSequencer}, tmp_path / "evil.pt")
+    with pytest.raises(CpmpFileError, match="not a trusted goal_nearest checkpoint") as info:
+        GoalNearestSequencer.load(tmp_path / "evil.pt")
+    assert "weights_only=False" not in str(info.value)
