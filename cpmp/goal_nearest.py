@@ -46,7 +46,7 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, load_checkpoint
 from cpmp.predictors.base import SCALINGS, FeatureScaler
 from cpmp.progress import expected_progress
-from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent, checked_features
+from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent, checked_features, checked_time
 from cpmp.switching import indicator_features
 
 if TYPE_CHECKING:
@@ -365,7 +365,7 @@ class GoalNearestSequencer:
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start each variable at its initial MP with the nearest entry state."""
-        t = _check_t(t)
+        t = checked_time(t)
         z = self.predictor.scaler.transform(self._features(x).reshape(-1))
         self.active = {}
         for v in sorted(self.graphs):
@@ -384,7 +384,7 @@ class GoalNearestSequencer:
         """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
         if not self.active or self._z is None or self._last_t is None:
             raise NotFittedError("call reset(t, x) before step(t, x)")
-        t = _check_t(t)
+        t = checked_time(t)
         if t < self._last_t:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
         state = self._features(x).reshape(-1)
@@ -575,10 +575,3 @@ class GoalNearestBatch(EpisodeBatch):
         if keep.shape != (n,):
             raise DataError(f"live must be {n} booleans, got shape {keep.shape}")
         return [(i, (float(times[i]), xn[i])) for i in np.flatnonzero(keep).tolist()]
-
-
-def _check_t(t: float) -> float:
-    t = float(t)
-    if not math.isfinite(t):
-        raise DataError(f"time must be finite, got t={t}")
-    return t

@@ -440,17 +440,10 @@ class ConcurrentSequencer:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
         demonstrated combination of initial nodes with the highest summed log entry probability
         when ``start_rule="joint"``)."""
-        t = self._check_t(t)
+        t = checked_time(t)
         self.predictor.reset_state(1)
         phi = self._heads(np.asarray(x, dtype=np.float64).reshape(-1))
         return self._episode.start(t, x, phi)
-
-    @staticmethod
-    def _check_t(t: float) -> float:
-        t = float(t)
-        if not math.isfinite(t):
-            raise DataError(f"time must be finite, got t={t}")
-        return t
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
@@ -747,7 +740,7 @@ class SequencerEpisode:
         does not go back in time."""
         if not self.active:
             raise NotFittedError("call reset(t, x) before step(t, x)")
-        t = self.seq._check_t(t)
+        t = checked_time(t)
         if self._last_t is not None and t < self._last_t:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
         return t
@@ -1005,6 +998,14 @@ class BatchedSequencer(EpisodeBatch):
                 )
             rows = np.flatnonzero(mask).tolist()
         return times.tolist(), xn, rows
+
+
+def checked_time(t: float) -> float:
+    """``t`` [s] as a float; :class:`~cpmp.errors.DataError` unless it is finite."""
+    t = float(t)
+    if not math.isfinite(t):
+        raise DataError(f"time must be finite, got t={t}")
+    return t
 
 
 def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:

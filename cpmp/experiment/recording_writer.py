@@ -20,6 +20,7 @@ import numpy as np
 
 from cpmp.errors import ConfigError, CpmpError, DataError, UnknownMPError
 from cpmp.io import atomic_path
+from cpmp.sequencer import checked_time
 
 if TYPE_CHECKING:
     import os
@@ -412,13 +413,6 @@ class EpisodeRecorder:
                 f"unknown MP {mp!r} for variable {variable!r}; known: {self.mp_names[variable]}"
             )
 
-    @staticmethod
-    def _check_time(t: float) -> float:
-        t = float(t)
-        if not math.isfinite(t):
-            raise DataError(f"time t must be finite, got {t}")
-        return t
-
     def _buffer_scalar(self, path: str, tick: int, t: float, value: float) -> None:
         ticks, times, values = self._scalars.setdefault(path, ([], [], []))
         ticks.append(tick)
@@ -466,7 +460,7 @@ class EpisodeRecorder:
         wxyz) in the world frame. Everything is validated before anything is recorded.
         """
         self._check_open()
-        t = self._check_time(t)
+        t = checked_time(t)
         if t < self._last_t:
             raise DataError(f"tick times must be non-decreasing: got t={t} after {self._last_t}")
         values = np.asarray(features, dtype=float)
@@ -579,7 +573,7 @@ class EpisodeRecorder:
         """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s]
         (``kind``: ``switch`` or ``recovery``)."""
         self._check_open()
-        t = self._check_time(t)
+        t = checked_time(t)
         self._check_mp(variable, source)
         self._check_mp(variable, target)
         probability = float(probability)
@@ -604,7 +598,7 @@ class EpisodeRecorder:
         """Record a sequencer note at ``t`` [s]: a held transition, a stall recovery or a
         non-finite φ (``kind``), about ``variable`` (may be empty), as readable ``text``."""
         self._check_open()
-        t = self._check_time(t)
+        t = checked_time(t)
         record = self._rr.DynamicArchetype(
             _NOTE_ARCHETYPE,
             components={"kind": str(kind), "variable": str(variable), "text": str(text)},
@@ -622,7 +616,7 @@ class EpisodeRecorder:
         otherwise ``INFO``. The ``status`` document at ``t`` shows the outcome too.
         """
         self._check_open()
-        t = self._check_time(t)
+        t = checked_time(t)
         if not str(outcome):
             raise DataError("outcome must be a non-empty string")
         text = outcome_text(str(outcome), str(reason))
