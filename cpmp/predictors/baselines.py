@@ -18,6 +18,7 @@ checkpoint holds tensors only.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -96,14 +97,8 @@ class SklearnKLRPredictor(KLRPredictor):
         from sklearn.linear_model import LogisticRegression
 
         c = self.config
-        kernels = self._node_kernels(data) if kernels is None else kernels
-        weight = torch.zeros_like(self.weight, requires_grad=False)
-        bias = self.bias.detach().clone()
-        infos = []
-        for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
-            mask = self.support_mask[i]
-            k = kern[:, mask].detach().to(torch.float64)
-            phi = node.target.detach().to(torch.float64)
+
+        def solve(i: int, k: torch.Tensor, phi: torch.Tensor) -> tuple:
             n = k.shape[0]
             features = torch.cat([k, k]).numpy()
             classes = np.concatenate([np.ones(n), np.zeros(n)])
@@ -118,14 +113,9 @@ class SklearnKLRPredictor(KLRPredictor):
             model.fit(features, classes, sample_weight=sample_weight)
             w = torch.as_tensor(model.coef_[0], dtype=torch.float64)
             b = float(model.intercept_[0]) if c.bias else float(self.bias[i])
-            weight[i, mask] = w.to(weight.dtype)
-            bias[i] = b
-            iterations = int(np.max(model.n_iter_))
-            infos.append(self._report(k, phi, w, b, iterations))
-        with torch.no_grad():
-            self.weight.copy_(weight)
-            self.bias.copy_(bias)
-        return infos
+            return w, b, self._report(k, phi, w, b, int(np.max(model.n_iter_)))
+
+        return _solve_nodes(self, data, kernels, solve)
 
     def _report(
         self, k: torch.Tensor, phi: torch.Tensor, w: torch.Tensor, b: float, iterations: int
@@ -183,14 +173,8 @@ class RegressionClipPredictor(KLRPredictor):
         """Closed-form ridge solution per node: ``(XᵀX / n + R) θ = Xᵀ φ / n`` with
         ``X = [K, 1]`` and ``R = diag(l2, ..., l2, 0)``; one Cholesky solve (least squares if
         the system is singular, e.g. for ``l2 = 0`` with repeated supports)."""
-        kernels = self._node_kernels(data) if kernels is None else kernels
-        weight = torch.zeros_like(self.weight, requires_grad=False)
-        bias = self.bias.detach().clone()
-        infos = []
-        for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
-            mask = self.support_mask[i]
-            k = kern[:, mask].detach().to(torch.float64)
-            y = node.target.detach().to(torch.float64)
+
+        def solve(i: int, k: torch.Tensor, y: torch.Tensor) -> tuple:
             n = k.shape[0]
             offset = 0.0 if self.config.bias else float(self.bias[i])
             x = torch.cat([k, torch.ones(n, 1, dtype=torch.float64)], 1) if self.config.bias else k
@@ -204,20 +188,42 @@ class RegressionClipPredictor(KLRPredictor):
                 theta = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
             else:
                 theta = torch.linalg.lstsq(gram, rhs[:, None], driver="gelsd").solution[:, 0]
-            s = int(mask.sum())
-            weight[i, mask] = theta[:s].to(weight.dtype)
+            s = k.shape[1]
             b = float(theta[-1]) if self.config.bias else offset
-            bias[i] = b
             residual = x @ theta + offset - y
             grad = x.T @ residual / n + reg * theta
             loss = 0.5 * float((residual * residual).mean()) + 0.5 * self.config.l2 * float(
                 theta[:s] @ theta[:s]
             )
-            infos.append(NewtonInfo(1, float(grad.abs().max()), float("nan"), loss, True))
-        with torch.no_grad():
-            self.weight.copy_(weight)
-            self.bias.copy_(bias)
-        return infos
+            return theta[:s], b, NewtonInfo(1, float(grad.abs().max()), float("nan"), loss, True)
+
+        return _solve_nodes(self, data, kernels, solve)
+
+
+def _solve_nodes(
+    bank: KLRPredictor,
+    data: list[NodeData],
+    kernels: list[torch.Tensor] | None,
+    solve: Callable[[int, torch.Tensor, torch.Tensor], tuple[torch.Tensor, float, NewtonInfo]],
+) -> list[NewtonInfo]:
+    """Fit every node of a kernel bank by ``solve(i, K_i (P, S_i), target (P,))`` -> (weights
+    ``(S_i,)``, bias, outcome) on its real supports (default kernels: the cached ones), then
+    write all weights and biases into the bank; returns the outcomes."""
+    kernels = bank._node_kernels(data) if kernels is None else kernels
+    weight = torch.zeros_like(bank.weight, requires_grad=False)
+    bias = bank.bias.detach().clone()
+    infos = []
+    for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
+        mask = bank.support_mask[i]
+        k = kern[:, mask].detach().to(torch.float64)
+        w, b, info = solve(i, k, node.target.detach().to(torch.float64))
+        weight[i, mask] = w.to(weight.dtype)
+        bias[i] = b
+        infos.append(info)
+    with torch.no_grad():
+        bank.weight.copy_(weight)
+        bank.bias.copy_(bias)
+    return infos
 
 
 def _clipped_logit(raw: torch.Tensor) -> torch.Tensor:
