@@ -15,7 +15,6 @@ minus the demonstration's state at its first sample under the new MP).
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -27,7 +26,8 @@ from cpmp.progress import expected_progress
 
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
-    from cpmp.sequencer import ConcurrentSequencer, TransitionEvent
+    from cpmp.records import TransitionEvent
+    from cpmp.sequencer import ConcurrentSequencer
 
 
 @dataclass
@@ -123,12 +123,6 @@ def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) ->
     }
 
 
-def demonstrated_switches(demo: Demonstration, variable: str) -> list[tuple[str, str, np.ndarray]]:
-    """``(source, target, state)`` of each switch of ``variable`` in ``demo``."""
-    segs = demo.segments(variable)
-    return [(a.mp, b.mp, demo.features[b.start]) for a, b in itertools.pairwise(segs)]
-
-
 def switch_distances(
     events: Sequence[TransitionEvent],
     demo: Demonstration,
@@ -136,16 +130,16 @@ def switch_distances(
     columns: np.ndarray | None = None,
 ) -> list[float] | None:
     """Distances between triggered and demonstrated switch states of ``variable``; ``None`` if
-    the triggered switches do not match the demonstrated ones one to one. ``columns`` (d,) bool
+    the triggered switches (``events``, each with its ``state``) do not match the demonstrated
+    ones (:meth:`~cpmp.data.Demonstration.transitions`) one to one. ``columns`` (d,) bool
     restricts the distance to those features (e.g. :func:`continuous_features`)."""
     fired = [e for e in events if e.variable == variable]
-    shown = demonstrated_switches(demo, variable)
-    if [(e.source, e.target) for e in fired] != [(s, t) for s, t, _ in shown]:
+    shown = demo.transitions(variable)
+    if [(e.source, e.target) for e in fired] != [(s.source, s.target) for s in shown]:
         return None
     keep = slice(None) if columns is None else np.asarray(columns, dtype=bool)
     return [
-        float(np.linalg.norm((e.state - x)[keep]))
-        for e, (_, _, x) in zip(fired, shown, strict=True)
+        float(np.linalg.norm((e.state - s.state)[keep])) for e, s in zip(fired, shown, strict=True)
     ]
 
 

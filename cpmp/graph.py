@@ -9,38 +9,10 @@ times, so graphs can have cycles.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field, replace
 
-import numpy as np
-
+from cpmp.data import Activation, Demonstration
 from cpmp.errors import DataError, UnknownMPError
-
-if TYPE_CHECKING:
-    from cpmp.data import Demonstration
-
-
-@dataclass(frozen=True)
-class Activation:
-    """One activation of an MP: samples ``start:stop`` of demonstration ``demo``.
-
-    Attributes:
-        demo: index of the demonstration in the list the graph was built from.
-        start: first sample index (inclusive).
-        stop: last sample index (exclusive).
-        time: (n,) seconds.
-        features: (n, d) feature trajectory while the MP was active.
-    """
-
-    demo: int
-    start: int
-    stop: int
-    time: np.ndarray
-    features: np.ndarray
-
-    @property
-    def n_samples(self) -> int:
-        return self.stop - self.start
 
 
 @dataclass
@@ -150,27 +122,15 @@ def build_graph(demos: Sequence[Demonstration], variable: str) -> SequenceGraph:
                 f"{demo.name or f'demonstration {m}'} has no labels for control variable "
                 f"{variable!r}; it labels: {', '.join(sorted(demo.labels))}"
             )
-        labels = np.asarray(demo.labels[variable]).astype(str)
-        switches = np.flatnonzero(labels[1:] != labels[:-1]) + 1
-        starts = np.concatenate([[0], switches])
-        stops = np.concatenate([switches, [len(labels)]])
-        graph.initial_nodes.add(str(labels[0]))
+        segments = demo.segments(variable)
+        graph.initial_nodes.add(segments[0].mp)
         previous: str | None = None
-        for start, stop in zip(starts.tolist(), stops.tolist(), strict=True):
-            mp = str(labels[start])
-            graph.add_node(mp)
+        for segment in segments:
+            graph.add_node(segment.mp)
             if previous is not None:
-                graph.edges.add((previous, mp))
-            graph.activations[mp].append(
-                Activation(
-                    demo=m,
-                    start=start,
-                    stop=stop,
-                    time=demo.time[start:stop],
-                    features=demo.features[start:stop],
-                )
-            )
-            previous = mp
+                graph.edges.add((previous, segment.mp))
+            graph.activations[segment.mp].append(replace(segment, demo=m))
+            previous = segment.mp
     return graph
 
 

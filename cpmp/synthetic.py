@@ -17,23 +17,15 @@ synchronise through the shared features only.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
-from cpmp.data import Demonstration
+from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError
+from cpmp.records import Policy
 
 FEATURE_NAMES = ["p_a", "p_b", "context"]
 VARIABLES = ["a", "b"]
-
-
-class Policy(Protocol):
-    """What closed-loop execution needs from a sequencer."""
-
-    def reset(self, t: float, x: np.ndarray) -> dict[str, str]: ...
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]: ...
 
 
 @dataclass
@@ -95,30 +87,21 @@ class SyntheticTask:
         parallel = episode["context"] >= 0.5
         active = {"a": "a_go", "b": "b_go" if parallel else "b_wait"}
         p = np.array(episode["start"], dtype=float)
-        times, feats, labels = [], [], {v: [] for v in VARIABLES}
+        log = DemonstrationLog(VARIABLES)
         t = 0.0
         while t <= self.max_time:
-            times.append(t)
-            feats.append([p[0], p[1], episode["context"]])
-            for v in VARIABLES:
-                labels[v].append(active[v])
+            log.append(t, [p[0], p[1], episode["context"]], active)
             if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
                 break
             g = self.goals(episode, active)
             active = self._demo_switch(p, g, active)
             p = p + self.dt * np.asarray(self.gain) * (self.goals(episode, active) - p)
             t = round(t + self.dt, 10)
-        return Demonstration(
-            time=np.array(times),
-            features=np.array(feats),
-            labels={v: np.array(labels[v]) for v in VARIABLES},
-            feature_names=FEATURE_NAMES,
-            name=name,
-            metadata={
-                "context": episode["context"],
-                "strategy": "parallel" if parallel else "sequential",
-            },
-        )
+        metadata = {
+            "context": episode["context"],
+            "strategy": "parallel" if parallel else "sequential",
+        }
+        return log.to_demonstration(FEATURE_NAMES, name, metadata)
 
     def rollout(self, episode: dict, policy: Policy) -> tuple[dict[str, list[str]], bool]:
         """Run ``policy`` closed-loop on ``episode``.

@@ -59,9 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.data import Demonstration
+from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError, UnknownMPError
-from cpmp.synthetic import Policy
+from cpmp.records import Policy
 
 FEATURE_NAMES = ["carrier_x", "carrier_y", "receiver_x", "receiver_y", "grip_force", "context"]
 VARIABLES = ["carrier", "gripper", "receiver"]
@@ -418,32 +418,23 @@ class RelayTask:
         ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``)."""
         state = self.initial_state(episode)
         active = self.initial_mps(episode)
-        times, feats, labels = [], [], {v: [] for v in VARIABLES}
+        log = DemonstrationLog(VARIABLES)
         t = 0.0
         while True:
             x = self.features(state, episode)
-            times.append(t)
-            feats.append(x)
-            for v in VARIABLES:
-                labels[v].append(active[v])
+            log.append(t, x, active)
             if self.at_goal(state, episode) or t >= self.max_time:
                 break
             active = self.script(x, episode, active)
             self.advance(state, episode, active)
             t = round(t + self.dt, 10)
-        return Demonstration(
-            time=np.array(times),
-            features=np.array(feats),
-            labels={v: np.array(labels[v]) for v in VARIABLES},
-            feature_names=FEATURE_NAMES,
-            name=name,
-            metadata={
-                "task": "relay",
-                "context": episode.context,
-                "strategy": episode.strategy,
-                "reached_goal": self.at_goal(state, episode),
-            },
-        )
+        metadata = {
+            "task": "relay",
+            "context": episode.context,
+            "strategy": episode.strategy,
+            "reached_goal": self.at_goal(state, episode),
+        }
+        return log.to_demonstration(FEATURE_NAMES, name, metadata)
 
     def scripted_policy(self, episode: RelayEpisode) -> ScriptedPolicy:
         """The demonstrator as a closed-loop policy for ``episode``."""
@@ -485,7 +476,7 @@ class RelayTask:
 
 
 class ScriptedPolicy:
-    """The demonstrator's finite state machine behind the :class:`~cpmp.synthetic.Policy`
+    """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy`
     interface (it knows the episode's goals, as the demonstrator does)."""
 
     def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:

@@ -1,4 +1,5 @@
-"""Tests for cpmp.data: Demonstration validation, HDF5 round trip, splits, failure modes."""
+"""Tests for cpmp.data (Demonstration validation, activations, transitions) and its file
+format cpmp.datafile (HDF5 round trip, splits, failure modes); both build on ``make_demo``."""
 
 from __future__ import annotations
 
@@ -12,13 +13,10 @@ import h5py
 import numpy as np
 import pytest
 
-from cpmp.data import (
-    Demonstration,
-    Segment,
-    list_splits,
-    load_demonstrations,
-    save_demonstrations,
-)
+import cpmp.data
+import cpmp.datafile
+from cpmp.data import Demonstration, DemonstrationLog, mp_sequences
+from cpmp.datafile import list_splits, load_demonstrations, save_demonstrations
 from cpmp.errors import CpmpError, CpmpFileError, DataError, UnknownMPError
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "data_format.md"
@@ -156,17 +154,72 @@ def test_message_gives_the_fix() -> None:
 
 def test_segments_and_switch_indices() -> None:
     labels = ["a", "a", "b", "b", "b", "a", "c"]
-    demo = Demonstration(np.arange(7.0), np.zeros((7, 1)), {"v": labels, "w": ["z"] * 7})
-    assert demo.segments("v") == [
-        Segment("a", 0, 2),
-        Segment("b", 2, 5),
-        Segment("a", 5, 6),
-        Segment("c", 6, 7),
+    features = np.arange(14.0).reshape(7, 2)
+    demo = Demonstration(np.arange(7.0) / 10, features, {"v": labels, "w": ["z"] * 7})
+    segments = demo.segments("v")
+    assert [(s.mp, s.start, s.stop, s.demo) for s in segments] == [
+        ("a", 0, 2, None),
+        ("b", 2, 5, None),
+        ("a", 5, 6, None),
+        ("c", 6, 7, None),
     ]
-    assert [s.length for s in demo.segments("v")] == [2, 3, 1, 1]
+    assert [s.n_samples for s in segments] == [2, 3, 1, 1]
+    assert np.array_equal(segments[1].features, features[2:5])
+    assert np.array_equal(segments[1].time, demo.time[2:5])
     assert demo.switch_indices("v").tolist() == [2, 5, 6]
-    assert demo.segments("w") == [Segment("z", 0, 7)]
+    assert [(s.mp, s.start, s.stop) for s in demo.segments("w")] == [("z", 0, 7)]
     assert demo.switch_indices("w").tolist() == []
+    assert mp_sequences(demo) == {"v": ["a", "b", "a", "c"], "w": ["z"]}
+
+
+def test_activations_compare_by_position_not_arrays() -> None:
+    demo = make_demo()
+    a, b = demo.segments("right")[0], make_demo(seed=5).segments("right")[0]
+    assert a == b  # same MP and samples; the arrays differ and are not compared
+    assert a != demo.segments("right")[1]
+
+
+def test_transitions_are_the_label_switches_in_time_order() -> None:
+    demo = Demonstration(
+        np.arange(6.0) * 0.5,
+        np.arange(12.0).reshape(6, 2),
+        {"u": ["a", "a", "b", "b", "b", "c"], "v": ["x", "x", "x", "y", "y", "y"]},
+    )
+    events = demo.transitions()
+    assert [(e.t, e.variable, e.source, e.target) for e in events] == [
+        (1.0, "u", "a", "b"),
+        (1.5, "v", "x", "y"),
+        (2.5, "u", "b", "c"),
+    ]
+    assert [e.state.tolist() for e in events] == [[4.0, 5.0], [6.0, 7.0], [10.0, 11.0]]
+    assert all(np.isnan(e.probability) and e.kind == "switch" for e in events)
+    assert demo.transitions("v") == [events[1]]
+
+
+def test_transitions_at_equal_times_keep_variable_order() -> None:
+    demo = Demonstration(np.arange(3.0), np.zeros((3, 1)), {"b": list("xyy"), "a": list("pqq")})
+    assert [e.variable for e in demo.transitions()] == ["a", "b"]
+
+
+def test_demonstration_log_builds_a_validated_demonstration() -> None:
+    log = DemonstrationLog(["u", "v"])
+    for k in range(4):
+        log.append(0.1 * k, [k, -k], {"u": "a" if k < 2 else "b", "v": "x", "extra": "ignored"})
+    demo = log.to_demonstration(["p", "q"], "demo_7", {"k": 1})
+    assert demo.name == "demo_7" and demo.metadata == {"k": 1}
+    assert demo.feature_names == ["p", "q"]
+    assert demo.features.dtype == np.float64 and demo.features[:, 1].tolist() == [0, -1, -2, -3]
+    assert mp_sequences(demo) == {"u": ["a", "b"], "v": ["x"]}
+    with pytest.raises(DataError, match="at least 2 are needed"):
+        DemonstrationLog(["u"]).to_demonstration()
+
+
+def test_file_functions_importable_from_the_record_module() -> None:
+    """The README and docs import save/load/list_splits from cpmp.data; they are datafile's."""
+    for name in ("save_demonstrations", "load_demonstrations", "list_splits"):
+        assert getattr(cpmp.data, name) is getattr(cpmp.datafile, name)
+    with pytest.raises(AttributeError, match="no attribute 'nonexistent'"):
+        cpmp.data.nonexistent  # noqa: B018
 
 
 def test_segments_unknown_variable() -> None:

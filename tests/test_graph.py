@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -46,7 +48,17 @@ def test_activations_split_by_labels(demos):
     assert [(a.demo, a.start, a.stop) for a in acts] == [(0, 0, 2), (0, 4, 5)]
     assert [(a.demo, a.start, a.stop) for a in g.activations["B"]] == [(0, 2, 4), (1, 0, 2)]
     np.testing.assert_array_equal(acts[1].features, demos[0].features[4:5])
+    np.testing.assert_array_equal(acts[0].time, demos[0].time[0:2])
     assert sum(len(v) for v in g.activations.values()) == 6
+
+
+def test_activations_are_the_demonstrations_segments(demos):
+    """The graph keeps the demonstrations' own activations, marked with the demo's index."""
+    g = build_graph(demos, "a")
+    for m, demo in enumerate(demos):
+        for segment in demo.segments("a"):
+            (same,) = [a for a in g.activations[segment.mp] if a == replace(segment, demo=m)]
+            assert same.features.base is demo.features  # a view, not a copy
 
 
 def test_build_graphs_all_variables(demos):

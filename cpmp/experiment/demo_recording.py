@@ -30,23 +30,12 @@ on the ``control_dt`` grid, so only float round-off needs absorbing."""
 
 
 def label_switches(demo: Demonstration) -> list[TransitionEvent]:
-    """Every label change of ``demo`` as a transition at the time of the first sample with the
-    new label [s], with probability :data:`DEMO_TRANSITION_PROBABILITY`; in time order
-    (variables in ``demo.variables`` order at equal times)."""
-    from cpmp.experiment.recording import TransitionEvent
+    """Every label change of ``demo`` (:meth:`~cpmp.data.Demonstration.transitions`) with
+    probability :data:`DEMO_TRANSITION_PROBABILITY`; in time order (variables in
+    ``demo.variables`` order at equal times)."""
+    from dataclasses import replace
 
-    out = [
-        TransitionEvent(
-            float(demo.time[i]),
-            variable,
-            str(demo.labels[variable][i - 1]),
-            str(demo.labels[variable][i]),
-            DEMO_TRANSITION_PROBABILITY,
-        )
-        for variable in demo.variables
-        for i in map(int, demo.switch_indices(variable))
-    ]
-    return sorted(out, key=lambda event: (event.t, demo.variables.index(event.variable)))
+    return [replace(e, probability=DEMO_TRANSITION_PROBABILITY) for e in demo.transitions()]
 
 
 class _DemoLogger:
@@ -63,7 +52,8 @@ class _DemoLogger:
     def flush(self, t: float) -> None:
         """Log the pending switches at or before ``t`` [s]."""
         while self.pending and self.pending[0].t <= t + _TIME_TOL:
-            self.recorder.log_transition(*self.pending.pop(0))
+            e = self.pending.pop(0)
+            self.recorder.log_transition(e.t, e.variable, e.source, e.target, e.probability, e.kind)
 
 
 def record_demo_rrd(

@@ -55,8 +55,9 @@ name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds
 text; metadata values that JSON cannot encode are stored as ``str``).
 
 Scalars and body poses are buffered and sent column-wise (``send_columns``) every
-``flush_every`` ticks and on :meth:`EpisodeRecorder.close`: one ``rr.log`` call costs ~30 µs,
-which at 100 entities per tick would cost more than the simulation itself. The file is written
+``flush_every`` ticks (default 5000) and on :meth:`EpisodeRecorder.close`, one row per tick and
+tuple of entities: one ``rr.log`` call costs ~30 µs, which at 100 entities per tick would cost
+more than the simulation itself, and an aborted episode sends nothing. The file is written
 beside the target under a temporary name and renamed onto it only by a successful
 :meth:`EpisodeRecorder.close`, so a failed or aborted episode leaves no partial file.
 """
@@ -64,8 +65,8 @@ beside the target under a temporary name and renamed onto it only by a successfu
 from __future__ import annotations
 
 from cpmp.experiment.recording_reader import (
-    NoteEvent,
     RecordingSummary,
+    SequencerNote,
     TransitionEvent,
     ViewInfo,
     format_summary,
@@ -87,8 +88,8 @@ __all__ = [
     "MAX_SERIES_PER_PANEL",
     "TOUCH_WORDS",
     "EpisodeRecorder",
-    "NoteEvent",
     "RecordingSummary",
+    "SequencerNote",
     "TransitionEvent",
     "ViewInfo",
     "format_summary",

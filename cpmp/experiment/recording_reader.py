@@ -23,31 +23,10 @@ from cpmp.experiment.recording_writer import (
     outcome_text,
     transition_text,
 )
+from cpmp.records import SequencerNote, TransitionEvent
 
 if TYPE_CHECKING:
     import os
-
-
-class TransitionEvent(NamedTuple):
-    """One MP transition: ``t`` [s], control ``variable``, ``source`` -> ``target`` MP;
-    ``kind`` is ``switch`` (the switching rule fired) or ``recovery`` (a stall was resolved)."""
-
-    t: float
-    variable: str
-    source: str
-    target: str
-    probability: float
-    kind: str = "switch"
-
-
-class NoteEvent(NamedTuple):
-    """A sequencer note: ``t`` [s], ``kind`` (``hold``, ``recovery``, ``nonfinite``), the
-    ``variable`` concerned (may be empty) and a readable ``text``."""
-
-    t: float
-    kind: str
-    variable: str
-    text: str
 
 
 class ViewInfo(NamedTuple):
@@ -66,8 +45,9 @@ class RecordingSummary:
     """What :func:`read_recording` finds in an ``.rrd`` file.
 
     ``episodes``: episode names (recording name, else ``application_id/recording_id``), one per
-    recording in the file. ``transitions``: in time order. ``outcome``/``reason``: of the last
-    outcome logged, ``None`` if none. ``duration``: last time on the ``time`` timeline [s].
+    recording in the file. ``transitions``: in time order (a recording keeps no feature
+    vector: their ``state`` is ``None``). ``notes``: in time order. ``outcome``/``reason``: of
+    the last outcome logged, ``None`` if none. ``duration``: last time on the ``time`` timeline [s].
     ``n_ticks``: number of distinct ``tick`` values. ``entity_paths``: sorted, without the
     leading ``/`` and without recording properties. ``metadata``: the recorder's ``metadata``.
     ``feature_groups``: plot panel -> feature names (empty for files written before panels).
@@ -81,14 +61,16 @@ class RecordingSummary:
     n_ticks: int
     entity_paths: list[str]
     metadata: dict[str, Any] = field(default_factory=dict)
-    notes: list[NoteEvent] = field(default_factory=list)
+    notes: list[SequencerNote] = field(default_factory=list)
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict of the fields, each transition and note as a dict with named fields."""
+        """JSON-able dict of the fields, each transition and note as a dict with named fields
+        (transitions without ``state``, which a recording does not hold)."""
         data = asdict(self)
-        data["transitions"] = [event._asdict() for event in self.transitions]
-        data["notes"] = [note._asdict() for note in self.notes]
+        data["transitions"] = [
+            {k: v for k, v in asdict(event).items() if k != "state"} for event in self.transitions
+        ]
         return data
 
 
@@ -154,7 +136,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     ticks: dict[int, set[int]] = {index: set() for index in range(len(stores))}
     entity_paths: set[str] = set()
     transitions: list[TransitionEvent] = []
-    notes: list[NoteEvent] = []
+    notes: list[SequencerNote] = []
     outcomes: list[tuple[float, int, str, str]] = []
     duration = 0.0
     for index, _store, entity_path, batch in batches:
@@ -211,7 +193,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
             for row, t in enumerate(times):
                 if _first(cells["kind"][row]) is not None:
                     notes.append(
-                        NoteEvent(
+                        SequencerNote(
                             t,
                             str(_first(cells["kind"][row])),
                             str(_first(cells["variable"][row]) or ""),
@@ -349,8 +331,8 @@ def format_summary(summary: RecordingSummary) -> str:
 
 
 __all__ = [
-    "NoteEvent",
     "RecordingSummary",
+    "SequencerNote",
     "TransitionEvent",
     "ViewInfo",
     "format_summary",

@@ -491,3 +491,33 @@ def test_read_views_of_bad_files(tmp_path: Path) -> None:
     garbage.write_bytes(b"not a rerun file" * 20)
     with pytest.raises(CpmpFileError, match="rerun recording"):
         read_views(garbage)
+
+
+def test_summary_holds_the_sequencers_own_records(tmp_path: Path) -> None:
+    """A transition and a note the sequencer made read back as the same core records (equal but
+    for the time's nanosecond resolution; a recording keeps no feature vector, so ``state`` is
+    None and ``to_dict`` leaves it out)."""
+    from dataclasses import replace
+
+    from cpmp.records import SequencerNote, TransitionEvent
+
+    event = TransitionEvent(0.2, "left_pos", "approach", "grasp", 0.4, np.ones(2), "recovery")
+    note = SequencerNote(0.1, "hold", "left_pos", "approach -> grasp held")
+    path = tmp_path / "records.rrd"
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        recorder.log_tick(0.0, [0.0, 0.0], {}, {"left_pos": "approach", "right_fingers": "open"})
+        recorder.log_note(note.t, note.kind, note.variable, note.text)
+        e = event
+        recorder.log_transition(e.t, e.variable, e.source, e.target, e.probability, e.kind)
+    summary = read_recording(path)
+    (got,) = summary.transitions
+    assert type(got) is TransitionEvent and got.state is None
+    assert got.t == pytest.approx(event.t, abs=TIME_TOL)
+    assert replace(got, t=event.t) == event
+    (got_note,) = summary.notes
+    assert type(got_note) is SequencerNote
+    assert replace(got_note, t=note.t) == note
+    data = json.loads(json.dumps(summary.to_dict()))
+    fields = ["t", "variable", "source", "target", "probability", "kind"]
+    assert list(data["transitions"][0]) == fields
+    assert data["notes"][0]["text"] == note.text

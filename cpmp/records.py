@@ -1,0 +1,117 @@
+"""The records every layer shares: a transition, a sequencer note, a control tick, and the
+policy protocols a closed loop drives.
+
+The sequencer (:mod:`cpmp.sequencer`), the simulator runner (:mod:`cpmp.sim.runner`), the
+recordings (:mod:`cpmp.experiment.recording`) and the evaluation (:mod:`cpmp.evaluation`) all
+speak in these types. A producer fills the fields it knows; the others keep their documented
+defaults. (A demonstration's activations, :class:`cpmp.data.Activation`, live beside the
+demonstration record.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TransitionEvent:
+    """A switch of one control variable.
+
+    Attributes:
+        t: time [s] of the tick at which the switch fired (for a demonstration: the time of
+            the first sample under the new MP).
+        variable: control variable.
+        source: MP active before.
+        target: MP active after.
+        probability: transition probability ``p`` at that tick; ``nan`` where the producer
+            does not know it (the simulator runner, which sees only the active MPs; a
+            demonstration's label switch).
+        state: (d,) feature vector on which the switch was decided (for a demonstration: the
+            first sample under the new MP); ``None`` where the producer does not keep it (a
+            recording read back). Not compared by ``==``.
+        kind: ``switch`` (the switching rule fired) or ``recovery`` (a stall was resolved);
+            ``switch`` where the producer cannot tell.
+    """
+
+    t: float
+    variable: str
+    source: str
+    target: str
+    probability: float = math.nan
+    state: np.ndarray | None = field(default=None, repr=False, compare=False)
+    kind: str = "switch"
+
+
+@dataclass(frozen=True)
+class SequencerNote:
+    """Something the sequencer decided not to do, or did exceptionally, at time ``t`` [s].
+
+    ``kind``: ``hold`` (a transition the rule would fire is held back by the coupling),
+    ``recovery`` (a stall resolved) or ``nonfinite`` (φ was NaN/inf; every MP kept);
+    ``variable``: the control variable concerned (empty if none); ``text``: readable.
+    """
+
+    t: float
+    kind: str
+    variable: str
+    text: str
+
+
+@dataclass
+class TickInfo:
+    """One control tick. The sequencer fills what it computed (``last_tick``); the simulator
+    runner passes what it observed to ``on_tick`` callbacks (before the tick's physics).
+
+    Attributes:
+        t: time [s].
+        progress: variable -> MP -> φ (every node; sequencer, empty from the runner).
+        transition_probs: variable -> successor -> ``p`` (successors of the active MP;
+            sequencer, empty from the runner).
+        active: variable -> active MP (sequencer: after the tick; runner: during it).
+        held: variable -> successor held back by the coupling at this tick (sequencer).
+        features: (d,) feature vector (runner; ``None`` from the sequencer).
+        body_poses: body -> (position (3,) [m], quaternion (4,) wxyz) in the world frame
+            (runner; empty from the sequencer).
+    """
+
+    t: float
+    progress: dict[str, dict[str, float]] = field(default_factory=dict)
+    transition_probs: dict[str, dict[str, float]] = field(default_factory=dict)
+    active: dict[str, str] = field(default_factory=dict)
+    held: dict[str, str] = field(default_factory=dict)
+    features: np.ndarray | None = None
+    body_poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+
+class Policy(Protocol):
+    """What a closed loop drives, one episode: ``reset`` at the start, then ``step`` every
+    control tick, each with the time ``t`` [s] and the features ``x`` (d,); both return
+    variable -> active MP. A fitted :class:`~cpmp.sequencer.ConcurrentSequencer` is one."""
+
+    def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
+
+    def step(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
+
+
+class BatchedPolicy(Protocol):
+    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.sequencer.BatchedSequencer`.
+    ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool marks the episodes still running (the others'
+    rows are to be ignored); the result holds one mapping variable -> MP per episode."""
+
+    def __len__(self) -> int: ...
+
+    def reset(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> Sequence[Mapping[str, str]]: ...
+
+    def step(
+        self, t: float, x: np.ndarray, live: np.ndarray | None = None
+    ) -> Sequence[Mapping[str, str]]: ...
+
+
+__all__ = ["BatchedPolicy", "Policy", "SequencerNote", "TickInfo", "TransitionEvent"]
