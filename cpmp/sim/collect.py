@@ -10,7 +10,7 @@ import numpy as np
 from cpmp.data import Demonstration, save_demonstrations
 from cpmp.errors import ConfigError
 from cpmp.sim.config import TaskConfig
-from cpmp.sim.runner import record_demonstration
+from cpmp.sim.runner import record_demonstrations
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
 
 MAX_DRAWS_PER_BOX = 10_000
@@ -43,13 +43,14 @@ def collect_demonstrations(
 ) -> tuple[Path, list[Demonstration]]:
     """Record ``n_demos`` scripted demonstrations with boxes drawn from ``seed`` and save them.
 
-    Demos are named ``demo_<i>_<strategy>``. Returns the written path and the demonstrations.
+    Demos are named ``demo_<i>_<strategy>``; all boxes run together
+    (:func:`~cpmp.sim.runner.record_demonstrations`). Returns the written path and the
+    demonstrations.
     """
     rng = np.random.default_rng(seed)
-    demos = []
-    for i, box in enumerate(sample_boxes(rng, cfg, n_demos, balanced)):
-        name = f"demo_{i:03d}_{correct_strategy(box, cfg)}"
-        demos.append(record_demonstration(box, cfg, name=name))
+    boxes = sample_boxes(rng, cfg, n_demos, balanced)
+    names = [f"demo_{i:03d}_{correct_strategy(box, cfg)}" for i, box in enumerate(boxes)]
+    demos = record_demonstrations(boxes, cfg, names=names)
     failed = [d.name for d in demos if not (d.metadata or {}).get("success")]
     if failed:
         raise RuntimeError(f"the scripted demonstrator failed on {failed}; this is a bug")

@@ -165,10 +165,12 @@ class ScriptedDemonstrator:
 
     def _finished(self, a: dict[str, str]) -> bool:
         """All variables in their final MP and at its goal."""
+        # every hand's MPs first: the goal checks are read only once all MPs are final
         for hand in HANDS:
             final = ("home", "home") if hand in self.hands else (IDLE, IDLE)
             if (a[f"{hand}_pos"], a[f"{hand}_rot"], a[f"{hand}_fingers"]) != (*final, "relax"):
                 return False
+        for hand in HANDS:
             if self._pos_error(hand) > self.cfg.pos_tol or not self._rot_done(hand):
                 return False
             if not self._fingers_done(hand):

@@ -96,7 +96,9 @@ class ArmKinematics:
 
         if not compile:
             return eager
-        probe = torch.linspace(-1.5, 1.5, 14, dtype=torch.float64).reshape(2, 7)
+        # made like fk_jacobian's input (from numpy, not a view of another tensor): a probe
+        # that is a view compiles guards on its base and every real call recompiles
+        probe = torch.from_numpy(np.linspace(-1.5, 1.5, 14).reshape(2, 7))
         try:
             compiled = torch.compile(
                 eager, fullgraph=True, dynamic=True, options={"cpp_wrapper": True}

@@ -7,12 +7,13 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from cpmp.data import Demonstration
+from cpmp.data import Demonstration, mp_sequences
 from cpmp.errors import ConfigError, UnknownMPError
+from cpmp.records import BatchedPolicy, Policy, TickInfo, TransitionEvent
 from cpmp.sim.config import TaskConfig
 from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.scene import Box, correct_strategy
@@ -21,31 +22,6 @@ from cpmp.sim.simulation import Simulation, prepare_steps
 OUTCOMES: tuple[str, ...] = ("complete", "wrong_start", "incomplete", "diverged")
 STILL_SPEED = 0.02
 """Joint speed [rad/s] below which the robot counts as standing still (deadlock detection)."""
-
-
-class Policy(Protocol):
-    """What :func:`run_episode` drives: the core sequencer's interface."""
-
-    def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
-
-    def step(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
-
-
-class BatchedPolicy(Protocol):
-    """What :func:`run_episodes` drives: N episodes at once, e.g.
-    :class:`~cpmp.sequencer.BatchedSequencer`. ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool
-    marks the episodes still running (the others' rows are to be ignored); the result holds
-    one mapping variable -> MP per episode."""
-
-    def __len__(self) -> int: ...
-
-    def reset(
-        self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> Sequence[Mapping[str, str]]: ...
-
-    def step(
-        self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> Sequence[Mapping[str, str]]: ...
 
 
 class PolicyList:
@@ -77,30 +53,6 @@ class PolicyList:
         ]
 
 
-@dataclass(frozen=True)
-class Transition:
-    """One MP switch: at time ``t`` [s] ``variable`` went ``source`` -> ``target``.
-
-    ``features`` (d,) is the state on which the switch was decided.
-    """
-
-    t: float
-    variable: str
-    source: str
-    target: str
-    features: np.ndarray
-
-
-@dataclass(frozen=True)
-class TickInfo:
-    """Passed to ``on_tick`` every control tick (before the tick's physics)."""
-
-    t: float
-    features: np.ndarray
-    active: dict[str, str]
-    body_poses: dict[str, tuple[np.ndarray, np.ndarray]]
-
-
 @dataclass
 class EpisodeResult:
     """Outcome of :func:`run_episode`.
@@ -108,12 +60,15 @@ class EpisodeResult:
     ``outcome``: "complete" (box in container, hands home, MP sequences equal the
     demonstrator's), "wrong_start" (initial MPs differ from the correct strategy's),
     "incomplete" (wrong transition, deadlock or time-out) or "diverged" (NaN/unstable physics).
+    ``transitions``: every MP switch the policy made, in order; the runner sees only the active
+    MPs, so each has ``probability`` nan and ``kind`` ``switch``, and ``state`` is the feature
+    vector (d,) the policy switched on.
     """
 
     outcome: str
     reason: str
     sequences: dict[str, list[str]]
-    transitions: list[Transition]
+    transitions: list[TransitionEvent]
     initial: dict[str, str]
     duration: float
     box_in_container: bool
@@ -165,58 +120,116 @@ def record_demonstration(
     Returns a :class:`~cpmp.data.Demonstration` with ``time`` (n,) [s], ``features`` (n, 33),
     the active MP per variable at each tick, the feature names and metadata (box size,
     strategy, success, duration). Deterministic: the same box and config give identical data.
+    :func:`record_demonstrations` with one box (the same loop).
+    """
+    return record_demonstrations([box], cfg, names=[name])[0]
+
+
+def record_demonstrations(
+    boxes: Sequence[Box],
+    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    names: Sequence[str | None] | None = None,
+    on_result: Callable[[int, Demonstration], None] | None = None,
+) -> list[Demonstration]:
+    """Run the scripted demonstrator on every box, all together, and record each at the
+    control rate; each result equals :func:`record_demonstration` of its box alone, to the
+    last bit.
+
+    Every control tick: one batched pose/Jacobian and IK call over the robots still running
+    (:func:`~cpmp.sim.simulation.prepare_steps`), MuJoCo stepping each box's own model and each
+    demonstrator reading its own simulation. A recording that ends (demonstrator done, time-out
+    or diverged physics) is left out of the following ticks.
+
+    names: per box, the demonstration's name (``None``: unnamed). on_result: called with
+    ``(index, demonstration)`` as each recording ends (e.g. a progress bar).
     """
     cfg = _as_config(cfg)
-    sim = Simulation(cfg, box)
-    policy = ScriptedDemonstrator(sim)
-    features, labels = [], {v: [] for v in sim.variables}
-    x = sim.features()
-    active = policy.reset(0.0, x)
+    boxes = list(boxes)
+    names = _per_episode(names, len(boxes), "names")
+    runs = [_Recording(box, cfg) for box in boxes]
+    out: list[Demonstration | None] = [None] * len(runs)
+
+    def finish(index: int) -> None:
+        out[index] = runs[index].demonstration(names[index])
+        if on_result is not None:
+            on_result(index, out[index])
+
+    running = list(range(len(runs)))
     n_max = round(cfg.max_time / cfg.control_dt)
-    diverged = False
     for k in range(n_max + 1):
-        features.append(x)
-        for variable in sim.variables:
-            labels[variable].append(active[variable])
-        if policy.done or k == n_max:
+        for i in running:
+            runs[i].append()
+        ended = [i for i in running if runs[i].policy.done or k == n_max]
+        for i in ended:
+            finish(i)
+        running = [i for i in running if i not in ended]
+        if not running:
             break
-        sim.set_active(active)
-        if not sim.step():
-            diverged = True
-            break
-        x = sim.features()
-        active = policy.step((k + 1) * cfg.control_dt, x)
-    n = len(features)
-    success = bool(policy.done and sim.box_in_container() and sim.hands_home() and not diverged)
-    return Demonstration(
-        time=np.arange(n) * cfg.control_dt,
-        features=np.asarray(features),
-        labels={v: np.asarray(labels[v]) for v in sim.variables},
-        feature_names=list(sim.feature_names),
-        name=name,
-        metadata={
-            "box_width": box.width,
-            "box_depth": box.depth,
-            "box_height": box.height,
-            "strategy": policy.strategy,
-            "success": success,
-            "diverged": diverged,
-            "duration": float((n - 1) * cfg.control_dt),
-            "control_dt": cfg.control_dt,
-        },
-    )
+        for i in running:
+            runs[i].sim.set_active(runs[i].active)
+        prepare_steps([runs[i].sim for i in running])
+        diverged = [i for i in running if not runs[i].sim.step()]
+        for i in diverged:
+            runs[i].diverged = True
+            finish(i)
+        running = [i for i in running if i not in diverged]
+        t = (k + 1) * cfg.control_dt
+        for i in running:
+            runs[i].observe(t)
+    return [demo for demo in out if demo is not None]
 
 
-def mp_sequences(demo: Demonstration) -> dict[str, list[str]]:
-    """Run-length collapsed MP sequence per variable of a demonstration."""
-    out = {}
-    for variable, labels in demo.labels.items():
-        seq: list[str] = []
-        for label in labels:
-            if not seq or seq[-1] != label:
-                seq.append(str(label))
-        out[variable] = seq
-    return out
+class _Recording:
+    """One box of :func:`record_demonstrations`: its simulation, the scripted demonstrator and
+    the samples so far (the loop of :func:`record_demonstration`, one tick at a time)."""
+
+    def __init__(self, box: Box, cfg: TaskConfig) -> None:
+        self.box = box
+        self.cfg = cfg
+        self.sim = Simulation(cfg, box)
+        self.policy = ScriptedDemonstrator(self.sim)
+        self.x = self.sim.features()
+        self.active = self.policy.reset(0.0, self.x)
+        self.features: list[np.ndarray] = []
+        self.labels: dict[str, list[str]] = {v: [] for v in self.sim.variables}
+        self.diverged = False
+
+    def append(self) -> None:
+        """Keep the current sample: features and the active MP per variable."""
+        self.features.append(self.x)
+        for variable, labels in self.labels.items():
+            labels.append(self.active[variable])
+
+    def observe(self, t: float) -> None:
+        """After a tick of physics at time ``t`` [s]: the new features and the
+        demonstrator's MPs for them."""
+        self.x = self.sim.features()
+        self.active = self.policy.step(t, self.x)
+
+    def demonstration(self, name: str | None) -> Demonstration:
+        """The recording so far as a :class:`~cpmp.data.Demonstration`."""
+        sim, policy, box, cfg = self.sim, self.policy, self.box, self.cfg
+        n = len(self.features)
+        success = bool(
+            policy.done and sim.box_in_container() and sim.hands_home() and not self.diverged
+        )
+        return Demonstration(
+            time=np.arange(n) * cfg.control_dt,
+            features=np.asarray(self.features),
+            labels={v: np.asarray(self.labels[v]) for v in sim.variables},
+            feature_names=list(sim.feature_names),
+            name=name,
+            metadata={
+                "box_width": box.width,
+                "box_depth": box.depth,
+                "box_height": box.height,
+                "strategy": policy.strategy,
+                "success": success,
+                "diverged": self.diverged,
+                "duration": float((n - 1) * cfg.control_dt),
+                "control_dt": cfg.control_dt,
+            },
+        )
 
 
 def run_episode(
@@ -280,15 +293,12 @@ def run_episodes(
     batch = _as_batched(policy, n)
     expected = _per_episode(expected, n, "expected")
     callbacks = _per_episode(on_tick, n, "on_tick")
+    missing = [i for i, demo in enumerate(expected) if demo is None]
+    recorded = record_demonstrations([boxes[i] for i in missing], cfg)
+    for i, demo in zip(missing, recorded, strict=True):
+        expected[i] = demo
     runs = [
-        _Rollout(
-            i,
-            box,
-            cfg,
-            record_demonstration(box, cfg) if demo is None else demo,
-            tick,
-            on_result,
-        )
+        _Rollout(i, box, cfg, demo, tick, on_result)
         for i, (box, demo, tick) in enumerate(zip(boxes, expected, callbacks, strict=True))
     ]
     x = np.stack([run.x for run in runs])
@@ -381,7 +391,7 @@ class _Rollout:
         self.active: dict[str, str] = {}
         self.initial: dict[str, str] = {}
         self.sequences: dict[str, list[str]] = {}
-        self.transitions: list[Transition] = []
+        self.transitions: list[TransitionEvent] = []
         self.last_switch = 0.0
         self.policy_time = 0.0
         self.result: EpisodeResult | None = None
@@ -424,7 +434,10 @@ class _Rollout:
         """The ``on_tick`` callback, then the active MPs to the simulation."""
         sim = self.sim
         if self.on_tick is not None:
-            self.on_tick(TickInfo(sim.t, self.x, dict(self.active), sim.body_poses()))
+            tick = TickInfo(
+                sim.t, active=dict(self.active), features=self.x, body_poses=sim.body_poses()
+            )
+            self.on_tick(tick)
         sim.set_active(self.active)
 
     def physics_step(self) -> bool:
@@ -444,7 +457,7 @@ class _Rollout:
             if new[variable] == old[variable]:
                 continue
             self.transitions.append(
-                Transition(t, variable, old[variable], new[variable], self.x.copy())
+                TransitionEvent(t, variable, old[variable], new[variable], state=self.x.copy())
             )
             sequence = self.sequences[variable]
             sequence.append(new[variable])

@@ -79,6 +79,7 @@ class Simulation:
         self.model = build_spec(box, cfg).compile()
         self.model.opt.timestep = cfg.physics_dt
         self.data = mujoco.MjData(self.model)
+        self._warnings = self.data.warning.number  # a live view, read every tick
         self.kin = shared_kinematics(cfg.compile_kinematics)
         m = self.model
         self.n_substeps = round(cfg.control_dt / m.opt.timestep)
@@ -101,6 +102,8 @@ class Simulation:
         )
         self._site = np.array([m.site(f"{h}_ee").id for h in HANDS])
         self._box_body = m.body("box").id
+        named = [i for i in range(1, m.nbody) if m.body(i).name]
+        self._named_bodies = (np.array(named, dtype=int), [m.body(i).name for i in named])
         self._box_geom = m.geom("box").id
         self._palm_geom = {h: m.geom(f"{h}_palm").id for h in HANDS}
         support_bodies = {m.body(name).id for name in ("world", "table", "plate", "container")}
@@ -211,7 +214,7 @@ class Simulation:
         # NaN/inf speeds fail the comparison too
         if not (np.isfinite(d.qpos).all() and np.abs(d.qvel).max() <= 1e3):
             return True
-        return bool(d.warning.number[_INSTABILITY_WARNINGS].any())
+        return bool(self._warnings[_INSTABILITY_WARNINGS].any())
 
     # measured state -------------------------------------------------------------------------
     def box_pos(self) -> np.ndarray:
@@ -305,12 +308,10 @@ class Simulation:
     # visualisation -------------------------------------------------------------------------
     def body_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """World pose of every named body: name -> (pos (3,) [m], quat wxyz (4,))."""
-        m, d = self.model, self.data
-        return {
-            m.body(i).name: (d.xpos[i].copy(), d.xquat[i].copy())
-            for i in range(1, m.nbody)
-            if m.body(i).name
-        }
+        ids, names = self._named_bodies
+        # rows of two fresh copies: one fancy index per array, not two copies per body
+        poses = zip(self.data.xpos[ids], self.data.xquat[ids], strict=True)
+        return dict(zip(names, poses, strict=True))
 
     def geoms(self) -> list[dict]:
         """Static description of the visual geoms (floor plane excluded).

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from cpmp.errors import ConfigError, CpmpError
 from cpmp.sequencer import ConcurrentSequencer
@@ -25,7 +26,7 @@ def _same_result(one, together):
         (tr.t, tr.variable, tr.source, tr.target) for tr in one.transitions
     ]
     for a, b in zip(together.transitions, one.transitions, strict=True):
-        np.testing.assert_array_equal(a.features, b.features)
+        np.testing.assert_array_equal(a.state, b.state)
 
 
 class Ticks:
@@ -63,6 +64,19 @@ def test_batched_jacobians_and_controls_equal_single_ones_bit_for_bit(cfg):
     prepare_steps(sims[:1])
     with pytest.raises(CpmpError, match="after prepare_steps"):
         sims[0].set_active(dict(active, right_fingers="grasp"))
+
+
+def test_compiled_jacobian_is_not_recompiled_by_the_rollouts():
+    kin = shared_kinematics.__wrapped__(True)  # a fresh build, not the session's cached one
+    if not kin.compiled:
+        pytest.skip("torch.compile is unavailable here; the eager Jacobian runs")
+    # the start-up check compiled it for the inputs fk_jacobian makes: any robot count runs
+    # that code (a recompile would cost seconds per process)
+    eager = shared_kinematics(False)
+    with torch.compiler.set_stance("fail_on_recompile"):
+        for q in (np.zeros((2, 7)), np.zeros((1, 2, 7)), np.full((6, 2, 7), 0.3)):
+            for got, want in zip(kin.fk_jacobian(q), eager.fk_jacobian(q), strict=True):
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpmp.data import load_demonstrations, save_demonstrations
+from cpmp.datafile import load_demonstrations, save_demonstrations
 from cpmp.errors import UnknownMPError
 from cpmp.sim import (
     STRATEGIES,
@@ -95,12 +95,23 @@ def test_balanced_box_sampling_is_seeded(cfg):
 
 
 def test_replayed_demo_completes(demos, boxes, cfg):
-    result = run_episode(boxes["left"], ReplayPolicy(demos["left"]), cfg, expected=demos["left"])
+    demo, ticks = demos["left"], []
+    policy = ReplayPolicy(demo)
+    result = run_episode(boxes["left"], policy, cfg, expected=demo, on_tick=ticks.append)
     assert result.outcome == "complete", result.reason
     assert result.box_in_container and result.hands_home
-    assert result.sequences == mp_sequences(demos["left"])
-    assert len(result.transitions) == sum(len(s) - 1 for s in result.sequences.values())
-    assert result.transitions[0].features.shape == (33,)
+    assert result.sequences == mp_sequences(demo)
+    # the replay switches when the labels do: the runner's records are the demonstration's
+    ran = sorted((e.t, e.variable, e.source, e.target) for e in result.transitions)
+    assert ran == [(e.t, e.variable, e.source, e.target) for e in demo.transitions()]
+    assert result.transitions[0].state.shape == (33,)
+    assert all(np.isnan(e.probability) for e in result.transitions)
+    # one tick record per control tick, with what the runner observed
+    dt = cfg.control_dt
+    assert [tick.t for tick in ticks[:3]] == pytest.approx([0.0, dt, 2 * dt])
+    np.testing.assert_array_equal(ticks[0].features, demo.features[0])
+    assert ticks[0].active == {v: str(labels[0]) for v, labels in demo.labels.items()}
+    assert "box" in ticks[0].body_poses and ticks[0].progress == {}
 
 
 def test_wrong_start_and_wrong_transition(demos, boxes, cfg):

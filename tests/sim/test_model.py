@@ -152,13 +152,6 @@ def test_invalid_config_raises_config_error():
         TaskConfig.from_dict({"compile_kinematics": "yes"})
 
 
-def test_yaml_config_matches_dataclass_defaults():
-    from omegaconf import OmegaConf
-
-    yaml = OmegaConf.load("conf/task/default.yaml")
-    assert TaskConfig.from_dict(yaml) == TaskConfig()
-
-
 def test_visual_description(cfg):
     sim = Simulation(cfg, Box(0.15, 0.12, 0.1))
     geoms = sim.geoms()

@@ -1,0 +1,105 @@
+"""Batched demonstration recording: many boxes recorded together give exactly the data of
+one box at a time."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from cpmp.data import Demonstration
+from cpmp.sim import (
+    Box,
+    ScriptedDemonstrator,
+    Simulation,
+    TaskConfig,
+    record_demonstration,
+    record_demonstrations,
+)
+
+
+def _one_at_a_time(box: Box, cfg: TaskConfig) -> tuple[np.ndarray, dict[str, list[str]], bool]:
+    """The demonstrator's loop on one simulation that computes its own control every tick
+    (no batching anywhere): features (n, d), labels per variable, diverged."""
+    sim = Simulation(cfg, box)
+    policy = ScriptedDemonstrator(sim)
+    x = sim.features()
+    active = policy.reset(0.0, x)
+    features, labels = [], {v: [] for v in sim.variables}
+    n_max = round(cfg.max_time / cfg.control_dt)
+    for k in range(n_max + 1):
+        features.append(x)
+        for variable in sim.variables:
+            labels[variable].append(active[variable])
+        if policy.done or k == n_max:
+            break
+        sim.set_active(active)
+        if not sim.step():
+            return np.asarray(features), labels, True
+        x = sim.features()
+        active = policy.step((k + 1) * cfg.control_dt, x)
+    return np.asarray(features), labels, False
+
+
+def _same_demo(got: Demonstration, want: Demonstration) -> None:
+    """Every array equal to the last bit, the names and the metadata equal."""
+    assert (got.name, got.feature_names, got.metadata) == (
+        want.name,
+        want.feature_names,
+        want.metadata,
+    )
+    assert np.array_equal(got.time, want.time)
+    assert np.array_equal(got.features, want.features)
+    assert got.labels.keys() == want.labels.keys()
+    for variable, labels in want.labels.items():
+        assert np.array_equal(got.labels[variable], labels), variable
+
+
+def _matches_reference(demo: Demonstration, box: Box, cfg: TaskConfig) -> None:
+    features, labels, diverged = _one_at_a_time(box, cfg)
+    assert np.array_equal(demo.features, features)
+    for variable, want in labels.items():
+        assert list(demo.labels[variable]) == want, variable
+    assert demo.metadata["diverged"] is diverged
+
+
+def test_batched_demonstrations_equal_one_at_a_time(demos, boxes, cfg):
+    extra = Box(0.28, 0.11, 0.1)  # a fourth box, bimanual like the first
+    run = [boxes["both"], boxes["right"], boxes["left"], extra]
+    names = ["demo_both", "demo_right", "demo_left", "extra"]
+    ended: list[int] = []
+    together = record_demonstrations(run, cfg, names, on_result=lambda i, demo: ended.append(i))
+    assert sorted(ended) == [0, 1, 2, 3]
+    # recordings end as their demonstrator finishes: shortest first
+    lengths = [len(together[i].time) for i in ended]
+    assert lengths == sorted(lengths) and len(set(lengths)) > 1
+    for strategy, demo in zip(("both", "right", "left"), together, strict=False):
+        _same_demo(demo, demos[strategy])
+    _same_demo(together[3], record_demonstration(extra, cfg, name="extra"))
+    # both paths equal the plain single-simulation loop
+    _matches_reference(together[1], boxes["right"], cfg)
+    _matches_reference(together[3], extra, cfg)
+    assert all(demo.metadata["success"] for demo in together)
+
+
+def test_time_out_and_divergence_end_only_their_own_recording(demos, boxes, cfg, monkeypatch):
+    short = dataclasses.replace(cfg, max_time=1.0)
+    original = Simulation.step
+
+    def blow_up(self):
+        if self.box == boxes["both"] and self.t > 0.5:
+            self.data.qvel[:] = np.nan  # what an unstable integration leaves behind
+        return original(self)
+
+    monkeypatch.setattr(Simulation, "step", blow_up)
+    broken, cut = record_demonstrations([boxes["both"], boxes["right"]], short)
+    assert broken.metadata["diverged"] and not broken.metadata["success"]
+    _matches_reference(broken, boxes["both"], short)
+    assert len(broken.time) < 101
+    # the other box runs on to its time-out: the first second of its full recording
+    n = round(short.max_time / short.control_dt) + 1
+    assert len(cut.time) == n and cut.metadata["duration"] == demos["right"].time[n - 1]
+    assert not cut.metadata["diverged"] and not cut.metadata["success"]
+    assert np.array_equal(cut.features, demos["right"].features[:n])
+    for variable, labels in demos["right"].labels.items():
+        assert np.array_equal(cut.labels[variable], labels[:n]), variable
