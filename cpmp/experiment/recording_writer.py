@@ -47,9 +47,11 @@ _NOTE_ARCHETYPE = "cpmp.Note"
 _PROPERTY_NAME = "cpmp"
 _STATUS_ENTITY = "status"
 
-_ScalarBuffer = tuple[list[int], list[float], list[float]]
+_RowBuffer = tuple[list[int], list[float], list[np.ndarray]]
+"""Ticks, times [s] and one row (K,) of scalar values per tick for a tuple of K entity paths."""
 """Per entity: ticks, times [s], values."""
 _PoseBuffer = tuple[list[int], list[float], list[np.ndarray], list[np.ndarray]]
+"""Ticks, times [s], positions (B, 3) and xyzw quaternions (B, 4) per tick for B bodies."""
 """Per body: ticks, times [s], positions (3,), quaternions (4,) xyzw."""
 
 
@@ -187,6 +189,25 @@ def _wxyz_to_xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
     return quat_wxyz[[1, 2, 3, 0]]
 
 
+def _pose_rows(
+    body_poses: Mapping[str, tuple[Any, Any]],
+) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Body names, positions (B, 3) [m] and xyzw quaternions (B, 4) of wxyz ``body_poses``;
+    a malformed pose raises :class:`DataError` naming its body."""
+    bodies = tuple(str(body) for body in body_poses)
+    try:
+        positions = np.array([pos for pos, _ in body_poses.values()], dtype=float)
+        quats = np.array([quat for _, quat in body_poses.values()], dtype=float)
+    except (TypeError, ValueError):
+        positions = quats = np.empty(0)
+    if positions.shape != (len(bodies), 3) or quats.shape != (len(bodies), 4):
+        for body, (pos, quat) in body_poses.items():
+            _as_vector(pos, 3, f"position of body {body!r}", DataError)
+            _as_vector(quat, 4, f"quaternion (wxyz) of body {body!r}", DataError)
+        raise DataError("body_poses must map each body to (position (3,), quaternion (4,))")
+    return bodies, positions, quats[:, [1, 2, 3, 0]]
+
+
 class EpisodeRecorder:
     """Record one episode to a rerun ``.rrd`` file (layout: :mod:`cpmp.experiment.recording`).
 
@@ -212,7 +233,10 @@ class EpisodeRecorder:
     metadata:
         Free-form JSON-able episode information, stored as a recording property.
     flush_every:
-        Send buffered per-tick data to the file every this many ticks.
+        Send buffered per-tick data to the file every this many ticks (and on :meth:`close`).
+        The default holds a 50 s episode at 100 Hz (a few MB), so an episode that is
+        discarded with :meth:`abort` (``record=failures`` keeps only failures) never pays for
+        sending its columns.
     feature_groups:
         Panel name -> feature names, one time-series panel each; features in no group go to
         ``other``. Default: :func:`group_features` of ``feature_names``.
@@ -230,7 +254,7 @@ class EpisodeRecorder:
         application_id: str = "cpmp",
         geoms: Sequence[Mapping[str, Any]] | None = None,
         metadata: Mapping[str, Any] | None = None,
-        flush_every: int = 500,
+        flush_every: int = 5000,
         feature_groups: Mapping[str, Sequence[str]] | None = None,
     ) -> None:
         import rerun as rr
@@ -258,9 +282,15 @@ class EpisodeRecorder:
         parsed_geoms = [_parse_geom(i, geom) for i, geom in enumerate(geoms or [])]
 
         self._rr = rr
-        self._feature_paths = [_entity("features", name) for name in self.feature_names]
-        self._scalars: dict[str, _ScalarBuffer] = {}
-        self._poses: dict[str, _PoseBuffer] = {}
+        self._feature_paths = tuple(_entity("features", name) for name in self.feature_names)
+        self._mp_index = {
+            var: {mp: i for i, mp in enumerate(mps)} for var, mps in self.mp_names.items()
+        }
+        # Per-tick values are buffered as rows, one buffer per tuple of entity paths; the paths
+        # of a (kind, variable, MP names) layout are made, checked and named once.
+        self._rows: dict[tuple[str, ...], _RowBuffer] = {}
+        self._poses: dict[tuple[str, ...], _PoseBuffer] = {}
+        self._layouts: dict[tuple[Any, ...], tuple[str, ...]] = {}
         self._named_series: set[str] = set()
         self._active: dict[str, str] = {}
         self._last_transition = ""
@@ -413,11 +443,52 @@ class EpisodeRecorder:
                 f"unknown MP {mp!r} for variable {variable!r}; known: {self.mp_names[variable]}"
             )
 
-    def _buffer_scalar(self, path: str, tick: int, t: float, value: float) -> None:
-        ticks, times, values = self._scalars.setdefault(path, ([], [], []))
+    def _buffer_row(self, paths: tuple[str, ...], tick: int, t: float, row: np.ndarray) -> None:
+        ticks, times, rows = self._rows.setdefault(paths, ([], [], []))
         ticks.append(tick)
         times.append(t)
-        values.append(float(value))
+        rows.append(row)
+
+    def _progress_paths(self, variable: str, mps: tuple[str, ...]) -> tuple[str, ...]:
+        """``phi``, ``entry``, ``exit`` paths of each MP in ``mps`` (MP-major), checked, named."""
+        key = ("progress", variable, mps)
+        paths = self._layouts.get(key)
+        if paths is None:
+            for mp in mps:
+                self._check_mp(variable, mp)
+            paths = tuple(
+                _entity("progress", variable, mp, part)
+                for mp in mps
+                for part in ("phi", "entry", "exit")
+            )
+            for path, (mp, part) in zip(
+                paths, [(mp, part) for mp in mps for part in ("phi", "entry", "exit")], strict=True
+            ):
+                self._name_series(path, f"{mp} {part}")
+            self._layouts[key] = paths
+        return paths
+
+    def _transition_paths(self, variable: str, targets: tuple[str, ...]) -> tuple[str, ...]:
+        key = ("transition", variable, targets)
+        paths = self._layouts.get(key)
+        if paths is None:
+            for target in targets:
+                self._check_mp(variable, target)
+            paths = tuple(_entity("transition", variable, target) for target in targets)
+            for path, target in zip(paths, targets, strict=True):
+                self._name_series(path, f"to {target}")
+            self._layouts[key] = paths
+        return paths
+
+    def _index_paths(self, variables: tuple[str, ...]) -> tuple[str, ...]:
+        key = ("active", variables)
+        paths = self._layouts.get(key)
+        if paths is None:
+            for variable in variables:
+                self._check_mp(variable)
+            paths = tuple(_entity("active", variable, "index") for variable in variables)
+            self._layouts[key] = paths
+        return paths
 
     def _name_series(self, path: str, name: str) -> None:
         if path not in self._named_series:
@@ -463,47 +534,38 @@ class EpisodeRecorder:
         t = checked_time(t)
         if t < self._last_t:
             raise DataError(f"tick times must be non-decreasing: got t={t} after {self._last_t}")
-        values = np.asarray(features, dtype=float)
+        values = np.array(features, dtype=float)  # a copy: the caller may reuse its array
         if values.shape != (len(self.feature_names),):
             raise DataError(
                 f"features must have shape ({len(self.feature_names)},) to match "
                 f"feature_names, got {values.shape}"
             )
+        rows: list[tuple[tuple[str, ...], np.ndarray]] = [(self._feature_paths, values)]
         for variable, phis in progress.items():
-            for mp in phis:
-                self._check_mp(variable, mp)
-        for variable, mp in active.items():
-            self._check_mp(variable, mp)
+            if phis:
+                phi = np.fromiter(phis.values(), dtype=float, count=len(phis))
+                row = np.empty(3 * phi.size)
+                row[0::3], row[1::3], row[2::3] = phi, 1.0 - phi, phi
+                rows.append((self._progress_paths(variable, tuple(phis)), row))
         for variable, targets in (transition_probs or {}).items():
-            for target in targets:
-                self._check_mp(variable, target)
-        poses = {
-            str(body): (
-                _as_vector(pos, 3, f"position of body {body!r}", DataError),
-                _as_vector(quat, 4, f"quaternion (wxyz) of body {body!r}", DataError),
-            )
-            for body, (pos, quat) in (body_poses or {}).items()
-        }
+            if targets:
+                row = np.fromiter(targets.values(), dtype=float, count=len(targets))
+                rows.append((self._transition_paths(variable, tuple(targets)), row))
+        if active:
+            indices = np.empty(len(active))
+            for i, (variable, mp) in enumerate(active.items()):
+                index = self._mp_index.get(variable, {}).get(mp)
+                if index is None:
+                    self._check_mp(variable, mp)
+                indices[i] = index
+            rows.append((self._index_paths(tuple(active)), indices))
+        poses = _pose_rows(body_poses) if body_poses else None
 
         tick = self._n_ticks
-        for path, value in zip(self._feature_paths, values, strict=True):
-            self._buffer_scalar(path, tick, t, value)
-        for variable, phis in progress.items():
-            for mp, phi in phis.items():
-                phi = float(phi)
-                for part, value in (("phi", phi), ("entry", 1.0 - phi), ("exit", phi)):
-                    path = _entity("progress", variable, mp, part)
-                    self._name_series(path, f"{mp} {part}")
-                    self._buffer_scalar(path, tick, t, value)
-        for variable, targets in (transition_probs or {}).items():
-            for target, probability in targets.items():
-                path = _entity("transition", variable, target)
-                self._name_series(path, f"to {target}")
-                self._buffer_scalar(path, tick, t, probability)
+        for paths, row in rows:
+            self._buffer_row(paths, tick, t, row)
         changed = False
         for variable, mp in active.items():
-            index_path = _entity("active", variable, "index")
-            self._buffer_scalar(index_path, tick, t, self.mp_names[variable].index(mp))
             if self._active.get(variable) != mp:
                 if not changed:
                     self._rec.reset_time()
@@ -518,12 +580,15 @@ class EpisodeRecorder:
                 )
         if changed:
             self._log_status(t)
-        for body, (pos, quat) in poses.items():
-            ticks, times, positions, quats = self._poses.setdefault(body, ([], [], [], []))
+        if poses is not None:
+            bodies, positions, quats = poses
+            ticks, times, position_rows, quat_rows = self._poses.setdefault(
+                bodies, ([], [], [], [])
+            )
             ticks.append(tick)
             times.append(t)
-            positions.append(pos)
-            quats.append(_wxyz_to_xyzw(quat))
+            position_rows.append(positions)
+            quat_rows.append(quats)
 
         self._n_ticks += 1
         self._last_t = t
@@ -533,30 +598,35 @@ class EpisodeRecorder:
 
     def _flush_buffers(self) -> None:
         rr = self._rr
-        for path, (ticks, times, values) in self._scalars.items():
+
+        def indexes(ticks: list[int], times: list[float]) -> list[Any]:
+            return [
+                rr.TimeColumn("time", duration=np.asarray(times)),
+                rr.TimeColumn("tick", sequence=np.asarray(ticks)),
+            ]
+
+        for paths, (ticks, times, rows) in self._rows.items():
             if ticks:
-                self._rec.send_columns(
-                    path,
-                    indexes=[
-                        rr.TimeColumn("time", duration=np.asarray(times)),
-                        rr.TimeColumn("tick", sequence=np.asarray(ticks)),
-                    ],
-                    columns=rr.Scalars.columns(scalars=np.asarray(values)),
-                )
-                for column in (ticks, times, values):
+                table = np.asarray(rows, dtype=float)  # (T, K)
+                for j, path in enumerate(paths):
+                    self._rec.send_columns(
+                        path,
+                        indexes=indexes(ticks, times),
+                        columns=rr.Scalars.columns(scalars=table[:, j]),
+                    )
+                for column in (ticks, times, rows):
                     column.clear()
-        for body, (ticks, times, positions, quats) in self._poses.items():
+        for bodies, (ticks, times, positions, quats) in self._poses.items():
             if ticks:
-                self._rec.send_columns(
-                    _entity("world", body),
-                    indexes=[
-                        rr.TimeColumn("time", duration=np.asarray(times)),
-                        rr.TimeColumn("tick", sequence=np.asarray(ticks)),
-                    ],
-                    columns=rr.Transform3D.columns(
-                        translation=np.stack(positions), quaternion=np.stack(quats)
-                    ),
-                )
+                translation, rotation = np.stack(positions), np.stack(quats)  # (T, B, 3|4)
+                for j, body in enumerate(bodies):
+                    self._rec.send_columns(
+                        _entity("world", body),
+                        indexes=indexes(ticks, times),
+                        columns=rr.Transform3D.columns(
+                            translation=translation[:, j], quaternion=rotation[:, j]
+                        ),
+                    )
                 for column in (ticks, times, positions, quats):
                     column.clear()
         self._buffered_ticks = 0
