@@ -46,7 +46,14 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, load_checkpoint
 from cpmp.predictors.base import SCALINGS, FeatureScaler
 from cpmp.progress import expected_progress
-from cpmp.sequencer import EpisodeBatch, TickInfo, TransitionEvent, checked_features, checked_time
+from cpmp.sequencer import (
+    ConcurrentSequencer,
+    EpisodeBatch,
+    TickInfo,
+    TransitionEvent,
+    checked_features,
+    checked_time,
+)
 from cpmp.switching import indicator_features
 
 if TYPE_CHECKING:
@@ -528,6 +535,33 @@ class GoalNearestSequencer:
                 f"{path} is a damaged goal_nearest checkpoint ({type(err).__name__}: {err}); "
                 "fit it again"
             ) from err
+
+
+def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequencer:
+    """Load any sequencer checkpoint cpmp writes (the main job's ``model_D<d>.pt``,
+    ``train.py``'s ``model.pt``): a :class:`~cpmp.sequencer.ConcurrentSequencer` with any
+    predictor, or a :class:`GoalNearestSequencer`; the checkpoint's own format decides.
+
+    Both share the :meth:`~cpmp.sequencer.ConcurrentSequencer.load` interface offline
+    evaluation needs (``graphs``, ``feature_names``, ``node_keys``, ``progress``, ``predictor``
+    with ``scaler`` and ``stateful``, ``replay``). A missing, damaged or untrusted file raises
+    :class:`CpmpFileError` as that loader does; a file of neither format names both.
+    """
+    try:
+        return GoalNearestSequencer.load(path)
+    except CpmpFileError as err:
+        # load_checkpoint's words for a readable checkpoint of another format
+        if str(err) != f"{Path(path)} is not a {KIND} checkpoint":
+            raise
+    try:
+        return ConcurrentSequencer.load(path)
+    except CpmpFileError as err:
+        if str(err) != f"{Path(path)} is not a cpmp sequencer checkpoint":
+            raise
+        raise CpmpFileError(
+            f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
+            "written by scripts/train.py or a model_D<d>.pt of scripts/experiment.py"
+        ) from err
 
 
 class GoalNearestBatch(EpisodeBatch):

@@ -13,6 +13,7 @@ from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation import activation_progress, progress_errors, stream_progress
 from cpmp.graph import build_graphs
 from cpmp.predictors import make_config, make_predictor
+from cpmp.predictors.dtw import interpolate_progress
 from cpmp.progress import expected_progress, time_labels
 from cpmp.sequencer import ConcurrentSequencer, node_training_data
 from cpmp.synthetic import make_demonstrations
@@ -237,6 +238,69 @@ def test_dtw_window_forgets_old_ticks_and_reset_restarts(fitted, test_demos):
     first, _ = seq.replay(demo_a.time, demo_a.features)
     again, _ = seq.replay(demo_a.time, demo_a.features)  # reset() restarts the stream
     assert again == first
+
+
+def test_dtw_interpolates_progress_between_kept_samples():
+    # one activation along feature 0 (samples at 0, 1, 2; progress 0, 0.5, 1), a second one
+    # elsewhere (samples 3, 4): nan step between them, so no interpolation across
+    reference = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [5.0, 5.0], [6.0, 5.0]])
+    progress = np.array([0.0, 0.5, 1.0, 0.0, 1.0])
+    steps = np.array([1.0, 1.0, np.nan, 1.0, np.nan])
+
+    def phi(point, matched):
+        dist = np.linalg.norm(reference - np.asarray(point), axis=1)
+        return interpolate_progress(np.array(matched), dist, steps, progress)
+
+    # past the matched sample: towards the next one; off the line: by the projection
+    np.testing.assert_allclose(phi([1.25, 0.0], [1]), [0.625])
+    np.testing.assert_allclose(phi([0.5, 0.3], [1]), [0.25])  # before it: from the previous
+    np.testing.assert_allclose(phi([1.0, 0.0], [1]), [0.5])
+    np.testing.assert_allclose(phi([-1.0, 0.0], [0]), [0.0])  # clipped, no sample before
+    np.testing.assert_allclose(phi([2.7, 0.0], [2]), [1.0])  # last sample: clipped at it
+    np.testing.assert_allclose(phi([5.5, 5.0], [3, 1]), [0.5, 1.0])  # two activations at once
+    np.testing.assert_allclose(phi([3.0, 0.0], [2]), [1.0])  # never into the next activation
+
+
+def test_dtw_progress_keeps_rising_while_the_features_move(fitted, test_demos):
+    """Regression: φ was the progress of the matched kept sample, a staircase that held still
+    for up to ``stride`` ticks while the MP moved; the switching rule read that as "not
+    improved for 50 ms" and fired mid-motion (dtw + coupled completed nothing closed loop).
+    Without the interpolation φ held still on 47 % of the ticks counted here."""
+    seq = fitted["dtw"]
+    lag = 5  # the rule's 50 ms patience at the synthetic task's 100 Hz
+    keys = seq.node_keys
+    rising = stalled = 0
+    for demo in test_demos:
+        phi = stream_progress(seq, demo.features)
+        scaled = seq.predictor.scaler.transform(demo.features)
+        for v in sorted(seq.graphs):
+            for s in demo.segments(v):
+                expected = expected_progress(scaled[s.start : s.stop], demo.time[s.start : s.stop])
+                f = phi[s.start : s.stop, keys.index((v, s.mp))]
+                moving = expected[lag:] - expected[:-lag] > 0.01
+                rising += int(moving.sum())
+                stalled += int((moving & (f[lag:] <= f[:-lag] + 1e-3)).sum())
+    assert rising > 1000  # the count means something
+    assert stalled / rising < 0.05, stalled / rising  # 0 on this data when written
+
+
+def test_dtw_batched_episodes_decide_as_single_ones(fitted, test_demos):
+    seq = fitted["dtw"]
+    demos = [test_demos[0], test_demos[3]]
+    n = min(d.n_samples for d in demos)
+    single = []
+    for demo in demos:
+        seq.reset(float(demo.time[0]), demo.features[0])
+        for t, x in zip(demo.time[1:n], demo.features[1:n], strict=True):
+            seq.step(float(t), x)
+        single.append([(e.t, e.variable, e.target, e.kind) for e in seq.events])
+    batch = seq.batched(2)
+    batch.reset(0.0, np.stack([d.features[0] for d in demos]))
+    for k in range(1, n):
+        batch.step(float(demos[0].time[k]), np.stack([d.features[k] for d in demos]))
+    for episode, events in zip(batch.episodes, single, strict=True):
+        assert [(e.t, e.variable, e.target, e.kind) for e in episode.events] == events
+    assert all(single)  # both episodes switch at all
 
 
 def test_stateless_predictors_ignore_reset_state(fitted, test_demos):

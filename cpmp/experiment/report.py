@@ -45,19 +45,75 @@ def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
 
+GOAL_NEAREST = "goal_nearest"
+"""The ``sequencer.kind`` of the baseline without a progress predictor (:mod:`cpmp.goal_nearest`;
+kept as a string here so that writing a report imports no model code)."""
+
+NEAREST_PROGRESS_NOTE = (
+    "sequencer=goal_nearest trains no progress predictor (the predictor group is not used); "
+    "its progress MAE is of a nearest-training-sample lookup of the expected progress (eq. 1), "
+    "which it never uses to switch"
+)
+"""What the progress numbers of a ``goal_nearest`` run are."""
+
+
+def is_goal_nearest(sequencer: Mapping[str, Any] | None) -> bool:
+    """Whether a ``sequencer`` config (a mapping, possibly empty) selects the goal-nearest
+    baseline."""
+    return bool(sequencer) and sequencer.get("kind") == GOAL_NEAREST
+
+
+def predictor_entry(
+    kind: str, predictor: Mapping[str, Any], sequencer: Mapping[str, Any] | None
+) -> dict[str, Any]:
+    """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran, or
+    for ``sequencer=goal_nearest`` (which runs none) ``kind: "none"``, the progress estimate it
+    reports instead (``nearest_sample``) and a note saying so."""
+    if is_goal_nearest(sequencer):
+        return {
+            "kind": "none",
+            "progress_estimate": "nearest_sample",
+            "used_to_switch": False,
+            "note": NEAREST_PROGRESS_NOTE,
+        }
+    return {"kind": kind, **predictor}
+
+
+def _method_line(report: Mapping[str, Any]) -> str:
+    """The sentence saying which predictor and sequencer ran, with their options."""
+    seq = report.get("sequencer") or {}
+    if is_goal_nearest(seq):
+        return (
+            f"Sequencer `{GOAL_NEAREST}` (the baseline without learned progress): a variable "
+            f"switches once every feature its active MP moves (L1 path share >= "
+            f"{seq.get('motion_share', '–')}) has stayed slower than "
+            f"{seq.get('speed_threshold', '–')} scaled units/s for {seq.get('hold_time', '–')} s, "
+            "to the successor whose demonstrated entry states are nearest; each variable starts "
+            "at the initial MP with the nearest demonstrated entry state (feature scaling "
+            f"`{seq.get('feature_scaling', '–')}`). No progress predictor is trained or used "
+            "(the `predictor` group is ignored), so there is no coupling and no stall recovery"
+        )
+    pred = report["predictor"]
+    return (
+        f"Predictor `{pred['kind']}` (feature weighting `{pred.get('feature_weighting', '–')}`, "
+        f"scaling `{pred.get('feature_scaling', '–')}`), start rule "
+        f"`{seq.get('start_rule', 'independent')}`, switching rule "
+        f"`{seq.get('switch_rule', 'plateau')}`, coupling `{seq.get('coupling', 'none')}`, "
+        f"recovery `{seq.get('recovery', False)}`"
+    )
+
+
 def render_markdown(report: Mapping[str, Any]) -> str:
-    """The human-readable report: Table I beside the paper's, progress errors, strategy map."""
+    """The human-readable report: Table I beside the paper's, progress errors, strategy map.
+    The header names what ran: the predictor and the learned sequencer's rules, or the
+    ``goal_nearest`` baseline's options (whose progress numbers are labelled as a
+    nearest-sample lookup it does not switch on)."""
     exp = report["experiment"]
-    seq = report.get("sequencer", {})
+    goal_nearest = is_goal_nearest(report.get("sequencer"))
     lines = [
         f"# cpmp experiment `{exp['name']}`",
         "",
-        f"Predictor `{report['predictor']['kind']}` (feature weighting "
-        f"`{report['predictor'].get('feature_weighting', '–')}`, scaling "
-        f"`{report['predictor'].get('feature_scaling', '–')}`), start rule "
-        f"`{seq.get('start_rule', 'independent')}`, switching rule "
-        f"`{seq.get('switch_rule', 'plateau')}`, coupling `{seq.get('coupling', 'none')}`, "
-        f"recovery `{seq.get('recovery', False)}`; task settle time "
+        f"{_method_line(report)}; task settle time "
         f"{report.get('task', {}).get('settle_time', '–')} s, demonstration feature noise "
         f"{exp.get('feature_noise', 0.0)}; seeds {exp['seeds']}, {exp['n_boxes']} random boxes "
         "per training size and seed; counts are mean ± std over seeds.",
@@ -77,7 +133,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             f"{_fmt(row['C'], row['C_std'], 1)} | {paper_counts} | "
             f"{_fmt(row['distance_mean'], row['distance_std'])} | "
             f"{_fmt(row.get('distance_continuous_mean'), row.get('distance_continuous_std'))} | "
-            f"{paper_dist} | {_fmt(row.get('recoveries'), None, 1)} |"
+            f"{paper_dist} | {'–' if goal_nearest else _fmt(row.get('recoveries'), None, 1)} |"
         )
     lines += [
         "",
@@ -90,11 +146,17 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "which flip by 1 when a switch comes a tick early or late. Recoveries: stalls resolved "
         "per seed (mean).",
         "",
-        "## Progress prediction (Fig. 6)",
-        "",
-        "| D | MAE | MAE first 10 % | MAE last 10 % |",
-        "| --- | --- | --- | --- |",
     ]
+    if goal_nearest:
+        lines += [
+            "## Progress estimate (nearest-sample lookup, not used to switch)",
+            "",
+            f"Not a learned prediction: {NEAREST_PROGRESS_NOTE}. Held-out demonstrations.",
+            "",
+        ]
+    else:
+        lines += ["## Progress prediction (Fig. 6)", ""]
+    lines += ["| D | MAE | MAE first 10 % | MAE last 10 % |", "| --- | --- | --- | --- |"]
     for d, row in report["progress"]["by_train_size"].items():
         lines.append(
             f"| {d} | {_fmt(row['mae'], row['mae_std'], 3)} | {_fmt(row['mae_first'], None, 3)} "

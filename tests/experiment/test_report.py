@@ -12,6 +12,7 @@ from cpmp.experiment.report import (
     PAPER_TABLE_I,
     jsonable,
     mean_std,
+    predictor_entry,
     render_markdown,
     write_json,
     write_report,
@@ -141,3 +142,61 @@ def test_render_markdown_lists_fit_warnings_only_when_there_are_some():
     report["fit_warnings"] = ["seed 0, D = 3: node c/wait: the features do not change"]
     text = render_markdown(jsonable(report))
     assert "## Fit warnings" in text and "- seed 0, D = 3: node c/wait" in text
+
+
+def goal_nearest_report() -> dict:
+    """``make_report`` as a ``sequencer=goal_nearest`` run writes it (predictor entry from
+    :func:`predictor_entry`, which drops the unused predictor group)."""
+    report = make_report()
+    sequencer = {
+        "kind": "goal_nearest",
+        "speed_threshold": 0.02,
+        "hold_time": 0.1,
+        "motion_share": 0.1,
+        "feature_scaling": "global",
+    }
+    report["sequencer"] = sequencer
+    report["predictor"] = predictor_entry("klr", {"gamma": 4.0}, sequencer)
+    for row in report["reproduction"].values():
+        row["recoveries"] = 0.0
+    return report
+
+
+def test_predictor_entry_names_the_predictor_that_ran():
+    learned = predictor_entry("klr", {"gamma": 4.0}, {"coupling": "context"})
+    assert learned == {"kind": "klr", "gamma": 4.0}
+    assert predictor_entry("mlp", {"lr": 0.1}, None) == {"kind": "mlp", "lr": 0.1}
+    baseline = predictor_entry("klr", {"gamma": 4.0}, {"kind": "goal_nearest"})
+    assert baseline["kind"] == "none" and "gamma" not in baseline
+    assert baseline["progress_estimate"] == "nearest_sample"
+    assert baseline["used_to_switch"] is False
+    assert "never uses to switch" in baseline["note"]
+
+
+def test_goal_nearest_report_says_what_ran():
+    text = render_markdown(jsonable(goal_nearest_report()))
+    header = text.split("## Reproduction")[0]
+    assert "Sequencer `goal_nearest`" in header
+    assert "slower than 0.02 scaled units/s for 0.1 s" in header
+    assert "L1 path share >= 0.1" in header and "feature scaling `global`" in header
+    assert "No progress predictor is trained or used" in header
+    # nothing of the learned sequencer or of the unused predictor group
+    for absent in ("Predictor `", "switching rule", "coupling `", "start rule", "klr"):
+        assert absent not in header, absent
+    assert "## Progress estimate (nearest-sample lookup, not used to switch)" in text
+    assert "Progress prediction (Fig. 6)" not in text
+    assert "nearest-training-sample lookup of the expected progress (eq. 1)" in text
+    assert "| 3 | 0.046 ± 0.002 | 0.080 | – |" in text  # the numbers stay
+    # no stall recovery in this baseline: the column shows none rather than a count of 0
+    assert "| 0.12 ± 0.01 | – | 0.13 ± 0.08 | – |" in text
+
+
+def test_learned_report_keeps_its_header_and_recoveries():
+    report = make_report()
+    report["sequencer"] = {"start_rule": "joint", "switch_rule": "paper", "coupling": "context"}
+    for row in report["reproduction"].values():
+        row["recoveries"] = 1.5
+    text = render_markdown(jsonable(report))
+    assert "Predictor `klr_sparse`" in text and "coupling `context`" in text
+    assert "goal_nearest" not in text and "## Progress prediction (Fig. 6)" in text
+    assert "| 0.12 ± 0.01 | – | 0.13 ± 0.08 | 1.5 |" in text

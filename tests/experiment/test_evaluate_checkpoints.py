@@ -1,0 +1,102 @@
+"""``cpmp-evaluate`` reads every checkpoint kind ``cpmp-train`` and the main job write (every
+predictor option with the learned sequencer, and the ``goal_nearest`` baseline) through one
+loader, :func:`cpmp.goal_nearest.load_sequencer`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from cpmp.data import save_demonstrations
+from cpmp.errors import CpmpFileError
+from cpmp.experiment.cli import CONF_DIR
+from cpmp.experiment.jobs import evaluate_checkpoint, train_from_file
+from cpmp.goal_nearest import GoalNearestSequencer, load_sequencer
+from cpmp.sequencer import ConcurrentSequencer
+from cpmp.synthetic import make_demonstrations
+
+PREDICTORS = sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml"))
+FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.epochs=20"]}
+"""Gradient fits cut short: the test is about loading and evaluating, not about their fit."""
+KINDS = [(name, [f"predictor={name}", *FAST.get(name, [])]) for name in PREDICTORS] + [
+    ("goal_nearest", ["sequencer=goal_nearest"])
+]
+
+
+def compose_cfg(name: str, overrides: list[str]):
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return compose(name, overrides=overrides)
+
+
+@pytest.fixture(scope="module")
+def demo_file(tmp_path_factory) -> Path:
+    """Four synthetic training and two test demonstrations in one file with masks."""
+    demos = make_demonstrations(6, seed=0)
+    path = tmp_path_factory.mktemp("data") / "demos.h5"
+    names = [d.name for d in demos]
+    save_demonstrations(path, demos, splits={"train": names[:4], "test": names[4:]})
+    return path
+
+
+@pytest.mark.parametrize(("name", "overrides"), KINDS, ids=[k for k, _ in KINDS])
+def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrides):
+    train_dir, eval_dir = tmp_path / "train", tmp_path / "evaluate"
+    train_dir.mkdir()
+    eval_dir.mkdir()
+    data = f"data.path={demo_file}"
+    checkpoint = train_from_file(compose_cfg("train", [data, *overrides]), train_dir)
+    seq = load_sequencer(checkpoint)
+    goal_nearest = name == "goal_nearest"
+    assert isinstance(seq, GoalNearestSequencer if goal_nearest else ConcurrentSequencer)
+
+    cfg = compose_cfg("evaluate", [data, f"checkpoint={checkpoint}"])
+    out = json.loads(evaluate_checkpoint(cfg, eval_dir).read_text())
+    assert out["n_demos"] == 2 and out["split"] == "test"
+    if goal_nearest:
+        assert out["model"]["sequencer"] == "goal_nearest"
+        assert out["model"]["predictor"] == "none"
+        assert out["model"]["used_to_switch"] is False
+    else:
+        assert out["model"] == {"sequencer": "learned", "predictor": seq.predictor.kind}
+    progress = out["progress"]
+    assert 0.0 <= progress["mae"] <= 1.0
+    assert set(progress["per_node"]) == {f"{v}/{mp}" for v, mp in seq.node_keys}
+    replay = out["replay"]
+    assert set(replay["sequence_match"]) == set(seq.graphs)
+    assert 0.0 <= replay["all_match"] <= 1.0
+    markdown = (eval_dir / "evaluation.md").read_text()
+    if goal_nearest:
+        assert "nearest-training-sample lookup" in markdown and "never uses to switch" in markdown
+    else:
+        assert f"predictor `{seq.predictor.kind}`" in markdown
+    assert (eval_dir / "fig6_progress.png").stat().st_size > 0
+
+
+def test_load_sequencer_refuses_other_files_by_name(tmp_path, train_demos):
+    import torch
+
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else", "weights": torch.zeros(2)}, other)
+    with pytest.raises(CpmpFileError, match="neither a cpmp sequencer nor a goal_nearest"):
+        load_sequencer(other)
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(CpmpFileError, match="not a readable") as err:
+        load_sequencer(junk)
+    assert "neither" not in str(err.value)  # a damaged file is not called a format mismatch
+    with pytest.raises(CpmpFileError, match="does not exist"):
+        load_sequencer(tmp_path / "missing.pt")
+    # a damaged checkpoint of a known format keeps its loader's own message
+    seq = GoalNearestSequencer.fit(train_demos)
+    payload = torch.load(seq.save(tmp_path / "gn.pt"), weights_only=True)
+    del payload["entries"]
+    torch.save(payload, tmp_path / "gn_damaged.pt")
+    with pytest.raises(CpmpFileError, match="damaged goal_nearest checkpoint"):
+        load_sequencer(tmp_path / "gn_damaged.pt")
+    loaded = load_sequencer(tmp_path / "gn.pt")
+    x = train_demos[0].features[:5]
+    assert np.array_equal(loaded.progress(x), seq.progress(x))
