@@ -21,13 +21,13 @@ import dataclasses
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
+from cpmp.config import FitConfig, SequencerConfig
 from cpmp.errors import (
     ConfigError,
     CpmpError,
@@ -39,17 +39,15 @@ from cpmp.errors import (
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, load_checkpoint, to_builtin
 from cpmp.predictors import (
+    PREDICTORS,
     START_PREFIX,
     NodeData,
     ProgressPredictor,
-    make_predictor,
     predictor_from_spec,
-    predictor_options,
 )
 from cpmp.progress import path_length, progress_labels
+from cpmp.records import SequencerNote, TickInfo, TransitionEvent
 from cpmp.switching import (
-    COUPLINGS,
-    SWITCH_RULES,
     Coupling,
     StallDetector,
     SwitchRule,
@@ -57,7 +55,7 @@ from cpmp.switching import (
     make_rule,
     recovery_choice,
 )
-from cpmp.training import TrainerConfig, fit_predictor
+from cpmp.training import fit_predictor
 
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
@@ -66,7 +64,6 @@ log = logging.getLogger(__name__)
 
 CHECKPOINT_FORMAT = "cpmp-sequencer"
 CHECKPOINT_VERSION = 2
-NONFINITE_POLICIES = ("hold", "raise")
 
 PAPER_OPTIONS: dict[str, Any] = {
     "feature_weighting": "none",
@@ -80,200 +77,6 @@ PAPER_OPTIONS: dict[str, Any] = {
 """Fit options that turn :meth:`ConcurrentSequencer.fit`'s defaults into the paper's method:
 ``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` (the main job's
 ``predictor=klr sequencer=paper``)."""
-
-
-@dataclass
-class SequencerConfig:
-    """The transition rule's parameters (defaults: cpmp's recommended configuration; see
-    :data:`PAPER_OPTIONS` for the paper's).
-
-    Attributes:
-        threshold: a transition fires only when ``p > threshold`` (paper: 0.65).
-        patience: the "50 ms" of the rule [s] (paper: 0.05).
-        min_improvement: an increase of ``p`` smaller than this does not count as improving.
-            Attractors converge asymptotically, so ``p`` keeps creeping up by tiny amounts; with
-            a strict comparison (``0``) such a transition might never fire.
-        switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
-            min_improvement``, the paper's sentence read literally) or ``plateau`` (``p`` above
-            the threshold for ``patience`` without a new maximum); see :mod:`cpmp.switching`.
-        coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
-            hold back a transition while another variable runs an MP never seen at that
-            demonstrated switch, or one that has progressed less than at every demonstrated
-            one (learned from the labels; see :mod:`cpmp.switching`).
-        progress_margin: with ``coupling=context``, another variable's MP counts as not far
-            enough while its predicted φ is more than this below the least progress it had at
-            a demonstrated switch (``None``: compare MPs only).
-        recovery: resolve stalls (no switch and no motion for ``stall_time``) by taking the
-            candidate transition most consistent with the coupling, then most probable, if its
-            ``p`` reaches ``recovery_threshold``.
-        stall_time: seconds without any switch and without motion that count as a stall.
-        rest_speed: features count as at rest below this speed, in training ranges per second.
-        recovery_threshold: the relaxed threshold of a recovery transition.
-        min_exit: a transition also needs the current node's exit probability ``φ`` above this
-            (0 = off, the paper's rule).
-        start_kernel: ``shared`` (paper): the initial node is chosen with the nodes' progress
-            predictors. ``isotropic``: with extra heads for the initial nodes, fitted in the same
-            run on the same data but always with the isotropic kernel. Meant for
-            ``feature_weighting=path``, which de-weights features that stay constant along an
-            activation, such as box size; those are exactly what decides the strategy.
-        start_rule: ``independent`` (paper): each graph starts at its own initial node of
-            highest entry probability. ``joint``: choose among the combinations of initial MPs
-            seen together in a demonstration the one with the highest summed log entry
-            probability, so graphs cannot start in a mixture of strategies that was never
-            demonstrated (the coupling the paper's discussion proposes).
-        nonfinite: what a tick with a non-finite φ does: ``hold`` (keep every MP, note the
-            event) or ``raise`` (:class:`~cpmp.errors.DataError`). A non-finite φ never fires.
-    """
-
-    threshold: float = 0.65
-    patience: float = 0.05
-    min_improvement: float = 1e-3
-    switch_rule: str = "paper"
-    coupling: str = "context"
-    progress_margin: float | None = 0.2
-    recovery: bool = True
-    stall_time: float = 1.0
-    rest_speed: float = 0.01
-    recovery_threshold: float = 0.2
-    min_exit: float = 0.0
-    start_kernel: str = "isotropic"
-    start_rule: str = "joint"
-    nonfinite: str = "hold"
-
-    def __post_init__(self) -> None:
-        for name in (
-            "threshold",
-            "patience",
-            "min_improvement",
-            "stall_time",
-            "rest_speed",
-            "recovery_threshold",
-            "min_exit",
-        ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"sequencer option {name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ConfigError(f"sequencer option {name} must be finite, got {value}")
-        if not 0.0 <= self.threshold < 1.0:
-            raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
-        margin = self.progress_margin
-        if margin is not None and (
-            isinstance(margin, bool)
-            or not isinstance(margin, (int, float))
-            or not 0.0 <= margin <= 1.0
-        ):
-            raise ConfigError(f"progress_margin must be null or in [0, 1], got {margin!r}")
-        if not 0.0 <= self.recovery_threshold < 1.0:
-            raise ConfigError(
-                f"recovery_threshold must be in [0, 1), got {self.recovery_threshold}"
-            )
-        if self.patience < 0.0:
-            raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
-        if self.min_improvement < 0.0:
-            raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
-        if self.stall_time <= 0.0 or self.rest_speed <= 0.0:
-            raise ConfigError(
-                f"stall_time and rest_speed must be > 0, got {self.stall_time} and "
-                f"{self.rest_speed}"
-            )
-        if not 0.0 <= self.min_exit < 1.0:
-            raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
-        if not isinstance(self.recovery, bool):
-            raise ConfigError(f"recovery must be true or false, got {self.recovery!r}")
-        for name, allowed in (
-            ("switch_rule", SWITCH_RULES),
-            ("coupling", COUPLINGS),
-            ("start_kernel", ("shared", "isotropic")),
-            ("start_rule", ("independent", "joint")),
-            ("nonfinite", NONFINITE_POLICIES),
-        ):
-            if getattr(self, name) not in allowed:
-                raise ConfigError(
-                    f"{name} must be one of {', '.join(map(repr, allowed))}, "
-                    f"got {getattr(self, name)!r}"
-                )
-
-
-@dataclass(frozen=True)
-class TransitionEvent:
-    """A switch of one control variable.
-
-    Attributes:
-        t: time [s] of the tick at which the switch fired.
-        variable: control variable.
-        source: MP active before.
-        target: MP active after.
-        probability: transition probability ``p`` at that tick.
-        state: (d,) feature vector at that tick.
-        kind: ``switch`` (the switching rule fired) or ``recovery`` (a stall was resolved).
-    """
-
-    t: float
-    variable: str
-    source: str
-    target: str
-    probability: float
-    state: np.ndarray = field(repr=False)
-    kind: str = "switch"
-
-
-@dataclass(frozen=True)
-class SequencerNote:
-    """Something the sequencer decided not to do, or did exceptionally, at time ``t`` [s].
-
-    ``kind``: ``hold`` (a transition the rule would fire is held back by the coupling),
-    ``recovery`` (a stall resolved) or ``nonfinite`` (φ was NaN/inf; every MP kept).
-    """
-
-    t: float
-    kind: str
-    variable: str
-    text: str
-
-
-@dataclass
-class TickInfo:
-    """What the sequencer computed at the last tick (for inspection and recordings).
-
-    Attributes:
-        t: time [s].
-        progress: variable -> MP -> φ (every node).
-        transition_probs: variable -> successor -> ``p`` (successors of the active MP).
-        active: variable -> active MP after the tick.
-        held: variable -> successor held back by the coupling at this tick.
-    """
-
-    t: float
-    progress: dict[str, dict[str, float]]
-    transition_probs: dict[str, dict[str, float]]
-    active: dict[str, str]
-    held: dict[str, str] = field(default_factory=dict)
-
-
-def _split_options(options: dict[str, Any], kind: str) -> tuple[dict, dict, dict, dict]:
-    """Route ``fit`` options to the predictor, sequencer, trainer and fit itself."""
-    pred_names = set(predictor_options(kind))
-    seq_names = {f.name for f in dataclasses.fields(SequencerConfig)}
-    trainer_names = {f.name for f in dataclasses.fields(TrainerConfig)}
-    fit_names = {"seed", "variables", "subsample"}
-    pred, seq, trainer, rest = {}, {}, {}, {}
-    for key, value in options.items():
-        if key in pred_names:
-            pred[key] = value
-        elif key in seq_names:
-            seq[key] = value
-        elif key in trainer_names:
-            trainer[key] = value
-        elif key in fit_names:
-            rest[key] = value
-        else:
-            valid = sorted(pred_names | seq_names | trainer_names | fit_names)
-            raise ConfigError(
-                f"unknown option {key!r} for ConcurrentSequencer.fit with predictor {kind!r}; "
-                f"valid options: {', '.join(valid)}"
-            )
-    return pred, seq, trainer, rest
 
 
 _PlanRow = tuple[str, str, list[str], list[int], int, list[int], list[tuple[int, int, float]]]
@@ -354,23 +157,31 @@ class ConcurrentSequencer:
         predictor: str = "klr",
         **options: Any,
     ) -> ConcurrentSequencer:
-        """Build the sequence graphs and fit every node's progress predictor.
+        """Build the sequence graphs and fit every node's progress predictor: the keyword form
+        of :meth:`fit_config`, ``fit_config(demos, FitConfig.from_options(predictor,
+        **options))``.
 
         Args:
             demos: labelled demonstrations sharing feature names and control variables.
-            predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse`` or ``mlp``.
+            predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse``, ``mlp`` or a baseline.
             **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
-                ``l2``, ``feature_scaling``), sequencer options (``threshold``, ``patience``,
-                ``min_improvement``), trainer options (``solver``, ``newton_tol``,
-                ``newton_max_iter``, ``max_epochs``, ``progress_bar``,
-                ``logger``, ``log_dir``), ``seed``, ``variables`` (subset to model) and
-                ``subsample`` (train on every k-th sample of each activation, its last sample
-                always kept; expected progress is computed on the full trajectory first).
+                ``l2``, ``feature_scaling``: the fields of its options class), sequencer
+                options (:class:`~cpmp.config.SequencerConfig`), trainer options
+                (:class:`~cpmp.config.TrainerConfig`), ``seed``, ``variables`` and
+                ``subsample`` (:class:`~cpmp.config.FitConfig`); an unknown name raises
+                :class:`~cpmp.errors.ConfigError`.
         """
-        pred_opts, seq_opts, trainer_opts, rest = _split_options(options, predictor)
-        seq_config = SequencerConfig(**seq_opts)
-        trainer_config = TrainerConfig(**trainer_opts)
-        seed = int(rest.get("seed", 0))
+        return cls.fit_config(demos, FitConfig.from_options(predictor, **options))
+
+    @classmethod
+    def fit_config(
+        cls, demos: Sequence[Demonstration], config: FitConfig | None = None
+    ) -> ConcurrentSequencer:
+        """Build the sequence graphs and fit every node's progress predictor as ``config``
+        says (``None``: cpmp's defaults, the main job's ``predictor=klr_path
+        sequencer=coupled``)."""
+        config = config or FitConfig()
+        predictor = config.predictor
         demos = list(demos)
         if not demos:
             raise DataError("ConcurrentSequencer.fit needs at least one demonstration, got none")
@@ -381,18 +192,15 @@ class ConcurrentSequencer:
                     f"{demo.name or f'demonstration {m}'} has features {list(demo.feature_names)}"
                     f" but the first demonstration has {feature_names}; all must match"
                 )
-        graphs = build_graphs(demos, rest.get("variables"))
+        graphs = build_graphs(demos, config.variables)
         node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        if seq_config.start_kernel == "isotropic":
+        if config.sequencer.start_kernel == "isotropic":
             node_keys += start_keys(graphs)
-        model = make_predictor(predictor, node_keys, len(feature_names), **pred_opts)
+        model = PREDICTORS[predictor](node_keys, len(feature_names), config.predictor_config)
         all_x = np.concatenate([d.features for d in demos], axis=0)
         model.scaler.fit(all_x, model.config.feature_scaling)
-        subsample = int(rest.get("subsample", 1))
-        if subsample < 1:
-            raise ConfigError(f"subsample must be >= 1, got {subsample}")
-        data = node_training_data(graphs, model, subsample)
-        summary = fit_predictor(model, data, trainer_config, seed=seed)
+        data = node_training_data(graphs, model, config.subsample)
+        summary = fit_predictor(model, data, config.trainer, seed=config.seed)
         bad = nonfinite_parameters(model)
         if bad:
             raise DataError(
@@ -411,7 +219,7 @@ class ConcurrentSequencer:
         coupling = Coupling.learn(demos, sorted(graphs), model.scaler.transform)
         feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
         return cls(
-            graphs, model, feature_names, seq_config, summary, combos, coupling, feature_range
+            graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range
         )
 
     # ----------------------------------------------------------------------------- inference

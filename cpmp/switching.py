@@ -39,11 +39,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from cpmp.config.sequencer import COUPLINGS, SWITCH_RULES
+
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
 
-SWITCH_RULES = ("paper", "plateau")
-COUPLINGS = ("none", "context")
 
 _EPS_T = 1e-9
 """Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""

@@ -21,133 +21,12 @@ from typing import Any, Literal
 
 import torch
 
+from cpmp.config.trainer import TrainerConfig
 from cpmp.errors import ConfigError
 from cpmp.predictors import NodeData, ProgressPredictor
-from cpmp.predictors.newton import NEWTON_MAX_ITER, NEWTON_TOL, NewtonInfo, SolverOptions
+from cpmp.predictors.newton import NewtonInfo
 
 log = logging.getLogger(__name__)
-
-
-LBFGS_EPOCHS = 3
-"""Default LBFGS optimiser steps (each up to the predictor's ``max_iter`` iterations)."""
-EARLY_STOPPING_TOL = 1e-4
-"""Default relative loss improvement that counts as progress for early stopping."""
-EARLY_STOPPING_PATIENCE = 20
-"""Default epochs without such progress before an Adam fit lowers its rate or stops."""
-EARLY_STOPPING_DECAYS = 2
-"""Default number of plateaus that lower the learning rate before one stops the fit."""
-EARLY_STOPPING_LR_FACTOR = 0.1
-"""Default learning-rate factor at such a plateau."""
-
-
-@dataclass
-class TrainerConfig:
-    """Options of the Lightning trainer used for fitting.
-
-    Attributes:
-        max_epochs: full-batch optimiser steps (Newton: each solves every node to ``newton_tol``;
-            LBFGS: each runs up to the predictor's ``max_iter`` iterations; Adam: one step);
-            ``None`` picks 1 for Newton (a second step finds nothing left to do),
-            ``lbfgs_epochs`` for LBFGS and the predictor's ``epochs`` for Adam. Adam fits may
-            stop before it (see ``early_stopping``).
-        progress_bar: show Lightning's progress bar.
-        logger: ``"csv"``, ``"tensorboard"`` or ``None`` (no logging).
-        log_dir: where the logger writes (``None``: no logger).
-        lr: learning rate override for Adam-trained predictors (> 0; ``None``: the
-            predictor's ``lr``).
-        solver: ``"newton"`` (default) or ``"lbfgs"``: how convex weight fits are solved
-            (``klr``, ``klr_full`` and ``klr_sparse``'s re-fit); Adam-trained parts ignore it.
-        newton_tol: Newton stops per node when the max-norm of the loss gradient or the Newton
-            decrement is at most this (> 0).
-        newton_max_iter: Newton iterations per node at most (>= 1).
-        lbfgs_epochs: LBFGS optimiser steps when ``max_epochs`` is ``None`` (>= 1).
-        early_stopping: lower the rate of an Adam fit (``mlp``, ``klr_sparse``'s sparsity
-            phase) when the training loss stops improving, and stop it at the last such
-            plateau (see :class:`LossPlateau`); ``False`` runs every epoch of the budget.
-            Convex solvers run their epochs regardless.
-        early_stopping_tol: an epoch improves on the best loss so far only if it lowers it by
-            more than this fraction of its magnitude (>= 0).
-        early_stopping_patience: after this many epochs in a row without such an
-            improvement, lower the learning rate or stop (>= 1).
-        early_stopping_decays: how many such plateaus multiply the learning rate by
-            ``early_stopping_lr_factor`` (and the fit goes on) before one stops it (>= 0): a
-            smaller rate lets Adam settle where a large one keeps oscillating.
-        early_stopping_lr_factor: the learning-rate factor of a decay (0 < factor < 1).
-    """
-
-    max_epochs: int | None = None
-    progress_bar: bool = False
-    logger: str | None = "csv"
-    log_dir: str | None = None
-    lr: float | None = None
-    solver: str = "newton"
-    newton_tol: float = NEWTON_TOL
-    newton_max_iter: int = NEWTON_MAX_ITER
-    lbfgs_epochs: int = LBFGS_EPOCHS
-    early_stopping: bool = True
-    early_stopping_tol: float = EARLY_STOPPING_TOL
-    early_stopping_patience: int = EARLY_STOPPING_PATIENCE
-    early_stopping_decays: int = EARLY_STOPPING_DECAYS
-    early_stopping_lr_factor: float = EARLY_STOPPING_LR_FACTOR
-
-    def __post_init__(self) -> None:
-        if self.logger not in (None, "csv", "tensorboard"):
-            raise ConfigError(
-                f"trainer logger must be 'csv', 'tensorboard' or null, got {self.logger!r}"
-            )
-        if self.solver not in ("newton", "lbfgs"):
-            raise ConfigError(f"trainer solver must be 'newton' or 'lbfgs', got {self.solver!r}")
-        for name in ("progress_bar", "early_stopping"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(
-                    f"trainer {name} must be true or false, got {getattr(self, name)!r}"
-                )
-        if self.max_epochs is not None:
-            self.max_epochs = self._whole("max_epochs")
-        self.newton_max_iter = self._whole("newton_max_iter")
-        self.lbfgs_epochs = self._whole("lbfgs_epochs")
-        self.early_stopping_patience = self._whole("early_stopping_patience")
-        self.early_stopping_decays = self._whole("early_stopping_decays", minimum=0)
-        factor = self._finite("early_stopping_lr_factor", positive=True)
-        if factor >= 1.0:
-            raise ConfigError(
-                f"trainer early_stopping_lr_factor must be < 1 (it lowers the rate), got {factor!r}"
-            )
-        self.early_stopping_lr_factor = factor
-        self.newton_tol = self._finite("newton_tol", positive=True)
-        self.early_stopping_tol = self._finite("early_stopping_tol", positive=False)
-        if self.lr is not None:
-            self.lr = self._finite("lr", positive=True)
-
-    def _whole(self, name: str, minimum: int = 1) -> int:
-        """Option ``name`` as a whole number >= ``minimum`` (``2.0`` is accepted as 2)."""
-        value = getattr(self, name)
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not math.isfinite(value)
-            or value != int(value)
-            or value < minimum
-        ):
-            raise ConfigError(f"trainer {name} must be a whole number >= {minimum}, got {value!r}")
-        return int(value)
-
-    def _finite(self, name: str, positive: bool) -> float:
-        """Option ``name`` as a finite float, > 0 if ``positive`` else >= 0."""
-        value = getattr(self, name)
-        bound = "> 0" if positive else ">= 0"
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not math.isfinite(value)
-            or (value <= 0 if positive else value < 0)
-        ):
-            raise ConfigError(f"trainer {name} must be a finite number {bound}, got {value!r}")
-        return float(value)
-
-    def solver_options(self) -> SolverOptions:
-        """The convex-solver settings handed to the predictor."""
-        return SolverOptions(self.solver, self.newton_tol, self.newton_max_iter)
 
 
 @dataclass
@@ -249,9 +128,9 @@ def _lightning_module(
                     params,
                     max_iter=int(_predictor_option(predictor, "max_iter")),
                     line_search_fn="strong_wolfe",
-                    tolerance_grad=1e-9,
-                    tolerance_change=1e-12,
-                    history_size=50,
+                    tolerance_grad=cfg.lbfgs_tolerance_grad,
+                    tolerance_change=cfg.lbfgs_tolerance_change,
+                    history_size=cfg.lbfgs_history_size,
                 )
             return torch.optim.Adam(params, lr=rate)
 

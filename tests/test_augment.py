@@ -8,6 +8,7 @@ import pytest
 from cpmp.augment import add_feature_noise, feature_ranges, noisy_features
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
+from cpmp.progress import white_noise_std
 
 
 def _demos(n_demos: int = 3, n: int = 2000, seed: int = 0) -> list[Demonstration]:
@@ -108,3 +109,17 @@ def test_noisy_features_for_closed_loop():
     assert np.all(samples[:, 1] == 2.0)
     batch = noisy_features(np.zeros((5, 3)), 0.0, [1.0, 1.0, 1.0], rng)
     assert batch.shape == (5, 3) and not batch.any()
+
+
+def test_noise_level_is_what_the_progress_label_estimates():
+    """add_feature_noise and cpmp.progress.white_noise_std agree on the noise's size: ~0
+    before, ``sigma * range`` after (what the noise-robust eq. 1 removes)."""
+    t = np.arange(3000) * 0.01
+    x = np.column_stack([np.sin(t), 4.0 * np.cos(0.3 * t), np.full_like(t, 0.3)])
+    demo = Demonstration(t, x, {"v": np.full(len(t), "a")}, ["s", "c", "ctx"], name="demo_0")
+    np.testing.assert_array_equal(white_noise_std(x), np.zeros(3))
+    sigma = 0.01
+    (noisy,) = add_feature_noise([demo], sigma, seed=5)
+    expected = sigma * feature_ranges([demo])
+    # relative standard error of the estimate: about 1.8 / sqrt(n); constant features stay 0
+    np.testing.assert_allclose(white_noise_std(noisy.features), expected, rtol=5 * 1.8 / 55)

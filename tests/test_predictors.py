@@ -48,7 +48,7 @@ def test_klr_uses_stated_support_count(fitted, train_demos):
 
 def test_klr_full_uses_every_sample(fitted, train_demos):
     counts = fitted["klr_full"].fit_summary["support_counts"]
-    n_a_go = sum(s.length for d in train_demos for s in d.segments("a") if s.mp == "a_go")
+    n_a_go = sum(s.n_samples for d in train_demos for s in d.segments("a") if s.mp == "a_go")
     assert counts["a/a_go"] == n_a_go
 
 

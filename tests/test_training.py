@@ -1,5 +1,4 @@
 import csv
-import dataclasses
 import functools
 import itertools
 import math
@@ -8,10 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-import yaml
 
 from cpmp.errors import ConfigError
-from cpmp.predictors import MLPConfig, SparseKLRConfig
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.training import LossPlateau, TrainerConfig
 
@@ -200,19 +197,6 @@ def test_whole_number_options_accept_integral_floats():
     cfg = TrainerConfig(max_epochs=7.0, lbfgs_epochs=2.0, early_stopping_patience=4.0)
     assert (cfg.max_epochs, cfg.lbfgs_epochs, cfg.early_stopping_patience) == (7, 2, 4)
     assert all(type(v) is int for v in (cfg.max_epochs, cfg.lbfgs_epochs))
-
-
-def test_trainer_yaml_lists_every_option_with_the_dataclass_default():
-    raw = yaml.safe_load((CONF / "trainer" / "default.yaml").read_text())
-    fields = {f.name: f.default for f in dataclasses.fields(TrainerConfig)}
-    assert set(raw) == set(fields) - {"log_dir"}  # the job sets log_dir to its run directory
-    assert {name: fields[name] for name in raw} == raw
-
-
-@pytest.mark.parametrize(("name", "config"), [("mlp", MLPConfig), ("klr_sparse", SparseKLRConfig)])
-def test_predictor_yaml_epoch_budget_matches_the_dataclass(name, config):
-    raw = yaml.safe_load((CONF / "predictor" / f"{name}.yaml").read_text())
-    assert (raw["epochs"], raw["lr"]) == (config.epochs, config.lr)
 
 
 # ------------------------------------------------------------------------- random state

@@ -7,12 +7,13 @@ A Hydra command checks its configuration before it imports anything heavy
 
 1. **compose** (Hydra and OmegaConf only, well under a second): the command line is parsed and
    the configuration composed as Hydra will compose it (for a multirun: every job of the
-   sweep); an unknown group option or key, an override Hydra cannot parse, a value of the
-   wrong type (against the type of its default), an interpolation that does not resolve, a
-   required path that is unset or names no file fail here — :func:`check_command`;
-2. **the job's own checks** (value ranges, predictor/sequencer/trainer options, the task): they
-   import torch (and MuJoCo for the task) but run before any long work, for every job of a sweep
-   before the first one starts;
+   sweep) on the schema of :mod:`cpmp.experiment.config`; an unknown group option or key, an
+   override Hydra cannot parse, a value of the wrong type (against the type of its default
+   and the schema), an interpolation that does not resolve, a required path that is unset or
+   names no file fail here — :func:`check_command`;
+2. **the job's own checks** (value ranges, predictor/sequencer/trainer options, the task): the
+   composed config is converted into the typed configs of :mod:`cpmp.config`, which validate
+   themselves, before any long work, for every job of a sweep before the first one starts;
 3. the job runs under ``hydra.main``; a :class:`~cpmp.errors.CpmpError` it raises ends it the
    same way (:func:`run_job`).
 
@@ -69,7 +70,7 @@ def _aggregate_job(cfg: Any, run_dir: Path) -> Path:
 
 def _collect_job(cfg: Any, run_dir: Path) -> Path:
     """Record ``n_demos`` scripted demonstrations into ``run_dir / output`` (HDF5)."""
-    from cpmp.sim import TaskConfig
+    from cpmp.config import TaskConfig
     from cpmp.sim.collect import collect_demonstrations
 
     task = TaskConfig.from_dict(cfg.task)
@@ -96,36 +97,31 @@ def _progress_field_job(cfg: Any, run_dir: Path) -> Path:
 
 
 # ------------------------------------------------------------------ the jobs' own checks
+# Each converts the config into the typed configs the job will build from it, which validate
+# themselves (cpmp.experiment.config); only the goal_nearest baseline's options import torch.
 def _check_experiment(cfg: Any) -> None:
-    """The main job's settings, predictor, sequencer, trainer and task (imports in order of
-    cost: torch, then the simulator)."""
-    from cpmp.experiment.pipeline import ExperimentSettings
+    """The main job's settings, predictor, sequencer, trainer and task."""
+    from cpmp.experiment.config import experiment_job
 
-    ExperimentSettings.from_cfg(cfg.experiment)
-    from cpmp.experiment.jobs import validate_common
-
-    validate_common(cfg)
-    from cpmp.sim import TaskConfig
-
-    TaskConfig.from_dict(cfg.task)
+    experiment_job(cfg)
 
 
 def _check_train(cfg: Any) -> None:
-    from cpmp.experiment.jobs import validate_common
+    from cpmp.experiment.config import job_fit_settings
 
-    validate_common(cfg)
+    job_fit_settings(cfg)
 
 
 def _check_collect(cfg: Any) -> None:
-    from cpmp.sim import TaskConfig
+    from cpmp.config import TaskConfig
 
     TaskConfig.from_dict(cfg.task)
 
 
 def _check_progress_field(cfg: Any) -> None:
-    from cpmp.experiment.config import predictor_options
+    from cpmp.experiment.config import predictor_from_cfg
 
-    predictor_options(cfg.predictor)
+    predictor_from_cfg(cfg.predictor)
 
 
 COMMANDS: dict[str, Command] = {

@@ -2,12 +2,13 @@
 :mod:`cpmp.experiment.cli`).
 
 :func:`check_command_line` parses the command line with Hydra's own parser and composes the
-configuration as Hydra will (for a multirun: every job of the sweep) with Hydra and OmegaConf
-only; an unknown group option or key, an override Hydra cannot parse, a value of the wrong type
-(against the type of its default), an interpolation that does not resolve, a required path that
-is unset or names no file become one-line :class:`~cpmp.errors.ConfigError` /
+configuration as Hydra will (for a multirun: every job of the sweep) with Hydra, OmegaConf and
+the schema of :mod:`cpmp.experiment.config` only; an unknown group option or key, an override
+Hydra cannot parse, a value of the wrong type (against the type of its default and the schema),
+an interpolation that does not resolve, a required path that is unset or names no file become
+one-line :class:`~cpmp.errors.ConfigError` /
 :class:`~cpmp.errors.CpmpFileError` messages naming the override. :func:`check_jobs` then runs
-the command's own value checks (which import torch) on every job, before the first starts.
+the command's own value checks (the typed configs) on every job, before the first starts.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+from cpmp.experiment.config import register_configs
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 """The Hydra config directory: ``conf/`` of the repository this package is installed from."""
@@ -143,6 +145,9 @@ def _composition_error(
             "(--multirun) to run one job per value; for a list write key=[a,b], for a string "
             "with commas quote it: key='a,b'"
         )
+    merging = re.match(r"Error merging override (.+)", text)
+    if merging and err.__cause__ is not None:
+        return ConfigError(f"{merging.group(1)}: {_one_line(str(err.__cause__))}")
     if "Cannot find primary config" in text:
         return ConfigError(f"{_one_line(text)}; the configs live in {CONF_DIR}")
     if "Primary config directory not found" in text:
@@ -178,6 +183,7 @@ def _compose(config_name: str, overrides: Sequence[str], config_dir: str | None)
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    register_configs()  # the schema of conf/, in case Hydra's ConfigStore was cleared
     overrides = list(overrides)
     if config_dir is not None:
         overrides = _with_search_path(overrides, config_dir)
@@ -279,19 +285,26 @@ def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
     return True, node
 
 
-def _check_values(
-    command: Command, job: dict[str, Any], base: dict[str, Any], parsed: list[Any]
-) -> None:
-    """Types of the overridden values against the defaults (``base``: the config composed with
-    the same group options and no value override), the seed and counts, then the command's
-    required paths, files and directories."""
+def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
+    """The overridden values, as written on the command line, against the kinds of the
+    defaults (``base``: the config composed with the same group options and no value
+    override; ``parsed``: the value overrides); an interpolation is checked once resolved, by
+    the schema."""
     for override in parsed:
         if override.is_delete() or override.is_hydra_override():
             continue
+        value = override.value()
+        if isinstance(value, str) and "${" in value:
+            continue
         key = override.get_key_element().lstrip("+")
-        (in_job, value), (in_base, default) = _select(job, key), _select(base, key)
-        if in_job and in_base:
+        in_base, default = _select(base, key)
+        if in_base:
             _check_type(key, value, default)
+
+
+def _check_values(command: Command, job: dict[str, Any]) -> None:
+    """The seed and counts of the composed job, then the command's required paths, files and
+    directories."""
     if "seed" in job:
         seed = job["seed"]
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -359,22 +372,26 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
     jobs = _sweep(parsed) if multirun else [overrides]
     checked: list[CheckedJob] = []
     bases: dict[tuple[str, ...], dict[str, Any]] = {}
+    group_names: set[str] | None = None
     for job_overrides in jobs:
         try:
-            cfg = _compose(config_name, job_overrides, args.config_dir)
             if inspection:
+                _compose(config_name, job_overrides, args.config_dir)
                 continue
             job_parsed = _parse_overrides(job_overrides)
-            choices = set(cfg.hydra.runtime.choices)
+            if group_names is None:
+                default = _compose(config_name, [], args.config_dir)
+                group_names = set(default.hydra.runtime.choices)
             groups = tuple(
                 line
                 for line, o in zip(job_overrides, job_parsed, strict=True)
-                if o.key_or_group in choices or o.is_hydra_override()
+                if o.key_or_group in group_names or o.is_hydra_override()
             )
             if groups not in bases:
                 bases[groups] = _resolved(_compose(config_name, list(groups), args.config_dir))
-            job = _resolved(cfg)
-            _check_values(command, job, bases[groups], job_parsed)
+            _check_types(bases[groups], [o for o in job_parsed if o.input_line not in groups])
+            cfg = _compose(config_name, job_overrides, args.config_dir)
+            _check_values(command, _resolved(cfg))
         except CpmpError as err:
             raise _in_job(err, job_overrides, len(jobs)) from None
         checked.append(

@@ -3,6 +3,7 @@ evaluation of a checkpoint. Each takes a composed config and a run directory."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import logging.handlers
 import os
@@ -17,12 +18,10 @@ from typing import Any
 import numpy as np
 
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.experiment.config import predictor_options, to_dict
+from cpmp.experiment.config import ExperimentJob, experiment_job, job_fit_settings
 from cpmp.experiment.pipeline import (
-    ExperimentSettings,
     balanced_subset,
     evaluate_offline,
-    fit_sequencer,
     progress_bar,
     reproduce,
     split_by_strategy,
@@ -30,32 +29,26 @@ from cpmp.experiment.pipeline import (
     strategy_map,
     strategy_signatures,
     summarize_episodes,
+    train_sequencer,
 )
-from cpmp.experiment.report import PAPER_TABLE_I, jsonable, mean_std, write_json, write_report
+from cpmp.experiment.report import (
+    PAPER_TABLE_I,
+    jsonable,
+    mean_std,
+    predictor_entry,
+    write_json,
+    write_report,
+)
 
 log = logging.getLogger(__name__)
 
 
 def validate_common(cfg: Any) -> tuple[str, dict[str, Any]]:
-    """Check the predictor, sequencer and trainer groups before any long work starts."""
-    from cpmp.sequencer import SequencerConfig
-    from cpmp.training import TrainerConfig
-
-    kind, options = predictor_options(cfg.predictor)
-    sequencer = to_dict(cfg.get("sequencer"))
-    if sequencer.get("kind") is not None:
-        from cpmp.goal_nearest import KIND, goal_nearest_options
-
-        if sequencer.pop("kind") != KIND:
-            raise ConfigError(f"sequencer.kind must be {KIND!r} or absent (the learned sequencer)")
-        goal_nearest_options(sequencer)
-        sequencer = {}
-    try:
-        SequencerConfig(**sequencer)
-        TrainerConfig(**to_dict(cfg.get("trainer")))
-    except TypeError as err:
-        raise ConfigError(f"bad sequencer/trainer option: {err}") from err
-    return kind, options
+    """Check the predictor, sequencer and trainer groups of a composed config
+    (:func:`~cpmp.experiment.config.job_fit_settings`); returns the predictor's kind and all
+    its options."""
+    settings = job_fit_settings(cfg)
+    return settings.predictor, dataclasses.asdict(settings.fit.predictor_config)
 
 
 @dataclass
@@ -91,16 +84,17 @@ def _timed(seconds: dict[str, float], key: str, name: str) -> Iterator[None]:
     seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - start
 
 
-def collect_seed(cfg: Any, run_dir: str | Path, seed: int) -> SeedData:
+def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> SeedData:
     """Stage 1 of one seed: record its demonstrations (saved as ``seed_<s>/demos.h5`` with the
-    train/test split) and the demonstrator's run on every reproduction box."""
+    train/test split) and the demonstrator's run on every reproduction box. ``job``: the
+    typed job (or its composed config, converted here)."""
     from cpmp.data import save_demonstrations
-    from cpmp.sim import TaskConfig, record_demonstration, sample_box
+    from cpmp.sim import sample_box
     from cpmp.sim.collect import sample_boxes
     from cpmp.sim.simulation import shared_kinematics
 
-    settings = ExperimentSettings.from_cfg(cfg.experiment)
-    task = TaskConfig.from_dict(cfg.task)
+    job = experiment_job(job)
+    settings, task = job.settings, job.task
     seed_dir = Path(run_dir) / f"seed_{seed}"
     seed_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -110,10 +104,8 @@ def collect_seed(cfg: Any, run_dir: str | Path, seed: int) -> SeedData:
     with _timed(seconds, "collect", f"seed {seed}: collect {n_demos} demonstrations"):
         rng = np.random.default_rng(seed)
         boxes = sample_boxes(rng, task, n_demos, balanced=True)
-        demos = [
-            record_demonstration(b, task, name=f"demo_{i:03d}")
-            for i, b in enumerate(progress_bar(boxes, f"seed {seed} demos"))
-        ]
+        names = [f"demo_{i:03d}" for i in range(n_demos)]
+        demos = _record_together(boxes, task, names, f"seed {seed} demos")
         failed = [d.name for d in demos if not d.metadata.get("success")]
         if failed:
             raise RuntimeError(f"the scripted demonstrator failed on {failed}")
@@ -133,7 +125,7 @@ def collect_seed(cfg: Any, run_dir: str | Path, seed: int) -> SeedData:
     with _timed(seconds, "expected", name):
         box_rng = np.random.default_rng(seed + settings.box_seed_offset)
         repro_boxes = [sample_box(box_rng, task) for _ in range(settings.n_boxes)]
-        expected = [record_demonstration(b, task) for b in progress_bar(repro_boxes, "expected")]
+        expected = _record_together(repro_boxes, task, None, "expected")
     signatures = strategy_signatures(train)
     if settings.feature_noise > 0:
         from cpmp.augment import add_feature_noise
@@ -142,33 +134,39 @@ def collect_seed(cfg: Any, run_dir: str | Path, seed: int) -> SeedData:
     return SeedData(seed, train, test, repro_boxes, expected, signatures, seconds)
 
 
-def run_train_size(cfg: Any, run_dir: str | Path, data: SeedData, d: int) -> dict[str, Any]:
+def _record_together(boxes: list[Any], task: Any, names: list[str] | None, desc: str) -> list[Any]:
+    """The scripted demonstrations of ``boxes``, all boxes run together
+    (:func:`cpmp.sim.record_demonstrations`, the same data as one at a time), with a progress
+    bar."""
+    from cpmp.sim import record_demonstrations
+
+    bar = progress_bar(boxes, desc)
+    try:
+        return record_demonstrations(boxes, task, names, on_result=lambda i, demo: bar.update(1))
+    finally:
+        bar.close()
+
+
+def run_train_size(
+    job: ExperimentJob | Any, run_dir: str | Path, data: SeedData, d: int
+) -> dict[str, Any]:
     """Stage 2 of one seed and training size ``d``: train (``seed_<s>/model_D<d>.pt``), evaluate
     progress offline, reproduce the boxes closed-loop and, at the largest D, the strategy map.
 
     Returns ``row`` (the report's per-seed numbers), ``pairs`` (Fig. 6 ``(expected,
     predicted)`` arrays), ``episodes`` (dicts), ``strategy_map`` (or ``None``), ``train_boxes``
-    ((width, depth) of the training demos) and ``seconds`` per stage.
+    ((width, depth) of the training demos) and ``seconds`` per stage. ``job``: the typed job
+    (or its composed config, converted here).
     """
-    from cpmp.sim import TaskConfig
-
-    settings = ExperimentSettings.from_cfg(cfg.experiment)
-    task = TaskConfig.from_dict(cfg.task)
-    kind, _ = predictor_options(cfg.predictor)
+    job = experiment_job(job)
+    settings, task, kind = job.settings, job.task, job.fit.predictor
     seed = data.seed
     seed_dir = Path(run_dir) / f"seed_{seed}"
     seed_dir.mkdir(parents=True, exist_ok=True)
     seconds: dict[str, float] = {}
     subset = balanced_subset(data.train, d)
     with _timed(seconds, "train", f"seed {seed}: train {kind} on {d} demos"):
-        seq = fit_sequencer(
-            subset,
-            cfg.predictor,
-            cfg.get("sequencer"),
-            cfg.get("trainer"),
-            seed,
-            log_dir=seed_dir / "lightning" / f"D{d}",
-        )
+        seq = train_sequencer(subset, job.fit, seed, log_dir=seed_dir / "lightning" / f"D{d}")
         seq.save(seed_dir / f"model_D{d}.pt")
     with _timed(seconds, "evaluate", f"seed {seed}: evaluate progress (D={d})"):
         offline = evaluate_offline(seq, data.test)
@@ -232,28 +230,26 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
     :func:`cpmp.experiment.compare.run_compare` instead and returns ``compare.json``.
     """
     from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map, progress_curves
-    from cpmp.sim import TaskConfig
 
     if cfg.get("compare") is not None:
         from cpmp.experiment.compare import run_compare
 
         return run_compare(cfg, run_dir)
     run_dir = Path(run_dir)
-    settings = ExperimentSettings.from_cfg(cfg.experiment)
-    TaskConfig.from_dict(cfg.task)
-    kind, _ = validate_common(cfg)
+    job = experiment_job(cfg)
+    settings = job.settings
     started = time.perf_counter()
     workers = settings.workers or default_workers(len(settings.seeds))
     workers = min(workers, len(settings.seeds) * len(settings.train_sizes))
     if workers > 1:
         log.info("running seeds %s on %d worker processes", settings.seeds, workers)
-        collected, results = _run_parallel(cfg, run_dir, settings, workers)
+        collected, results = _run_parallel(job, run_dir, workers)
     else:
         collected, results = {}, {}
         for seed in settings.seeds:
-            collected[seed] = collect_seed(cfg, run_dir, seed)
+            collected[seed] = collect_seed(job, run_dir, seed)
             for d in settings.train_sizes:
-                results[seed, d] = run_train_size(cfg, run_dir, collected[seed], d)
+                results[seed, d] = run_train_size(job, run_dir, collected[seed], d)
 
     largest = max(settings.train_sizes)
     per_seed: list[dict[str, Any]] = []
@@ -284,6 +280,11 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
         "seed_<s>/recordings/*.rrd": "rerun recordings (open with `rerun FILE.rrd`)",
         "seed_<s>/lightning/D<d>/": "Lightning CSV logs of the predictor fits",
     }
+    if job.fit.goal_nearest is not None:  # no predictor: nothing for Lightning to fit
+        del files["seed_<s>/lightning/D<d>/"]
+        files["seed_<s>/model_D<d>.pt"] = (
+            "goal_nearest checkpoints (cpmp.goal_nearest.load_sequencer)"
+        )
     with _timed(stage_seconds, "plots", "plots"):
         curves = {f"D={d}": progress_curves(pairs_by_d[d]) for d in settings.train_sizes}
         plot_progress_curves(
@@ -303,7 +304,7 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
         )
         files["fig7_strategy_map.png"] = "chosen vs correct initial strategy (Fig. 7)"
     write_json(run_dir / "episodes.json", episodes_out)
-    report = _aggregate(settings, kind, cfg, per_seed)
+    report = _aggregate(job, per_seed)
     report["files"] = files
     report["seconds"] = time.perf_counter() - started
     write_json(
@@ -356,35 +357,27 @@ def _init_worker(queue: Any, level: int) -> None:
     root.setLevel(level)
 
 
-def _collect_job(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
+def _collect_job(job: ExperimentJob, run_dir: Path, seed: int) -> SeedData:
     global _JOB_LABEL
     _JOB_LABEL = f"seed {seed}"
-    return collect_seed(_as_config(cfg), run_dir, seed)
+    return collect_seed(job, run_dir, seed)
 
 
-def _train_size_job(cfg: dict[str, Any], run_dir: Path, data: SeedData, d: int) -> dict[str, Any]:
+def _train_size_job(job: ExperimentJob, run_dir: Path, data: SeedData, d: int) -> dict[str, Any]:
     global _JOB_LABEL
     _JOB_LABEL = f"seed {data.seed} D={d}"
-    return run_train_size(_as_config(cfg), run_dir, data, d)
-
-
-def _as_config(cfg: dict[str, Any]) -> Any:
-    from omegaconf import OmegaConf
-
-    return OmegaConf.create(cfg)
+    return run_train_size(job, run_dir, data, d)
 
 
 def _run_parallel(
-    cfg: Any, run_dir: Path, settings: ExperimentSettings, workers: int
+    job: ExperimentJob, run_dir: Path, workers: int
 ) -> tuple[dict[int, SeedData], dict[tuple[int, int], dict[str, Any]]]:
     """Every seed's collection, then each of its training sizes (largest first), as jobs on
     ``workers`` spawned processes. Returns the collections by seed and results by (seed, D)."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
-    from omegaconf import DictConfig, OmegaConf
-
-    plain = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else cfg
+    settings = job.settings
     context = multiprocessing.get_context("spawn")
     queue = context.Queue()
     listener = logging.handlers.QueueListener(queue, _Dispatch())
@@ -399,7 +392,7 @@ def _run_parallel(
     os.environ["TQDM_DISABLE"] = "1"
     try:
         pending: dict[Future, tuple[int, int | None]] = {
-            pool.submit(_collect_job, plain, run_dir, seed): (seed, None) for seed in settings.seeds
+            pool.submit(_collect_job, job, run_dir, seed): (seed, None) for seed in settings.seeds
         }
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -410,8 +403,8 @@ def _run_parallel(
                     continue
                 collected[seed] = data = future.result()
                 for size in sorted(settings.train_sizes, reverse=True):
-                    job = pool.submit(_train_size_job, plain, run_dir, data, size)
-                    pending[job] = (seed, size)
+                    training = pool.submit(_train_size_job, job, run_dir, data, size)
+                    pending[training] = (seed, size)
     finally:
         if bars is None:
             del os.environ["TQDM_DISABLE"]
@@ -422,10 +415,9 @@ def _run_parallel(
     return collected, results
 
 
-def _aggregate(
-    settings: ExperimentSettings, kind: str, cfg: Any, per_seed: list[dict[str, Any]]
-) -> dict[str, Any]:
+def _aggregate(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean ± std over seeds of every number; distances pooled over all complete episodes."""
+    settings = job.settings
     reproduction: dict[str, Any] = {}
     progress_by_d: dict[str, Any] = {}
     for d in map(str, settings.train_sizes):
@@ -468,9 +460,7 @@ def _aggregate(
     return jsonable(
         {
             "experiment": {k: v for k, v in settings.__dict__.items() if k != "workers"},
-            "predictor": {"kind": kind, **to_dict(cfg.predictor)},
-            "sequencer": to_dict(cfg.get("sequencer")),
-            "task": to_dict(cfg.task),
+            **_configs(job),
             "progress": {
                 "mae": progress_by_d[largest]["mae"],
                 "mae_first": progress_by_d[largest]["mae_first"],
@@ -489,6 +479,24 @@ def _aggregate(
             "per_seed": per_seed,
         }
     )
+
+
+def _configs(job: ExperimentJob) -> dict[str, Any]:
+    """The report's ``predictor``, ``sequencer`` and ``task`` sections: every option used."""
+    fit = job.fit
+    if fit.goal_nearest is not None:
+        from cpmp.goal_nearest import KIND
+
+        sequencer = {"kind": KIND, **dataclasses.asdict(fit.goal_nearest)}
+    else:
+        sequencer = dataclasses.asdict(fit.fit.sequencer)
+    return {
+        "predictor": predictor_entry(
+            fit.predictor, dataclasses.asdict(fit.fit.predictor_config), sequencer
+        ),
+        "sequencer": sequencer,
+        "task": job.task.to_dict(),
+    }
 
 
 def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
@@ -510,21 +518,14 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
     save ``model.pt`` into ``run_dir``; returns the checkpoint path."""
-    validate_common(cfg)
+    settings = job_fit_settings(cfg)
     from cpmp.data import load_demonstrations
 
     path, split = _demo_file(cfg, "train")
     demos = load_demonstrations(path, split=split)
     run_dir = Path(run_dir)
     with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'})"):
-        seq = fit_sequencer(
-            demos,
-            cfg.predictor,
-            cfg.get("sequencer"),
-            cfg.get("trainer"),
-            int(cfg.seed),
-            log_dir=run_dir / "lightning",
-        )
+        seq = train_sequencer(demos, settings, int(cfg.seed), log_dir=run_dir / "lightning")
     out = seq.save(run_dir / "model.pt")
     write_json(
         run_dir / "train_summary.json",
@@ -539,7 +540,7 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON."""
     from cpmp.data import load_demonstrations
     from cpmp.experiment.plots import plot_progress_curves
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.goal_nearest import load_sequencer
 
     if not cfg.get("checkpoint"):
         raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
@@ -547,7 +548,7 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     if not checkpoint.is_file():
         raise CpmpFileError(f"checkpoint {checkpoint} does not exist; train one with train.py")
     path, split = _demo_file(cfg, "test")
-    seq = ConcurrentSequencer.load(checkpoint)
+    seq = load_sequencer(checkpoint)  # any kind the main job or train.py writes
     demos = load_demonstrations(path, split=split)
     run_dir = Path(run_dir)
     unknown = _unknown_mps(seq, demos)
@@ -570,6 +571,7 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
         "data": str(path),
         "split": split,
         "n_demos": len(demos),
+        "model": _model_entry(seq),
         "unknown_mps": unknown,
         "progress": result["progress"],
         "replay": result["replay"],
@@ -579,6 +581,17 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
 
     atomic_write_text(run_dir / "evaluation.md", _evaluation_markdown(out))
     return json_path
+
+
+def _model_entry(seq: Any) -> dict[str, Any]:
+    """What an evaluated checkpoint is: ``sequencer`` (``learned`` or ``goal_nearest``) and
+    ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is)."""
+    from cpmp.goal_nearest import KIND, GoalNearestSequencer
+
+    if isinstance(seq, GoalNearestSequencer):
+        entry = predictor_entry("none", {}, {"kind": KIND})
+        return {"sequencer": KIND, "predictor": entry.pop("kind"), **entry}
+    return {"sequencer": "learned", "predictor": seq.predictor.kind}
 
 
 def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
@@ -617,6 +630,11 @@ def _evaluation_markdown(out: dict[str, Any]) -> str:
         f"{out['n_demos']} demos from `{out['data']}` (split {out['split'] or 'all'}).",
         "",
     ]
+    model = out["model"]
+    if model["sequencer"] == "learned":
+        lines += [f"Learned sequencer, predictor `{model['predictor']}`.", ""]
+    else:
+        lines += [f"Sequencer `{model['sequencer']}`: {model['note']}.", ""]
     if out.get("unknown_mps"):
         lines += [
             "**MPs the model does not know** (renamed, or of a variable the model was not "

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections import defaultdict
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cpmp.errors import ConfigError, DataError
+from cpmp.errors import DataError
 from cpmp.evaluation import (
     activation_progress,
     continuous_features,
@@ -25,7 +26,11 @@ from cpmp.evaluation import (
     replay_demonstrations,
     switch_distances,
 )
-from cpmp.experiment.config import predictor_options, to_dict
+from cpmp.experiment.config import (
+    ExperimentSettings,  # noqa: F401 (re-exported)
+    FitSettings,
+    fit_settings,
+)
 
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
@@ -52,116 +57,6 @@ def stage(name: str) -> Iterator[None]:
     start = time.perf_counter()
     yield
     log.info("stage %s: done in %.1f s", name, time.perf_counter() - start)
-
-
-RECORD_CHOICES = ("failures", "all", "first", "none")
-"""Values of ``experiment.record``."""
-
-
-@dataclass
-class ExperimentSettings:
-    """Sizes of the evaluation (``experiment`` config group).
-
-    Attributes:
-        name: label of the settings (``quick``, ``full``, ...).
-        seeds: each seed repeats collection, training and reproduction.
-        demos_per_strategy: demonstrations collected per strategy (paper: 5, so 15 in all).
-        train_per_strategy: of those, used for training (paper: 3, so 9 train / 6 test).
-        train_sizes: training-set sizes D to compare (paper: 3, 6, 9), balanced over strategies.
-        n_boxes: random boxes reproduced per D and seed (paper: 20).
-        box_seed_offset: boxes for reproduction are drawn from ``seed + box_seed_offset``.
-        strategy_grid: (widths, depths) cells of the strategy map (Fig. 7).
-        record: which reproduction episodes keep an ``.rrd``: ``failures`` (every episode that
-            did not complete, plus the first one per training size), ``all``, ``first`` or
-            ``none``.
-        record_demos: also write the collected demonstrations as ``.rrd``.
-        max_time: episode time limit [s] (``None``: the task's ``max_time``).
-        feature_noise: std of Gaussian noise added to the training demonstrations' features,
-            as a fraction of each feature's range over the training set (0: none); the test
-            demonstrations and the closed loop stay noise-free.
-        workers: worker processes running the seeds' collection and training sizes in
-            parallel (``None``: min(cores, seeds); 1: everything in this process). The report's
-            numbers do not depend on it.
-    """
-
-    name: str = "quick"
-    seeds: list[int] = field(default_factory=lambda: [0])
-    demos_per_strategy: int = 3
-    train_per_strategy: int = 2
-    train_sizes: list[int] = field(default_factory=lambda: [3, 6])
-    n_boxes: int = 6
-    box_seed_offset: int = 1000
-    strategy_grid: list[int] = field(default_factory=lambda: [8, 6])
-    record: str = "failures"
-    record_demos: bool = False
-    max_time: float | None = None
-    feature_noise: float = 0.0
-    workers: int | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ConfigError(f"experiment.{name} must be an integer, got {value!r}")
-        for name in ("seeds", "train_sizes", "strategy_grid"):
-            values = list(getattr(self, name))
-            if any(isinstance(v, bool) or not isinstance(v, int) for v in values):
-                raise ConfigError(f"experiment.{name} must be integers, got {values}")
-        for name in ("seeds", "train_sizes"):
-            values = list(getattr(self, name))
-            if len(set(values)) != len(values):
-                raise ConfigError(f"experiment.{name} has duplicates: {values}")
-        if not self.seeds or any(s < 0 for s in self.seeds):
-            raise ConfigError(f"experiment.seeds must be non-negative integers, got {self.seeds}")
-        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"experiment.{name} must be >= 1, got {getattr(self, name)}")
-        if self.train_per_strategy >= self.demos_per_strategy:
-            raise ConfigError(
-                f"experiment.train_per_strategy ({self.train_per_strategy}) must be smaller than "
-                f"demos_per_strategy ({self.demos_per_strategy}) to leave test demos"
-            )
-        n_train = 3 * self.train_per_strategy
-        if not self.train_sizes or any(d < 1 or d > n_train for d in self.train_sizes):
-            raise ConfigError(
-                f"experiment.train_sizes must lie in 1..{n_train} (3 strategies x "
-                f"train_per_strategy), got {self.train_sizes}"
-            )
-        if len(self.strategy_grid) != 2 or min(self.strategy_grid) < 2:
-            raise ConfigError(
-                f"experiment.strategy_grid must be [n_widths, n_depths] >= 2, "
-                f"got {self.strategy_grid}"
-            )
-        if self.record not in RECORD_CHOICES:
-            raise ConfigError(
-                f"experiment.record must be one of {', '.join(RECORD_CHOICES)}, got {self.record!r}"
-            )
-        noise = self.feature_noise
-        if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not noise >= 0:
-            raise ConfigError(f"experiment.feature_noise must be a number >= 0, got {noise!r}")
-        if not np.isfinite(noise):
-            raise ConfigError(f"experiment.feature_noise must be finite, got {noise}")
-        if self.max_time is not None and self.max_time <= 0:
-            raise ConfigError(f"experiment.max_time must be > 0, got {self.max_time}")
-        workers = self.workers
-        if workers is not None and (
-            isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
-        ):
-            raise ConfigError(
-                f"experiment.workers must be an integer >= 1 or null (auto), got {workers!r}"
-            )
-
-    @classmethod
-    def from_cfg(cls, cfg: Any) -> ExperimentSettings:
-        options = to_dict(cfg)
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown experiment option(s) {', '.join(unknown)}; "
-                f"valid: {', '.join(sorted(known))}"
-            )
-        return cls(**options)
 
 
 # ------------------------------------------------------------------------------------ data
@@ -227,6 +122,30 @@ def classify_start(initial: Mapping[str, str], signatures: Mapping[str, Mapping[
 
 
 # ------------------------------------------------------------------------------- training
+def train_sequencer(
+    demos: Sequence[Demonstration],
+    settings: FitSettings,
+    seed: int = 0,
+    log_dir: str | Path | None = None,
+) -> Any:
+    """Fit the sequencer ``settings`` describe on ``demos`` with ``seed`` (Lightning logs into
+    ``log_dir`` when set): a :class:`~cpmp.sequencer.ConcurrentSequencer`, or the
+    :class:`~cpmp.goal_nearest.GoalNearestSequencer` baseline (no predictor, no trainer)."""
+    if settings.goal_nearest is not None:
+        from cpmp.goal_nearest import GoalNearestSequencer
+
+        options = dataclasses.asdict(settings.goal_nearest)
+        return GoalNearestSequencer.fit(list(demos), seed=seed, **options)
+    from cpmp.sequencer import ConcurrentSequencer
+
+    fit = settings.fit
+    trainer = fit.trainer
+    if log_dir is not None:
+        trainer = dataclasses.replace(trainer, log_dir=str(log_dir))
+    config = dataclasses.replace(fit, trainer=trainer, seed=seed)
+    return ConcurrentSequencer.fit_config(list(demos), config)
+
+
 def fit_sequencer(
     demos: Sequence[Demonstration],
     predictor_cfg: Any,
@@ -234,30 +153,11 @@ def fit_sequencer(
     trainer_cfg: Any = None,
     seed: int = 0,
     log_dir: str | Path | None = None,
-) -> ConcurrentSequencer:
-    """Fit a :class:`ConcurrentSequencer` from config groups (``predictor``, ``sequencer``,
-    ``trainer``); a ``sequencer`` entry with ``kind: goal_nearest`` fits the
-    :class:`~cpmp.goal_nearest.GoalNearestSequencer` baseline instead (no predictor, no
-    trainer)."""
-    from cpmp.sequencer import ConcurrentSequencer
-
-    sequencer_options = to_dict(sequencer_cfg)
-    if sequencer_options.get("kind") is not None:
-        from cpmp.goal_nearest import KIND, GoalNearestSequencer
-
-        if sequencer_options.pop("kind") != KIND:
-            raise ConfigError(f"sequencer.kind must be {KIND!r} or absent (the learned sequencer)")
-        return GoalNearestSequencer.fit(list(demos), seed=seed, **sequencer_options)
-    kind, options = predictor_options(predictor_cfg)
-    trainer = to_dict(trainer_cfg)
-    lr = trainer.pop("lr", None)  # the trainer's Adam rate, when set, overrides the predictor's
-    if lr is not None:
-        options["lr"] = lr
-    if log_dir is not None:
-        trainer["log_dir"] = str(log_dir)
-    return ConcurrentSequencer.fit(
-        list(demos), predictor=kind, seed=seed, **options, **sequencer_options, **trainer
-    )
+) -> Any:
+    """:func:`train_sequencer` from config groups (``predictor``, ``sequencer``, ``trainer``:
+    nodes or mappings), converted by :func:`~cpmp.experiment.config.fit_settings`."""
+    settings = fit_settings(predictor_cfg, sequencer_cfg, trainer_cfg)
+    return train_sequencer(demos, settings, seed, log_dir)
 
 
 # ----------------------------------------------------------------------------- evaluation
@@ -407,11 +307,10 @@ def reproduce(
         distances: list[float] = []
         continuous: list[float] = []
         if result.outcome == "complete":
-            events = [_as_event(tr) for tr in result.transitions]
             columns = continuous_features([demo])
             for v in seq.graphs:
-                distances += switch_distances(events, demo, v) or []
-                continuous += switch_distances(events, demo, v, columns) or []
+                distances += switch_distances(result.transitions, demo, v) or []
+                continuous += switch_distances(result.transitions, demo, v, columns) or []
         out.append(
             EpisodeRecord(
                 box=(box.width, box.depth),
@@ -429,19 +328,6 @@ def reproduce(
         )
         log.info("%sepisode %d: %s (%s)", label, i, result.outcome, result.reason)
     return out
-
-
-def _as_event(transition: Any) -> Any:
-    from cpmp.sequencer import TransitionEvent
-
-    return TransitionEvent(
-        transition.t,
-        transition.variable,
-        transition.source,
-        transition.target,
-        float("nan"),
-        transition.features,
-    )
 
 
 def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:

@@ -7,9 +7,9 @@ and the baselines ``sklearn_klr``, ``regression_clip``, ``time_phase``, ``dtw``)
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
+from cpmp.config.predictors import predictor_config, predictor_option_names
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
     START_PREFIX,
@@ -55,7 +55,7 @@ PREDICTORS: dict[str, type[ProgressPredictor]] = {
 
 def predictor_options(kind: str) -> list[str]:
     """The option names accepted by predictor ``kind``."""
-    return [f.name for f in dataclasses.fields(_predictor_class(kind).config_class)]
+    return predictor_option_names(kind)
 
 
 def _predictor_class(kind: str) -> type[ProgressPredictor]:
@@ -65,19 +65,9 @@ def _predictor_class(kind: str) -> type[ProgressPredictor]:
 
 
 def make_config(kind: str, **options: Any) -> PredictorConfig:
-    """Validated config of predictor ``kind``; unknown options raise :class:`ConfigError`."""
-    cls = _predictor_class(kind)
-    valid = predictor_options(kind)
-    unknown = sorted(set(options) - set(valid))
-    if unknown:
-        raise ConfigError(
-            f"unknown option(s) {', '.join(unknown)} for predictor {kind!r}; "
-            f"valid options: {', '.join(valid)}"
-        )
-    try:
-        return cls.config_class(**options)
-    except TypeError as err:
-        raise ConfigError(f"bad options for predictor {kind!r}: {err}") from err
+    """Validated config of predictor ``kind`` (:func:`cpmp.config.predictor_config`); unknown
+    options raise :class:`ConfigError`."""
+    return predictor_config(kind, **options)
 
 
 def make_predictor(

@@ -9,7 +9,6 @@ Training data comes per node as :class:`NodeData`; banks fit all nodes in one op
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -18,8 +17,10 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from cpmp.config.predictors import SCALINGS, PredictorConfig  # noqa: F401 (re-exported)
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.newton import NewtonInfo, SolverOptions
+from cpmp.progress import denoise_trajectory
 
 NodeKey = tuple[str, str]
 """(control variable, MP name)."""
@@ -46,70 +47,6 @@ class NodeData:
     activations: list[np.ndarray] = field(default_factory=list)
 
 
-@dataclass
-class PredictorConfig:
-    """Options shared by every predictor.
-
-    Attributes:
-        feature_scaling: ``global`` (default), ``none`` (the paper), ``minmax`` or
-            ``standard`` (see :class:`FeatureScaler`); the fitted scaling is stored in the
-            checkpoint and applied to every input.
-        dtype: ``float64`` or ``float32``.
-    """
-
-    feature_scaling: str = "global"
-    dtype: str = "float64"
-
-    def __post_init__(self) -> None:
-        if self.feature_scaling not in SCALINGS:
-            raise ConfigError(
-                f"feature_scaling must be one of {', '.join(SCALINGS)}, "
-                f"got {self.feature_scaling!r}"
-            )
-        if self.dtype not in ("float32", "float64"):
-            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
-
-    def _number(self, name: str) -> float:
-        value = getattr(self, name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"predictor option {name} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"predictor option {name} must be finite, got {value!r}")
-        return float(value)
-
-    def _positive(self, *names: str) -> None:
-        for name in names:
-            if not self._number(name) > 0:
-                raise ConfigError(
-                    f"predictor option {name} must be > 0, got {getattr(self, name)!r}"
-                )
-
-    def _non_negative(self, *names: str) -> None:
-        for name in names:
-            if self._number(name) < 0:
-                raise ConfigError(
-                    f"predictor option {name} must be >= 0, got {getattr(self, name)!r}"
-                )
-
-    def _integer(self, *names: str, allow_none: bool = False) -> None:
-        """Whole-number options (counts); ``2.0`` is accepted as 2, ``2.5`` is an error."""
-        for name in names:
-            value = getattr(self, name)
-            if value is None and allow_none:
-                continue
-            number = self._number(name)
-            if number != int(number):
-                raise ConfigError(f"predictor option {name} must be a whole number, got {value!r}")
-            setattr(self, name, int(number))
-
-    @property
-    def torch_dtype(self) -> torch.dtype:
-        return torch.float64 if self.dtype == "float64" else torch.float32
-
-
-SCALINGS = ("global", "none", "minmax", "standard")
-
-
 class FeatureScaler(nn.Module):
     """Affine feature scaling ``(x - offset) / scale`` fitted on training data.
 
@@ -123,18 +60,28 @@ class FeatureScaler(nn.Module):
       up features that barely vary (sensor noise on a near-constant coordinate) until they
       dominate the kernel.
 
-    Constant features get scale 1.
+    Constant features get scale 1. With ``noise="auto"`` the ranges (and moments) are those
+    of :func:`cpmp.progress.denoise_trajectory` of the samples, so that white noise on the
+    training features does not widen them (and with them shrink every path length, hence
+    the support counts, and the kernel's reach); an extreme held for only m samples comes out
+    lower by about the denoising penalty / m.
     """
 
-    def __init__(self, n_features: int, dtype: torch.dtype = torch.float64) -> None:
+    def __init__(
+        self, n_features: int, dtype: torch.dtype = torch.float64, noise: str = "none"
+    ) -> None:
         super().__init__()
+        self.noise = noise
         self.register_buffer("offset", torch.zeros(n_features, dtype=dtype))
         self.register_buffer("scale", torch.ones(n_features, dtype=dtype))
 
     def fit(self, x: np.ndarray, mode: str) -> None:
-        """Fit on training samples ``x`` (N, d)."""
+        """Fit on training samples ``x`` (N, d), in recording order (demonstrations one after
+        the other)."""
         if mode == "none":
             return
+        if self.noise == "auto":
+            x = denoise_trajectory(x)
         if mode == "global":
             lo = x.min(axis=0)
             offset, scale = lo, np.full(x.shape[1], np.max(x.max(axis=0) - lo))
@@ -168,8 +115,9 @@ class ProgressPredictor(nn.Module):
     kind: ClassVar[str] = ""
     config_class: ClassVar[type[PredictorConfig]] = PredictorConfig
     convex: ClassVar[bool] = False
-    labels: ClassVar[str] = "path"
-    """Training labels (:data:`cpmp.progress.LABELS`): ``path`` (eq. 1) or ``time``."""
+    labels: str = "path"
+    """Training labels (:data:`cpmp.progress.LABELS`): ``path`` (eq. 1) or ``time``; a bank
+    with ``path`` labels and ``config.path_noise == "auto"`` trains on ``path_denoised``."""
     stateful: ClassVar[bool] = False
     """A stateful bank treats the rows of each forward call as :meth:`reset_state`'s
     ``n_streams`` independent streams, each advancing one tick per call (e.g. ``dtw``, which
@@ -184,8 +132,10 @@ class ProgressPredictor(nn.Module):
         self.node_keys = [tuple(k) for k in node_keys]
         self.n_features = n_features
         self.config = config
+        if self.labels == "path" and config.path_noise == "auto":
+            self.labels = "path_denoised"
         self.dtype_ = config.torch_dtype
-        self.scaler = FeatureScaler(n_features, self.dtype_)
+        self.scaler = FeatureScaler(n_features, self.dtype_, config.path_noise)
 
     @property
     def n_nodes(self) -> int:

@@ -19,62 +19,19 @@ checkpoint holds tensors only.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import torch
 
-from cpmp.errors import ConfigError
+from cpmp.config.predictors import (
+    RegressionClipConfig,
+    SklearnKLRConfig,
+    TimePhaseConfig,
+)
 from cpmp.predictors.base import NodeData
-from cpmp.predictors.klr import KLRConfig, KLRPredictor
+from cpmp.predictors.klr import KLRPredictor
 from cpmp.predictors.newton import NewtonInfo, SolverOptions, penalised_loss
-
-SKLEARN_SOLVERS = ("newton-cholesky", "lbfgs", "newton-cg")
-"""scikit-learn solvers that leave the intercept unpenalised, as ``klr`` does."""
-
-
-@dataclass
-class SklearnKLRConfig(KLRConfig):
-    """Options of ``sklearn_klr`` (on top of :class:`~cpmp.predictors.klr.KLRConfig`, whose
-    ``gamma``, support rule, ``l2``, ``bias`` and feature weighting mean the same).
-
-    ``l2`` becomes scikit-learn's ``C = 1 / (n · l2)`` for a node of ``n`` samples (``C = inf``,
-    no penalty, for ``l2 = 0``): scikit-learn minimises ``C Σ_i s_i ℓ_i + ½ ||w||²``, which for
-    the two weighted copies is ``1 / l2`` times ``klr``'s ``mean BCE + ½ l2 ||w||²``.
-
-    Attributes:
-        sklearn_solver: ``newton-cholesky`` (default), ``lbfgs`` or ``newton-cg``.
-        sklearn_tol: scikit-learn's stopping tolerance.
-        sklearn_max_iter: scikit-learn's iteration cap per node.
-    """
-
-    sklearn_solver: str = "newton-cholesky"
-    sklearn_tol: float = 1e-10
-    sklearn_max_iter: int = 200
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.sklearn_solver not in SKLEARN_SOLVERS:
-            raise ConfigError(
-                f"sklearn_solver must be one of {', '.join(SKLEARN_SOLVERS)}, "
-                f"got {self.sklearn_solver!r}"
-            )
-        self._integer("sklearn_max_iter")
-        self._positive("sklearn_tol", "sklearn_max_iter")
-
-
-@dataclass
-class RegressionClipConfig(KLRConfig):
-    """Options of ``regression_clip``: those of :class:`~cpmp.predictors.klr.KLRConfig`, with
-    ``l2`` the ridge penalty: each node minimises ``½ mean (K w + b − φ)² + ½ l2 ||w||²``
-    (the intercept ``b`` unpenalised)."""
-
-
-@dataclass
-class TimePhaseConfig(KLRConfig):
-    """Options of ``time_phase``: exactly those of :class:`~cpmp.predictors.klr.KLRConfig`;
-    only the labels differ (normalised elapsed time)."""
 
 
 class SklearnKLRPredictor(KLRPredictor):

@@ -11,112 +11,23 @@ All three share one batched kernel evaluation over padded support sets ``(K, S, 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import torch
 from torch import nn
 
+from cpmp.config.predictors import KLRConfig, SparseKLRConfig
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
     START_PREFIX,
     NodeData,
     NodeKey,
-    PredictorConfig,
     ProgressPredictor,
     soft_bce,
 )
 from cpmp.predictors.newton import NewtonInfo, SolverOptions, newton_fit
-from cpmp.progress import support_point_count, support_points
-
-
-@dataclass
-class KLRConfig(PredictorConfig):
-    """Options of ``klr`` / ``klr_full``.
-
-    Attributes:
-        gamma: RBF kernel parameter γ in ``exp(-γ ||s - x||²)`` (the paper's "kernel width 4.0").
-        support_scale: support points per unit of L1 path length of an activation.
-        min_support: minimum support points per activation (the paper uses 3).
-        max_support: optional cap per activation.
-        max_total_support: hard cap on the support points of all nodes together; a fit that
-            would need more stops with a :class:`~cpmp.errors.ConfigError` before allocating
-            anything (memory grows with samples x supports).
-        l2: weight of the ``½ l2 ||w||²`` penalty added to each node's mean loss.
-        bias: learn a per-node intercept (the usual logistic-regression intercept; ``False``
-            gives exactly eq. 4, where φ tends to 0.5 far from every support point). On the
-            synthetic task the intercept picks the right initial node in 6/6 held-out replays
-            against 4/6 without it.
-        max_iter: LBFGS iterations per optimiser step (trainer ``solver: lbfgs`` only).
-        feature_weighting: ``path`` (default) or ``none`` (isotropic kernel, the paper):
-            ``path`` weights, per node, each feature in the kernel by its share of the node's
-            L1 path length (eq. 1 splits into one term per feature), so features that drive
-            the node's progress count and features that stay constant while it runs (e.g. box
-            size, the other arm) count little. Weights are ``max(d * share_j, weight_floor)``.
-        weight_floor: smallest feature weight under ``path`` weighting.
-    """
-
-    gamma: float = 4.0
-    support_scale: float = 2.0
-    min_support: int = 3
-    max_support: int | None = None
-    max_total_support: int = 50_000
-    l2: float = 1e-4
-    bias: bool = True
-    max_iter: int = 500
-    feature_weighting: str = "path"
-    weight_floor: float = 0.1
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        self._integer("max_iter", "min_support", "max_total_support")
-        self._integer("max_support", allow_none=True)
-        self._positive("gamma", "max_iter", "min_support", "max_total_support")
-        self._non_negative("support_scale", "l2", "weight_floor")
-        if self.feature_weighting not in ("none", "path"):
-            raise ConfigError(
-                f"feature_weighting must be 'none' or 'path', got {self.feature_weighting!r}"
-            )
-        if self.max_support is not None and self.max_support < self.min_support:
-            raise ConfigError(
-                f"max_support ({self.max_support}) must be >= min_support ({self.min_support})"
-            )
-
-
-@dataclass
-class SparseKLRConfig(KLRConfig):
-    """Options of ``klr_sparse`` (on top of :class:`KLRConfig`).
-
-    Attributes:
-        candidate_scale: candidates per unit path length (generous; pruned after training).
-        min_candidates: minimum candidates per activation.
-        l1: weight of the sparsity penalty ``l1 * mean|w|`` per node.
-        learn_positions: also move the support points.
-        learn_lengthscales: learn one length-scale per node and feature (ARD).
-        epochs: Adam steps (full batch) at most (the budget); the trainer's early stopping
-            usually ends the sparsity phase sooner, once the training loss stops improving.
-        lr: Adam learning rate.
-        prune_tol: prune supports with ``|w| < prune_tol * max|w|`` of their node.
-        refit: re-fit the surviving weights to convergence (the trainer's convex solver,
-            Newton by default) after pruning.
-    """
-
-    candidate_scale: float = 8.0
-    min_candidates: int = 8
-    l1: float = 1e-2
-    learn_positions: bool = False
-    learn_lengthscales: bool = False
-    epochs: int = 400
-    lr: float = 0.1
-    prune_tol: float = 0.02
-    refit: bool = True
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        self._integer("min_candidates", "epochs")
-        self._positive("candidate_scale", "min_candidates", "epochs", "lr")
-        self._non_negative("l1", "prune_tol")
+from cpmp.progress import feature_path_lengths, support_point_count, support_points
 
 
 class KLRPredictor(ProgressPredictor):
@@ -216,7 +127,7 @@ class KLRPredictor(ProgressPredictor):
     def _supports_for(self, node: NodeData) -> np.ndarray:
         c = self.config
         pts = [
-            support_points(a, c.support_scale, c.min_support, c.max_support)
+            support_points(a, c.support_scale, c.min_support, c.max_support, c.path_noise)
             for a in node.activations
         ]
         return np.concatenate(pts, axis=0)
@@ -228,7 +139,7 @@ class KLRPredictor(ProgressPredictor):
 
     def _support_total(self, data: list[NodeData]) -> int:
         """Support points :meth:`_supports_for` would place, counted without placing them."""
-        rule = self._support_rule()
+        rule = (*self._support_rule(), self.config.path_noise)
         return sum(support_point_count(a, *rule) for node in data for a in node.activations)
 
     def _check_support_budget(self, data: list[NodeData]) -> None:
@@ -257,7 +168,8 @@ class KLRPredictor(ProgressPredictor):
 
     def _path_weights(self, node: NodeData) -> torch.Tensor:
         """``(d,)`` kernel weights from each feature's share of the node's L1 path length."""
-        per_feature = sum(np.abs(np.diff(a, axis=0)).sum(axis=0) for a in node.activations)
+        noise = self.config.path_noise
+        per_feature = sum(feature_path_lengths(a, noise) for a in node.activations)
         total = float(np.sum(per_feature))
         d = self.n_features
         share = per_feature / total if total > 0 else np.full(d, 1.0 / d)
@@ -398,7 +310,8 @@ class SparseKLRPredictor(KLRPredictor):
     def _supports_for(self, node: NodeData) -> np.ndarray:
         c = self.config
         pts = [
-            support_points(a, c.candidate_scale, c.min_candidates, None) for a in node.activations
+            support_points(a, c.candidate_scale, c.min_candidates, None, c.path_noise)
+            for a in node.activations
         ]
         return np.concatenate(pts, axis=0)
 

@@ -8,49 +8,16 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
-from cpmp.errors import ConfigError
-from cpmp.predictors.base import NodeData, NodeKey, PredictorConfig, ProgressPredictor, soft_bce
+from cpmp.config.predictors import MLPConfig
+from cpmp.predictors.base import NodeData, NodeKey, ProgressPredictor, soft_bce
 
 _ACTIVATIONS = {"tanh": torch.tanh, "relu": torch.relu, "silu": nn.functional.silu}
-
-
-@dataclass
-class MLPConfig(PredictorConfig):
-    """Options of ``mlp``.
-
-    Attributes:
-        hidden: hidden layer widths.
-        activation: ``tanh``, ``relu`` or ``silu``.
-        epochs: full-batch Adam steps at most (the budget); the trainer's early stopping
-            usually ends the fit sooner, once the training loss stops improving.
-        lr: Adam learning rate.
-        weight_decay: L2 penalty on all weights, added to each node's mean loss.
-    """
-
-    hidden: tuple[int, ...] = (32, 32)
-    activation: str = "tanh"
-    epochs: int = 600
-    lr: float = 0.03
-    weight_decay: float = 1e-4
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        self.hidden = tuple(int(h) for h in self.hidden)
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise ConfigError(f"hidden must list positive layer widths, got {self.hidden}")
-        if self.activation not in _ACTIVATIONS:
-            raise ConfigError(
-                f"activation must be one of {sorted(_ACTIVATIONS)}, got {self.activation!r}"
-            )
-        self._integer("epochs")
-        self._positive("epochs", "lr")
-        self._non_negative("weight_decay")
+"""The functions of :data:`cpmp.config.ACTIVATIONS` (tested to match)."""
 
 
 class MLPPredictor(ProgressPredictor):

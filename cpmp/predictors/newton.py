@@ -18,10 +18,13 @@ from dataclasses import dataclass
 
 import torch
 
-NEWTON_TOL = 1e-10
-"""Default stopping tolerance on the gradient's max-norm and on the Newton decrement."""
-NEWTON_MAX_ITER = 100
-"""Default cap on Newton iterations per node."""
+from cpmp.config.trainer import TrainerConfig
+
+NEWTON_TOL = TrainerConfig.newton_tol
+"""Default stopping tolerance on the gradient's max-norm and on the Newton decrement (the
+trainer's ``newton_tol``)."""
+NEWTON_MAX_ITER = TrainerConfig.newton_max_iter
+"""Default cap on Newton iterations per node (the trainer's ``newton_max_iter``)."""
 
 _ARMIJO = 1e-4
 _MAX_HALVINGS = 60

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from cpmp.config import FitConfig
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.sim.collect import sample_boxes
@@ -27,8 +28,9 @@ TARGET_REAL_TIME_FACTOR = 10.0
 """The speed the simulation issue asks for: >= 10x real time on one core, IK and policy in the
 loop."""
 
-LEARNED_POLICY = {"predictor": "klr"}
-"""The main job's default sequencer (``predictor=klr_path sequencer=coupled``) as
+LEARNED_POLICY: dict[str, Any] = {"predictor": FitConfig().predictor}
+"""The main job's default sequencer (``predictor=klr_path sequencer=coupled``, the defaults
+of :class:`~cpmp.config.FitConfig`; tested) as
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` options."""
 
 

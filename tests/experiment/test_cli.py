@@ -72,6 +72,10 @@ LIGHT_CASES = [
     ("experiment", ["predictor.gamma=[1"], ["predictor.gamma=[1"]),
     ("experiment", ["experiment.n_boxes=${nope}"], ["experiment.n_boxes", "nope"]),
     ("experiment", ["predictor=klr,mlp"], ["predictor=klr,mlp", "--multirun"]),
+    ("experiment", ["predictor.bias=1"], ["predictor.bias=1", "boolean"]),
+    # ... against the schema (cpmp.config) where the default (null) says nothing
+    ("experiment", ["predictor.max_support=abc"], ["predictor.max_support=abc", "Integer"]),
+    ("experiment", ["--cfg", "job", "trainer.max_epochs=x"], ["trainer.max_epochs=x", "Integer"]),
     ("train", ["seed=abc"], ["seed='abc'", "integer"]),
     ("train", ["seed=-1"], ["seed=-1", "non-negative"]),
     ("evaluate", ["data.split=3"], ["data.split=3", "string"]),
@@ -169,7 +173,7 @@ print(json.dumps({{"failed": failed, "passed": passed, "heavy": heavy}}))
         ("experiment", ["-m", "predictor=klr,klr_sparse", "predictor.gamma=2,4"], 4),
         ("train", ["-m", "seed=range(3)", "data.path={file}"], 3),
         ("evaluate", ["data.split=null", "checkpoint={file}", "data.path={file}"], 1),
-        ("experiment", ["--cfg", "job", "experiment.n_boxes=abc"], 0),  # prints, runs nothing
+        ("experiment", ["--cfg", "job", "experiment.n_boxes=-1"], 0),  # prints, runs nothing
         ("experiment", ["--help"], 0),
     ],
 )

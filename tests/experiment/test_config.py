@@ -14,15 +14,31 @@ import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from cpmp.config import (
+    ACTIVATIONS,
+    PREDICTOR_CONFIGS,
+    FitConfig,
+    KLRConfig,
+    MLPConfig,
+    SequencerConfig,
+    TaskConfig,
+    TrainerConfig,
+)
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.experiment.config import predictor_options, to_dict
+from cpmp.experiment.config import (
+    ExperimentSettings,
+    experiment_job,
+    fit_settings,
+    job_fit_settings,
+    predictor_options,
+    to_dict,
+)
 from cpmp.experiment.jobs import (
     evaluate_checkpoint,
     run_experiment,
     train_from_file,
     validate_common,
 )
-from cpmp.experiment.pipeline import ExperimentSettings
 from cpmp.predictors import PREDICTORS
 
 # One thread: with a second busy process on a 2-core machine, torch's default two threads
@@ -187,13 +203,201 @@ def test_other_entry_configs_compose(config_name, overrides):
     assert OmegaConf.select(cfg, expected[0]) == expected[1]
 
 
-def test_task_default_yaml_round_trips_through_task_config():
+def test_task_config_round_trips_through_the_composed_task():
     from cpmp.sim import TaskConfig
 
-    raw = yaml.safe_load((CONF / "task" / "default.yaml").read_text())
-    task = TaskConfig.from_dict(raw)
-    assert task.to_dict() == raw
+    composed = to_dict(compose_cfg("experiment").task)
+    task = TaskConfig.from_dict(composed)
+    assert task == TaskConfig()
+    assert task.to_dict() == composed
     assert TaskConfig.from_dict(task.to_dict()) == task
+
+
+# ------------------------------------------------------------------------ the one schema
+SCHEMAS = {
+    "trainer": TrainerConfig,
+    "sequencer": SequencerConfig,
+    "task": TaskConfig,
+    "experiment": ExperimentSettings,
+}
+
+
+def defaults_of(cls: type) -> dict:
+    """A dataclass's defaults as YAML writes them (tuples as lists)."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        value = f.default if f.default_factory is dataclasses.MISSING else f.default_factory()
+        out[f.name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+def yaml_values(path: Path) -> dict:
+    """The values a config file writes itself (no ``defaults`` list)."""
+    raw = yaml.safe_load(path.read_text()) or {}
+    raw.pop("defaults", None)
+    return raw
+
+
+@pytest.mark.parametrize("group", ["predictor", "sequencer", "trainer", "task"])
+def test_group_options_compose_to_every_option_of_their_dataclass(group):
+    for name in options(group):
+        node = to_dict(compose_cfg("experiment", [f"{group}={name}"])[group])
+        kind = node.pop("kind", None)
+        if group == "sequencer" and kind is not None:
+            continue  # goal_nearest: its own options (cpmp.goal_nearest.GoalNearestConfig)
+        cls = PREDICTOR_CONFIGS[kind] if group == "predictor" else SCHEMAS[group]
+        assert list(node) == [f.name for f in dataclasses.fields(cls)], name
+
+
+def test_experiment_node_composes_to_every_setting():
+    for name in options("experiment"):
+        node = to_dict(compose_cfg("experiment", [f"experiment={name}"]).experiment)
+        assert list(node) == [f.name for f in dataclasses.fields(ExperimentSettings)], name
+
+
+def written_values(group: str, path: Path) -> list[tuple[str, object, dict]]:
+    """``(key, value, the schema's defaults)`` of every value ``path`` writes itself, for the
+    options that start from a schema; ``[]`` for an option extending another option of its
+    group (``klr_full``) and for ``goal_nearest``, whose options are not registered."""
+    values = yaml_values(path)
+    if group == "experiment":
+        schemas = {"experiment": ExperimentSettings, "task": TaskConfig}
+        return [
+            (key, value, defaults_of(schemas[node]))
+            for node in schemas
+            for key, value in values.get(node, {}).items()
+        ]
+    first = yaml.safe_load(path.read_text()).get("defaults", [""])[0]
+    if group == "predictor":
+        if not first.startswith("/schema_predictor_"):
+            return []
+        cls = PREDICTOR_CONFIGS[first.removeprefix("/schema_predictor_")]
+        assert "kind" not in values, f"{path.name}: the schema carries the kind"
+    elif values.get("kind") == "goal_nearest":
+        return []
+    else:
+        cls = SCHEMAS[group]
+    return [(key, value, defaults_of(cls)) for key, value in values.items()]
+
+
+@pytest.mark.parametrize("group", ["predictor", "sequencer", "trainer", "task", "experiment"])
+def test_no_config_file_restates_a_default(group):
+    """A value written in ``conf/<group>/*.yaml`` differs from the schema's default: no default
+    is written twice (the dataclasses of cpmp.config are the one place)."""
+    checked = 0
+    for path in sorted((CONF / group).glob("*.yaml")):
+        for key, value, defaults in written_values(group, path):
+            assert key in defaults, f"{path.name}: {key} is not an option"
+            assert value != defaults[key], f"{path.name}: {key}: {value!r} is the default"
+            checked += 1
+    if group in ("trainer", "task"):
+        assert checked == 0  # every option is the dataclass's default
+    else:
+        assert checked > 0
+
+
+def test_every_predictor_kind_has_its_options_class():
+    from cpmp.predictors.mlp import _ACTIVATIONS
+
+    assert list(PREDICTOR_CONFIGS) == list(PREDICTORS)
+    for kind, cls in PREDICTORS.items():
+        assert cls.config_class is PREDICTOR_CONFIGS[kind]
+    assert tuple(_ACTIVATIONS) == ACTIVATIONS
+
+
+def test_the_schema_imports_neither_torch_nor_mujoco():
+    code = (
+        "import sys, cpmp.config, cpmp.experiment.config; "
+        "print([m for m in ('torch', 'lightning', 'mujoco') if m in sys.modules])"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("experiment.n_boxes=abc", "experiment.n_boxes"),
+        ("predictor.bias=maybe", "predictor.bias"),
+        ("trainer.max_epochs=1.5", "trainer.max_epochs"),
+        ("task.width_range=[0.1,x]", "task.width_range"),
+    ],
+)
+def test_the_schema_rejects_a_value_of_the_wrong_type(override, key):
+    from hydra.errors import ConfigCompositionException
+
+    with pytest.raises(ConfigCompositionException, match=key.replace(".", r"\.")):
+        compose_cfg("experiment", [override])
+
+
+def test_learned_policy_of_the_simulator_benchmark_is_the_main_jobs_default():
+    from cpmp.sim.bench import LEARNED_POLICY
+
+    main = job_fit_settings(compose_cfg("experiment")).fit
+    assert FitConfig.from_options(**LEARNED_POLICY) == main
+
+
+def test_fit_settings_are_converted_once_into_typed_configs():
+    cfg = compose_cfg("experiment", ["predictor=mlp", "sequencer=paper", "trainer.lr=0.5"])
+    settings = job_fit_settings(cfg)
+    assert settings.goal_nearest is None
+    assert isinstance(settings.fit.predictor_config, MLPConfig)
+    assert settings.fit.predictor_config.hidden == (32, 32)
+    assert settings.fit.predictor_config.lr == 0.5  # the trainer's rate, recorded in the model
+    assert settings.fit.sequencer == SequencerConfig(**to_dict(cfg.sequencer))
+    assert settings.fit.trainer.lr == 0.5
+    # a predictor without an Adam rate keeps its options (the rate is not an option of klr)
+    klr = job_fit_settings(compose_cfg("experiment", ["predictor=klr", "trainer.lr=0.5"]))
+    assert not hasattr(klr.fit.predictor_config, "lr")
+    baseline = job_fit_settings(compose_cfg("experiment", ["sequencer=goal_nearest"]))
+    assert baseline.goal_nearest is not None and baseline.goal_nearest.hold_time == 0.1
+    # the baseline needs no predictor group (experiment=compare runs it without one) ...
+    alone = fit_settings({}, {"kind": "goal_nearest", "hold_time": 0.3})
+    assert alone.goal_nearest.hold_time == 0.3
+    # ... the learned sequencer does
+    with pytest.raises(ConfigError, match=r"predictor\.kind must be one of"):
+        fit_settings({}, None)
+
+
+def test_experiment_job_is_typed_and_picklable():
+    import pickle
+
+    job = experiment_job(compose_cfg("experiment", ["experiment=tiny"]))
+    assert job.settings.name == "tiny" and job.task == TaskConfig()
+    assert experiment_job(job) is job
+    assert pickle.loads(pickle.dumps(job)) == job
+
+
+def test_keyword_fit_is_the_typed_fit(tmp_path):
+    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.synthetic import make_demonstrations
+
+    demos = make_demonstrations(2, seed=0)
+    by_keyword = ConcurrentSequencer.fit(
+        demos, "klr", seed=3, logger=None, gamma=2.0, threshold=0.7
+    )
+    typed = ConcurrentSequencer.fit_config(
+        demos,
+        FitConfig(
+            "klr",
+            KLRConfig(gamma=2.0),
+            SequencerConfig(threshold=0.7),
+            TrainerConfig(logger=None),
+            seed=3,
+        ),
+    )
+    assert typed.config == by_keyword.config
+    assert typed.predictor.config == by_keyword.predictor.config
+    for (name, a), b in zip(
+        typed.predictor.state_dict().items(),
+        by_keyword.predictor.state_dict().values(),
+        strict=True,
+    ):
+        assert torch.equal(a, b), name
+    with pytest.raises(ConfigError, match="MLPConfig"):
+        FitConfig("mlp", KLRConfig())
+    with pytest.raises(ConfigError, match="unknown option 'gama'"):
+        FitConfig.from_options("klr", gama=2.0)
 
 
 # ---------------------------------------------------------------------------- bad values
@@ -224,10 +428,8 @@ def test_unknown_predictor_option_is_a_config_error():
         ("experiment.record=some", "record"),
         ("experiment.max_time=0", "max_time"),
         ("+experiment.n_box=3", "unknown experiment option.*n_box"),
-        ("experiment.n_boxes=2.5", "n_boxes must be an integer"),
         ("experiment.seeds=[0,0]", "seeds has duplicates"),
         ("experiment.train_sizes=[3,3]", "train_sizes has duplicates"),
-        ("experiment.seeds=[true]", "seeds must be integers"),
     ],
 )
 def test_bad_experiment_values_raise_config_error(override, match):
@@ -237,13 +439,32 @@ def test_bad_experiment_values_raise_config_error(override, match):
 
 
 @pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("n_boxes", 2.5, "n_boxes must be an integer"),
+        ("seeds", [True], "seeds must be integers"),
+        ("workers", 0, "workers must be an integer >= 1"),
+        ("feature_noise", float("inf"), "feature_noise must be finite"),
+    ],
+)
+def test_bad_experiment_values_from_a_mapping_raise_config_error(key, value, match):
+    """Values the schema turns away at composition still fail the settings' own checks when
+    they come as a plain mapping (the Python API, a worker's dict)."""
+    quick = to_dict(compose_cfg("experiment").experiment)
+    with pytest.raises(ConfigError, match=match):
+        ExperimentSettings.from_cfg({**quick, key: value})
+
+
+@pytest.mark.parametrize(
     "override",
     [
         "predictor.kind=svm",
         "experiment.n_boxes=-1",
         "+task.box_colour=red",
+        "task.box_height=0.5",
         "sequencer.threshold=1.5",
         "trainer.logger=wandb",
+        "trainer.lbfgs_history_size=0",
     ],
 )
 def test_run_experiment_fails_before_collecting(tmp_path, override):

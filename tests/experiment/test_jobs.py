@@ -304,14 +304,24 @@ def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
 
 
 # -------------------------------------------------------- experiment.workers (parallel jobs)
-@pytest.mark.parametrize("bad", ["0", "-2", "1.5", "true"])
+@pytest.mark.parametrize("bad", [0, -2, 1.5, True])
 def test_bad_worker_count_is_a_config_error(bad):
+    """The settings refuse what the Hydra schema would let through from Python."""
     from cpmp.errors import ConfigError
     from cpmp.experiment.pipeline import ExperimentSettings
 
-    cfg = compose_cfg("experiment", ["experiment=tiny", f"experiment.workers={bad}"])
     with pytest.raises(ConfigError, match=r"experiment\.workers must be an integer >= 1"):
-        ExperimentSettings.from_cfg(cfg.experiment)
+        ExperimentSettings.from_cfg({"workers": bad})
+
+
+@pytest.mark.parametrize("bad", ["1.5", "true"])
+def test_bad_worker_override_is_refused_at_composition(bad):
+    """Not an integer: the schema refuses the override before any job is built."""
+    from cpmp.errors import ConfigError
+    from cpmp.experiment.cli import check_command
+
+    with pytest.raises(ConfigError, match=r"experiment\.workers"):
+        check_command("experiment", ["experiment=tiny", f"experiment.workers={bad}"])
 
 
 def test_default_workers_is_cores_or_seeds():

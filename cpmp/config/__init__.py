@@ -1,0 +1,71 @@
+"""Every option of cpmp as a dataclass: the one schema of the Hydra configs in ``conf/``.
+
+Each group of ``conf/`` (``predictor``, ``sequencer``, ``trainer``, ``task``) is built on one
+of these classes, registered by :mod:`cpmp.experiment.config`; the YAML files hold only what
+differs from the defaults written here, and each class's docstring says what every option
+means. The classes validate themselves when built (``__post_init__``): wrong values raise
+:class:`~cpmp.errors.ConfigError`.
+
+This package imports neither torch nor MuJoCo, so that a command line is checked before
+either is loaded; the classes are re-exported where they are used (:mod:`cpmp.predictors`,
+:mod:`cpmp.sequencer`, :mod:`cpmp.training`, :mod:`cpmp.sim`).
+"""
+
+from cpmp.config.fit import FIT_OPTIONS, FitConfig
+from cpmp.config.predictors import (
+    ACTIVATIONS,
+    PREDICTOR_CONFIGS,
+    SCALINGS,
+    SKLEARN_SOLVERS,
+    DTWConfig,
+    KLRConfig,
+    MLPConfig,
+    PredictorConfig,
+    RegressionClipConfig,
+    SklearnKLRConfig,
+    SparseKLRConfig,
+    TimePhaseConfig,
+    predictor_config,
+    predictor_config_class,
+    predictor_option_names,
+)
+from cpmp.config.sequencer import (
+    COUPLINGS,
+    NONFINITE_POLICIES,
+    START_KERNELS,
+    START_RULES,
+    SWITCH_RULES,
+    SequencerConfig,
+)
+from cpmp.config.task import TaskConfig
+from cpmp.config.trainer import LOGGERS, SOLVERS, TrainerConfig
+
+__all__ = [
+    "ACTIVATIONS",
+    "COUPLINGS",
+    "FIT_OPTIONS",
+    "LOGGERS",
+    "NONFINITE_POLICIES",
+    "PREDICTOR_CONFIGS",
+    "SCALINGS",
+    "SKLEARN_SOLVERS",
+    "SOLVERS",
+    "START_KERNELS",
+    "START_RULES",
+    "SWITCH_RULES",
+    "DTWConfig",
+    "FitConfig",
+    "KLRConfig",
+    "MLPConfig",
+    "PredictorConfig",
+    "RegressionClipConfig",
+    "SequencerConfig",
+    "SklearnKLRConfig",
+    "SparseKLRConfig",
+    "TaskConfig",
+    "TimePhaseConfig",
+    "TrainerConfig",
+    "predictor_config",
+    "predictor_config_class",
+    "predictor_option_names",
+]

@@ -1,0 +1,137 @@
+"""The options of the transition rule (``conf/sequencer/paper.yaml``, ``coupled.yaml``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cpmp.errors import ConfigError
+
+SWITCH_RULES = ("paper", "plateau")
+"""Values of :attr:`SequencerConfig.switch_rule` (see :mod:`cpmp.switching`)."""
+COUPLINGS = ("none", "context")
+"""Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.switching`)."""
+NONFINITE_POLICIES = ("hold", "raise")
+"""Values of :attr:`SequencerConfig.nonfinite`."""
+START_KERNELS = ("shared", "isotropic")
+"""Values of :attr:`SequencerConfig.start_kernel`."""
+START_RULES = ("independent", "joint")
+"""Values of :attr:`SequencerConfig.start_rule`."""
+
+
+@dataclass
+class SequencerConfig:
+    """The transition rule's parameters. The defaults are cpmp's recommended configuration
+    (``sequencer=coupled``); ``sequencer=paper`` and :data:`cpmp.sequencer.PAPER_OPTIONS` set
+    ``coupling``, ``recovery``, ``start_rule`` and ``start_kernel`` back to the paper's.
+
+    Attributes:
+        threshold: a transition fires only when ``p = φ_current · (1 - φ_next) > threshold``
+            (paper: 0.65).
+        patience: the "50 ms" of the rule [s] (paper: 0.05): ``p`` must not have improved over
+            the last ``patience`` seconds.
+        min_improvement: an increase of ``p`` smaller than this does not count as improving
+            (``p(t) <= p(t - patience) + min_improvement``). Attractors converge
+            asymptotically, so ``p`` keeps creeping up by tiny amounts; with a strict
+            comparison (``0``) such a transition might never fire.
+        switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
+            min_improvement``, the paper's sentence read literally) or ``plateau`` (``p`` above
+            the threshold for ``patience`` without a new maximum, cpmp's earlier rule); see
+            :mod:`cpmp.switching`.
+        coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
+            hold back a transition while another variable runs an MP never seen at that
+            demonstrated switch, or one that has progressed less than at every demonstrated
+            one (learned from the labels; see :mod:`cpmp.switching`).
+        progress_margin: with ``coupling=context``, another variable's MP counts as not far
+            enough while its predicted φ is more than this below the least progress it had at
+            a demonstrated switch (``None``: compare MPs only).
+        recovery: resolve stalls (no switch and no motion for ``stall_time``) by taking the
+            candidate transition most consistent with the coupling, then most probable, if its
+            ``p`` reaches ``recovery_threshold``.
+        stall_time: seconds without any switch and without motion that count as a stall.
+        rest_speed: features count as at rest below this speed, in training ranges per second.
+        recovery_threshold: the relaxed threshold of a recovery transition.
+        min_exit: a transition also needs the current node's exit probability ``φ`` above this
+            (0 = off, the paper's rule).
+        start_kernel: ``shared`` (paper): the initial node is chosen with the nodes' progress
+            predictors. ``isotropic``: with extra heads for the initial nodes, fitted in the same
+            run on the same data but always with the isotropic kernel. Meant for
+            ``feature_weighting=path``, which de-weights features that stay constant along an
+            activation, such as box size; those are exactly what decides the strategy.
+        start_rule: ``independent`` (paper): each graph starts at its own initial node of
+            highest entry probability. ``joint``: choose among the combinations of initial MPs
+            seen together in a demonstration the one with the highest summed log entry
+            probability, so graphs cannot start in a mixture of strategies that was never
+            demonstrated (the coupling the paper's discussion proposes).
+        nonfinite: what a tick with a non-finite φ does: ``hold`` (keep every MP, note the
+            event) or ``raise`` (:class:`~cpmp.errors.DataError`). A non-finite φ never fires.
+    """
+
+    threshold: float = 0.65
+    patience: float = 0.05
+    min_improvement: float = 1e-3
+    switch_rule: str = "paper"
+    coupling: str = "context"
+    progress_margin: float | None = 0.2
+    recovery: bool = True
+    stall_time: float = 1.0
+    rest_speed: float = 0.01
+    recovery_threshold: float = 0.2
+    min_exit: float = 0.0
+    start_kernel: str = "isotropic"
+    start_rule: str = "joint"
+    nonfinite: str = "hold"
+
+    def __post_init__(self) -> None:
+        for name in (
+            "threshold",
+            "patience",
+            "min_improvement",
+            "stall_time",
+            "rest_speed",
+            "recovery_threshold",
+            "min_exit",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"sequencer option {name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f"sequencer option {name} must be finite, got {value}")
+        if not 0.0 <= self.threshold < 1.0:
+            raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
+        margin = self.progress_margin
+        if margin is not None and (
+            isinstance(margin, bool)
+            or not isinstance(margin, (int, float))
+            or not 0.0 <= margin <= 1.0
+        ):
+            raise ConfigError(f"progress_margin must be null or in [0, 1], got {margin!r}")
+        if not 0.0 <= self.recovery_threshold < 1.0:
+            raise ConfigError(
+                f"recovery_threshold must be in [0, 1), got {self.recovery_threshold}"
+            )
+        if self.patience < 0.0:
+            raise ConfigError(f"patience must be >= 0 seconds, got {self.patience}")
+        if self.min_improvement < 0.0:
+            raise ConfigError(f"min_improvement must be >= 0, got {self.min_improvement}")
+        if self.stall_time <= 0.0 or self.rest_speed <= 0.0:
+            raise ConfigError(
+                f"stall_time and rest_speed must be > 0, got {self.stall_time} and "
+                f"{self.rest_speed}"
+            )
+        if not 0.0 <= self.min_exit < 1.0:
+            raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
+        if not isinstance(self.recovery, bool):
+            raise ConfigError(f"recovery must be true or false, got {self.recovery!r}")
+        for name, allowed in (
+            ("switch_rule", SWITCH_RULES),
+            ("coupling", COUPLINGS),
+            ("start_kernel", START_KERNELS),
+            ("start_rule", START_RULES),
+            ("nonfinite", NONFINITE_POLICIES),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(
+                    f"{name} must be one of {', '.join(map(repr, allowed))}, "
+                    f"got {getattr(self, name)!r}"
+                )
