@@ -68,6 +68,7 @@ CHECKPOINT_VERSION = 2
 PAPER_OPTIONS: dict[str, Any] = {
     "feature_weighting": "none",
     "feature_scaling": "none",
+    "path_noise": "none",
     "start_kernel": "shared",
     "start_rule": "independent",
     "switch_rule": "paper",
@@ -216,7 +217,9 @@ class ConcurrentSequencer:
             combo = {v: str(demo.labels[v][0]) for v in sorted(graphs)}
             if combo not in combos:
                 combos.append(combo)
-        coupling = Coupling.learn(demos, sorted(graphs), model.scaler.transform)
+        coupling = Coupling.learn(
+            demos, sorted(graphs), model.scaler.transform, getattr(model, "labels", "path")
+        )
         feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
         return cls(
             graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range

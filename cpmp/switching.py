@@ -158,26 +158,30 @@ class Coupling:
         demos: Sequence[Demonstration],
         variables: Sequence[str],
         transform: Callable[[np.ndarray], np.ndarray] | None = None,
+        labels: str = "path",
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``; ``transform``
         maps features ``(n, d)`` to the space progress is measured in (the predictor's
-        scaling)."""
-        from cpmp.progress import expected_progress
+        scaling) and ``labels`` is the predictor's kind of progress label
+        (:func:`cpmp.progress.progress_labels`), so that the learned progress thresholds are
+        in the units of the φ they are compared with (e.g. eq. 1 on the denoised trajectory of
+        noisy demonstrations)."""
+        from cpmp.progress import progress_labels
 
         contexts: dict[Edge, dict[str, set[str]]] = {}
         progress: dict[Edge, dict[str, dict[str, float]]] = {}
         variables = list(variables)
         for demo in demos:
-            labels = {v: np.asarray(demo.labels[v]) for v in variables}
+            mps = {v: np.asarray(demo.labels[v]) for v in variables}
             x = demo.features if transform is None else transform(demo.features)
             done = {}
             for u in variables:
                 done[u] = np.zeros(demo.n_samples)
                 for seg in demo.segments(u):
                     sl = slice(seg.start, seg.stop)
-                    done[u][sl] = expected_progress(x[sl], demo.time[sl])
+                    done[u][sl] = progress_labels(x[sl], demo.time[sl], labels)
             for v in variables:
-                lab = labels[v]
+                lab = mps[v]
                 for i in np.flatnonzero(lab[1:] != lab[:-1]) + 1:
                     edge = (v, str(lab[i - 1]), str(lab[i]))
                     ctx = contexts.setdefault(edge, {})
@@ -185,7 +189,7 @@ class Coupling:
                     for u in variables:
                         if u == v:
                             continue
-                        before, after = str(labels[u][i - 1]), str(labels[u][i])
+                        before, after = str(mps[u][i - 1]), str(mps[u][i])
                         ctx.setdefault(u, set()).update((before, after))
                         if before == after:
                             seen = prog.setdefault(u, {})

@@ -109,6 +109,20 @@ def test_coupling_learns_contexts_of_switches():
     assert Coupling.from_dict(coupling.to_dict()) == coupling
 
 
+def test_coupling_progress_is_in_the_predictors_label_units():
+    """The thresholds use the predictor's label kind: with time labels, w switched when U2 had
+    run 1 of its 3 intervals, whatever distance u's feature had covered by then."""
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+    )
+    demo.features[3:7, 0] = [0.0, 2.5, 2.8, 3.0]  # most of the distance in the first step
+    demo.features[7:, 0] = 3.0
+    path = Coupling.learn([demo], ["u", "w"])
+    timed = Coupling.learn([demo], ["u", "w"], labels="time")
+    assert path.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(2.5 / 3)}}
+    assert timed.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(1 / 3)}}
+
+
 def test_coupling_learns_how_far_the_others_had_progressed():
     # u's feature moves 0 -> 1 during U2 (4 samples); w switched when U2 was 1/3 done, so a
     # w switch needs U2 at >= 1/3 - margin; U1 -> U2 and the simultaneous end carry no progress
