@@ -1,6 +1,7 @@
 """cpmp: probabilistic progress prediction and sequencing of concurrent movement primitives."""
 
 from cpmp.errors import (
+    CheckpointFormatError,
     ConfigError,
     CpmpError,
     CpmpFileError,
@@ -12,6 +13,7 @@ from cpmp.errors import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "CheckpointFormatError",
     "ConfigError",
     "CpmpError",
     "CpmpFileError",

@@ -28,11 +28,21 @@ class CpmpFileError(CpmpError, OSError):
     """A file is missing, unreadable, or not in the expected cpmp format."""
 
 
+class CheckpointFormatError(CpmpFileError):
+    """A readable checkpoint of another format; ``found`` is its ``"format"`` entry (``None``
+    where it has none)."""
+
+    def __init__(self, message: str, found: object = None) -> None:
+        super().__init__(message)
+        self.found = found
+
+
 class NotFittedError(CpmpError, RuntimeError):
     """A model was used before it was fitted or loaded."""
 
 
 __all__ = [
+    "CheckpointFormatError",
     "ConfigError",
     "CpmpError",
     "CpmpFileError",

@@ -41,7 +41,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from cpmp.errors import ConfigError, CpmpError, CpmpFileError, DataError, NotFittedError
+from cpmp.errors import (
+    CheckpointFormatError,
+    ConfigError,
+    CpmpError,
+    CpmpFileError,
+    DataError,
+    NotFittedError,
+)
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import atomic_path, load_checkpoint
 from cpmp.predictors.base import SCALINGS, FeatureScaler
@@ -548,20 +555,14 @@ def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequenc
     :class:`CpmpFileError` as that loader does; a file of neither format names both.
     """
     try:
-        return GoalNearestSequencer.load(path)
-    except CpmpFileError as err:
-        # load_checkpoint's words for a readable checkpoint of another format
-        if str(err) != f"{Path(path)} is not a {KIND} checkpoint":
-            raise
-    try:
         return ConcurrentSequencer.load(path)
-    except CpmpFileError as err:
-        if str(err) != f"{Path(path)} is not a cpmp sequencer checkpoint":
-            raise
-        raise CpmpFileError(
-            f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
-            "written by scripts/train.py or a model_D<d>.pt of scripts/experiment.py"
-        ) from err
+    except CheckpointFormatError as err:
+        if err.found != CHECKPOINT_FORMAT:
+            raise CpmpFileError(
+                f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
+                "written by scripts/train.py or a model_D<d>.pt of scripts/experiment.py"
+            ) from err
+    return GoalNearestSequencer.load(path)
 
 
 class GoalNearestBatch(EpisodeBatch):

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.errors import CpmpFileError
+from cpmp.errors import CheckpointFormatError, CpmpFileError
 
 
 @contextlib.contextmanager
@@ -170,5 +170,6 @@ def load_checkpoint(
     except Exception as err:
         raise CpmpFileError(f"{path} is not a readable {label} checkpoint: {err}") from err
     if not isinstance(payload, dict) or payload.get("format") != fmt:
-        raise CpmpFileError(f"{path} is not a {kind} checkpoint")
+        found = payload.get("format") if isinstance(payload, dict) else None
+        raise CheckpointFormatError(f"{path} is not a {kind} checkpoint", found)
     return payload
