@@ -456,14 +456,9 @@ class EpisodeRecorder:
         if paths is None:
             for mp in mps:
                 self._check_mp(variable, mp)
-            paths = tuple(
-                _entity("progress", variable, mp, part)
-                for mp in mps
-                for part in ("phi", "entry", "exit")
-            )
-            for path, (mp, part) in zip(
-                paths, [(mp, part) for mp in mps for part in ("phi", "entry", "exit")], strict=True
-            ):
+            series = [(mp, part) for mp in mps for part in ("phi", "entry", "exit")]
+            paths = tuple(_entity("progress", variable, mp, part) for mp, part in series)
+            for path, (mp, part) in zip(paths, series, strict=True):
                 self._name_series(path, f"{mp} {part}")
             self._layouts[key] = paths
         return paths
