@@ -4,8 +4,8 @@ and its activations (:class:`Activation`).
 A :class:`Demonstration` is one recorded execution of a task (paper Sec. III-A): a feature
 trajectory ``X`` of shape ``(n, d)`` sampled at times ``t`` and, for every control variable, the
 name of the movement primitive (MP) active at each time step. The HDF5 file format is
-:mod:`cpmp.datafile`; ``save_demonstrations``, ``load_demonstrations`` and ``list_splits`` are
-importable from here too (loaded on first use, so the record needs no h5py).
+:mod:`cpmp.datafile` (``save_demonstrations``, ``load_demonstrations``, ``list_splits``); the
+record needs no h5py.
 """
 
 from __future__ import annotations
@@ -22,9 +22,6 @@ from cpmp.errors import DataError, UnknownMPError
 from cpmp.records import TransitionEvent
 
 MetadataValue = str | int | float | bool | None
-
-_FILE_FORMAT = ("list_splits", "load_demonstrations", "save_demonstrations")
-"""Names of :mod:`cpmp.datafile` that ``from cpmp.data import ...`` still finds."""
 
 
 @dataclass(frozen=True)
@@ -61,26 +58,19 @@ class Activation:
 class Demonstration:
     """One labelled demonstration, validated on construction.
 
-    Parameters
-    ----------
-    time : array, shape (n,)
-        Sample times [s], finite and strictly increasing, ``n >= 2``.
-    features : array, shape (n, d)
-        Feature state ``x`` at each sample (stored as float64), finite, ``d >= 1``.
-    labels : mapping, variable name -> array of str, shape (n,)
-        Name of the MP active on each control variable at each sample.
-    feature_names : sequence of str, length d, optional
-        Unique column names; defaults to ``f0 .. f{d-1}``.
-    name : str, optional
-        Used in error messages and as the HDF5 group name (``demo_<something>``).
-    metadata : mapping of str -> str/int/float/bool/None, optional
-        Free-form scalars such as box size or strategy.
+    Args:
+        time: (n,) sample times [s], finite and strictly increasing, ``n >= 2``.
+        features: (n, d) feature state ``x`` at each sample (stored as float64), finite,
+            ``d >= 1``.
+        labels: variable name -> (n,) str array, the name of the MP active on that control
+            variable at each sample.
+        feature_names: d unique column names; defaults to ``f0 .. f{d-1}``.
+        name: used in error messages and as the HDF5 group name (``demo_<something>``).
+        metadata: free-form scalars (str/int/float/bool/None) such as box size or strategy.
 
-    Raises
-    ------
-    DataError
-        If any of the above does not hold; the message names the demonstration and the fix.
-        Call :meth:`validate` again after editing the arrays in place.
+    Raises:
+        DataError: if any of the above does not hold; the message names the demonstration and
+            the fix. Call :meth:`validate` again after editing the arrays in place.
     """
 
     time: np.ndarray
@@ -374,15 +364,6 @@ class DemonstrationLog:
             name=name,
             metadata=None if metadata is None else dict(metadata),
         )
-
-
-def __getattr__(name: str) -> Any:
-    """The file-format functions of :mod:`cpmp.datafile` (imported on first use)."""
-    if name in _FILE_FORMAT:
-        from cpmp import datafile
-
-        return getattr(datafile, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = [

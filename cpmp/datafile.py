@@ -88,13 +88,10 @@ def load_demonstrations(path: PathLike, split: str | None = None) -> list[Demons
     Demonstrations come back in natural order of their group names (``demo_2`` before
     ``demo_10``); ``name`` is the group name.
 
-    Raises
-    ------
-    CpmpFileError
-        The file is missing, not HDF5, or not in the cpmp layout/version.
-    DataError
-        A demonstration is malformed (label ids outside ``mp_catalogue``, NaN, ...) or
-        ``split`` is not in the file (the message lists the available splits).
+    Raises:
+        CpmpFileError: the file is missing, not HDF5, or not in the cpmp layout/version.
+        DataError: a demonstration is malformed (label ids outside ``mp_catalogue``, NaN, ...)
+            or ``split`` is not in the file (the message lists the available splits).
     """
     with _open(path) as (f, header):
         groups = _demo_groups(f, path)

@@ -3,7 +3,8 @@
 * Progress prediction (paper Fig. 6): predicted φ against expected progress (eq. 1) for every
   MP activation of held-out demonstrations (a stateful predictor, such as ``dtw``, is fed each
   demonstration tick by tick). Whatever labels a predictor was trained on (``time_phase``:
-  normalised time), it is scored against eq. 1.
+  normalised time), it is scored against eq. 1. :func:`progress_curves` averages them over
+  activations (the statistics the figure draws).
 * Replay: the sequencer runs open-loop over each recorded feature stream; per variable we check
   that it reproduces the demonstrated MP sequence and measure the switch-state distance.
 
@@ -21,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cpmp.errors import DataError
+from cpmp.errors import ConfigError, DataError
 from cpmp.progress import expected_progress
 
 if TYPE_CHECKING:
@@ -123,6 +124,69 @@ def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) ->
     }
 
 
+def progress_curves(
+    activations: Sequence[tuple[np.ndarray, np.ndarray]], n_bins: int = 50
+) -> dict[str, Any]:
+    """Average predicted progress over MP activations (the statistics of Fig. 6).
+
+    ``activations``: (expected (n,), predicted (n,)) per activation, n >= 2 samples in time
+    order. Each is resampled (linear interpolation) onto ``n_bins`` points of normalised time
+    in [0, 1]; all samples are also binned by expected progress into ``n_bins`` equal bins.
+
+    Returns arrays of shape (n_bins,): ``time``, ``predicted_mean``, ``predicted_std``,
+    ``expected_mean``, ``expected_std`` (over activations, per time point); ``progress_bins``
+    (bin centres), ``binned_mean``, ``binned_std`` (predicted progress per expected-progress
+    bin, NaN where empty), ``binned_count``; and ``n_activations``. Standard deviations are
+    population (ddof=0) values.
+    """
+    if int(n_bins) < 2:
+        raise ConfigError(f"n_bins must be >= 2, got {n_bins}")
+    n_bins = int(n_bins)
+    if len(activations) == 0:
+        raise DataError("progress_curves needs at least one activation")
+    time = np.linspace(0.0, 1.0, n_bins)
+    resampled_expected, resampled_predicted = [], []
+    all_expected, all_predicted = [], []
+    for i, pair in enumerate(activations):
+        if len(pair) != 2:
+            raise DataError(f"activations[{i}] must be a pair (expected, predicted)")
+        expected, predicted = (np.asarray(a, dtype=float) for a in pair)
+        if expected.ndim != 1 or expected.shape != predicted.shape or len(expected) < 2:
+            raise DataError(
+                f"activations[{i}]: expected and predicted must both have shape (n,) with "
+                f"n >= 2, got {expected.shape} and {predicted.shape}"
+            )
+        if not (np.all(np.isfinite(expected)) and np.all(np.isfinite(predicted))):
+            raise DataError(f"activations[{i}] contains NaN or inf")
+        own_time = np.linspace(0.0, 1.0, len(expected))
+        resampled_expected.append(np.interp(time, own_time, expected))
+        resampled_predicted.append(np.interp(time, own_time, predicted))
+        all_expected.append(expected)
+        all_predicted.append(predicted)
+
+    expected_flat, predicted_flat = np.concatenate(all_expected), np.concatenate(all_predicted)
+    edges = np.linspace(0.0, 1.0, n_bins + 1)
+    bin_index = np.clip(np.digitize(expected_flat, edges) - 1, 0, n_bins - 1)
+    count = np.bincount(bin_index, minlength=n_bins)
+    total = np.bincount(bin_index, weights=predicted_flat, minlength=n_bins)
+    total_sq = np.bincount(bin_index, weights=predicted_flat**2, minlength=n_bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        binned_mean = np.where(count > 0, total / count, np.nan)
+        binned_var = np.where(count > 0, total_sq / count - binned_mean**2, np.nan)
+    return {
+        "time": time,
+        "predicted_mean": np.mean(resampled_predicted, axis=0),
+        "predicted_std": np.std(resampled_predicted, axis=0),
+        "expected_mean": np.mean(resampled_expected, axis=0),
+        "expected_std": np.std(resampled_expected, axis=0),
+        "progress_bins": 0.5 * (edges[:-1] + edges[1:]),
+        "binned_mean": binned_mean,
+        "binned_std": np.sqrt(np.maximum(binned_var, 0.0)),
+        "binned_count": count,
+        "n_activations": len(activations),
+    }
+
+
 def switch_distances(
     events: Sequence[TransitionEvent],
     demo: Demonstration,
@@ -194,3 +258,22 @@ def replay_demonstrations(
         "distance_std": float(np.std(distances)) if distances else None,
         "n_switches": len(distances),
     }
+
+
+def evaluate_offline(
+    seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
+) -> dict[str, Any]:
+    """Everything offline about ``seq`` on ``demos``: progress MAE (overall, first/last 10 %,
+    per node; :func:`progress_errors`), Fig. 6 curves (:func:`progress_curves` with ``n_bins``)
+    and the raw ``(expected, predicted)`` pairs per activation, and a replay of the recorded
+    feature streams (:func:`replay_demonstrations`).
+
+    Returns:
+        ``{"progress", "curves", "replay", "pairs"}``.
+    """
+    records = activation_progress(seq, demos)
+    errors = progress_errors(records)
+    curves = progress_curves([(r.expected, r.predicted) for r in records], n_bins=n_bins)
+    replay = replay_demonstrations(seq, demos)
+    pairs = [(r.expected, r.predicted) for r in records]
+    return {"progress": errors, "curves": curves, "replay": replay, "pairs": pairs}

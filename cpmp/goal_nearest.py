@@ -23,8 +23,9 @@ It shows what learned progress adds over "wait until done, then pick the closest
   demonstration did.
 
 It has no progress predictor; for offline evaluation :meth:`GoalNearestSequencer.progress`
-gives the nearest-neighbour estimate: the expected progress (eq. 1) of the nearest training
-sample of each node. The switching rule never uses it.
+gives the nearest-neighbour estimate (:class:`~cpmp.nearest_progress.NearestProgress`): the
+expected progress (eq. 1) of the nearest training sample of each node. The switching rule never
+uses it. Its options are :class:`~cpmp.config.GoalNearestConfig`.
 """
 
 from __future__ import annotations
@@ -33,34 +34,21 @@ import copy
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
-from torch import nn
 
-from cpmp.errors import (
-    CheckpointFormatError,
-    ConfigError,
-    CpmpError,
-    CpmpFileError,
-    DataError,
-    NotFittedError,
-)
+from cpmp.batches import GoalNearestBatch
+from cpmp.config.goal_nearest import KIND, GoalNearestConfig, goal_nearest_options
+from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph, build_graphs
-from cpmp.io import atomic_path, load_checkpoint
-from cpmp.predictors.base import SCALINGS, FeatureScaler
+from cpmp.inputs import checked_demonstrations, checked_features, checked_time
+from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
+from cpmp.nearest_progress import NearestProgress
 from cpmp.progress import expected_progress
-from cpmp.sequencer import (
-    ConcurrentSequencer,
-    EpisodeBatch,
-    TickInfo,
-    TransitionEvent,
-    checked_features,
-    checked_time,
-)
+from cpmp.records import TickInfo, TransitionEvent
 from cpmp.switching import indicator_features
 
 if TYPE_CHECKING:
@@ -68,131 +56,17 @@ if TYPE_CHECKING:
 
 CHECKPOINT_FORMAT = "cpmp-goal-nearest"
 CHECKPOINT_VERSION = 1
-KIND = "goal_nearest"
-"""The ``kind`` of the ``sequencer`` config group entry that selects this baseline."""
+CHECKPOINT = CheckpointSpec(
+    CHECKPOINT_FORMAT,
+    (CHECKPOINT_VERSION,),
+    "goal_nearest",
+    "load a file written by "
+    "GoalNearestSequencer.save, or fit it again with GoalNearestSequencer.fit",
+)
+"""The goal_nearest checkpoint kind."""
 
 _EPS_T = 1e-9
 """Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
-
-
-@dataclass
-class GoalNearestConfig:
-    """Options of the goal-nearest baseline (``conf/sequencer/goal_nearest.yaml``).
-
-    Attributes:
-        speed_threshold: an MP has converged while each of its moving features changes slower
-            than this [scaled feature units / s].
-        hold_time: the MP must stay converged this long before its variable switches [s].
-        motion_share: a feature moves during an MP if its L1 path over the MP's training
-            activations is at least this fraction of the largest feature's path, in [0, 1].
-        feature_scaling: the scaled feature space of velocities and distances (one of
-            ``global``, ``none``, ``minmax``, ``standard``; see
-            :class:`~cpmp.predictors.FeatureScaler`).
-    """
-
-    speed_threshold: float = 0.02
-    hold_time: float = 0.1
-    motion_share: float = 0.1
-    feature_scaling: str = "global"
-
-    def __post_init__(self) -> None:
-        for name in ("speed_threshold", "hold_time", "motion_share"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"goal_nearest option {name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ConfigError(f"goal_nearest option {name} must be finite, got {value}")
-        if self.speed_threshold <= 0:
-            raise ConfigError(
-                f"goal_nearest speed_threshold must be > 0 [scaled units/s], got "
-                f"{self.speed_threshold}"
-            )
-        if self.hold_time < 0:
-            raise ConfigError(f"goal_nearest hold_time must be >= 0 s, got {self.hold_time}")
-        if not 0.0 <= self.motion_share <= 1.0:
-            raise ConfigError(
-                f"goal_nearest motion_share must be in [0, 1], got {self.motion_share}"
-            )
-        if self.feature_scaling not in SCALINGS:
-            raise ConfigError(
-                f"goal_nearest feature_scaling must be one of {', '.join(SCALINGS)}, got "
-                f"{self.feature_scaling!r}"
-            )
-
-
-def goal_nearest_options(options: Mapping[str, Any]) -> GoalNearestConfig:
-    """Validated :class:`GoalNearestConfig` from a mapping; unknown names raise
-    :class:`ConfigError` listing the valid ones."""
-    valid = [f.name for f in dataclasses.fields(GoalNearestConfig)]
-    unknown = sorted(set(options) - set(valid))
-    if unknown:
-        raise ConfigError(
-            f"unknown option(s) {', '.join(unknown)} for sequencer=goal_nearest; valid "
-            f"options: {', '.join(valid)}"
-        )
-    return GoalNearestConfig(**options)
-
-
-class NearestProgress(nn.Module):
-    """Nearest-neighbour progress of every node: φ of node ``k`` at ``x`` is the expected
-    progress (eq. 1) of the training sample of ``k`` nearest to ``x`` in the scaled space.
-
-    Buffers: ``samples (P, d)`` scaled training samples of all nodes, ``targets (P,)`` their
-    expected progress, ``node (P,)`` the node index of each. Offers what offline evaluation
-    needs of a predictor (``scaler``, ``node_keys``, ``stateful``, ``reset_state``).
-    """
-
-    stateful = False
-
-    def __init__(
-        self,
-        node_keys: Sequence[tuple[str, str]],
-        n_features: int,
-        n_samples: int,
-        dtype: torch.dtype = torch.float64,
-    ) -> None:
-        super().__init__()
-        self.node_keys = [tuple(k) for k in node_keys]
-        self.n_features = n_features
-        self.scaler = FeatureScaler(n_features, dtype)
-        self.register_buffer("samples", torch.zeros(n_samples, n_features, dtype=dtype))
-        self.register_buffer("targets", torch.zeros(n_samples, dtype=dtype))
-        self.register_buffer("node", torch.zeros(n_samples, dtype=torch.long))
-        self._trees: list[Any] | None = None
-
-    def reset_state(self, n_streams: int) -> None:
-        """Stateless: nothing to reset."""
-
-    def n_parameters(self) -> int:
-        return 0
-
-    def _lookup(self) -> list[Any]:
-        if self._trees is None:
-            from scipy.spatial import cKDTree
-
-            samples, node = self.samples.numpy(), self.node.numpy()
-            self._trees = []
-            for k in range(len(self.node_keys)):
-                rows = np.flatnonzero(node == k)
-                if rows.size == 0:
-                    raise DataError(f"node {self.node_keys[k]} has no training samples")
-                self._trees.append((cKDTree(samples[rows]), self.targets.numpy()[rows]))
-        return self._trees
-
-    def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
-        """``x (..., d)`` raw features -> ``(..., K)`` nearest-neighbour progress in [0, 1]
-        (``heads``: only the first ``heads`` nodes)."""
-        lead = x.shape[:-1]
-        z = self.scaler.transform(x.detach().cpu().numpy().reshape(-1, self.n_features))
-        trees = self._lookup()[: len(self.node_keys) if heads is None else heads]
-        out = np.empty((z.shape[0], len(trees)))
-        for k, (tree, targets) in enumerate(trees):
-            out[:, k] = targets[tree.query(z)[1]]
-        return torch.from_numpy(out).reshape(*lead, len(trees))
-
-    def load_state_dict(self, *args: Any, **kwargs: Any) -> Any:
-        self._trees = None
-        return super().load_state_dict(*args, **kwargs)
 
 
 class GoalNearestSequencer:
@@ -296,16 +170,7 @@ class GoalNearestSequencer:
 
         started = time.perf_counter()
         config = goal_nearest_options(options)
-        demos = list(demos)
-        if not demos:
-            raise DataError("GoalNearestSequencer.fit needs at least one demonstration, got none")
-        feature_names = list(demos[0].feature_names)
-        for m, demo in enumerate(demos):
-            if list(demo.feature_names) != feature_names:
-                raise DataError(
-                    f"{demo.name or f'demonstration {m}'} has features {list(demo.feature_names)}"
-                    f" but the first demonstration has {feature_names}; all must match"
-                )
+        demos, feature_names = checked_demonstrations(demos, "GoalNearestSequencer.fit")
         graphs = build_graphs(demos, variables)
         all_x = np.concatenate([d.features for d in demos], axis=0)
         binary = indicator_features(all_x)
@@ -427,7 +292,7 @@ class GoalNearestSequencer:
                     continue  # staying is nearest: decide again at the next tick
                 target = successors[k]
                 self.events.append(
-                    TransitionEvent(t, v, current, target, float("nan"), state.copy(), "switch")
+                    TransitionEvent(t, v, current, target, math.nan, state.copy(), "switch")
                 )
                 self.active[v] = target
                 self._still_since[v] = None
@@ -466,147 +331,63 @@ class GoalNearestSequencer:
     # ----------------------------------------------------------------------------- persistence
     def save(self, path: str | Path) -> Path:
         """Write a checkpoint atomically to ``path`` (read it with :meth:`load`)."""
-        payload = {
-            "format": CHECKPOINT_FORMAT,
-            "version": CHECKPOINT_VERSION,
-            "config": dataclasses.asdict(self.config),
-            "feature_names": self.feature_names,
-            "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
-            "node_keys": [list(k) for k in self.predictor.node_keys],
-            "predictor": self.predictor.state_dict(),
-            "motion": {
-                v: {mp: torch.from_numpy(m) for mp, m in masks.items()}
-                for v, masks in self.motion.items()
+        return save_checkpoint(
+            path,
+            {
+                "format": CHECKPOINT_FORMAT,
+                "version": CHECKPOINT_VERSION,
+                "config": dataclasses.asdict(self.config),
+                "feature_names": self.feature_names,
+                "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
+                "node_keys": [list(k) for k in self.predictor.node_keys],
+                "predictor": self.predictor.state_dict(),
+                "motion": {
+                    v: {mp: torch.from_numpy(m) for mp, m in masks.items()}
+                    for v, masks in self.motion.items()
+                },
+                "entries": [
+                    {"variable": v, "source": s, "target": t, "states": torch.from_numpy(e)}
+                    for (v, s, t), e in sorted(self.entries.items(), key=lambda kv: str(kv[0]))
+                ],
+                "finals": [
+                    {"variable": v, "mp": mp, "states": torch.from_numpy(e)}
+                    for (v, mp), e in sorted(self.finals.items())
+                ],
+                "fit_summary": {k: v for k, v in self.fit_summary.items() if k != "warnings"},
             },
-            "entries": [
-                {"variable": v, "source": s, "target": t, "states": torch.from_numpy(e)}
-                for (v, s, t), e in sorted(self.entries.items(), key=lambda kv: str(kv[0]))
-            ],
-            "finals": [
-                {"variable": v, "mp": mp, "states": torch.from_numpy(e)}
-                for (v, mp), e in sorted(self.finals.items())
-            ],
-            "fit_summary": {k: v for k, v in self.fit_summary.items() if k != "warnings"},
-        }
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            torch.save(payload, tmp)
-        return path
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> GoalNearestSequencer:
         """Load a checkpoint written by :meth:`save`."""
-        payload = load_checkpoint(
-            path,
-            CHECKPOINT_FORMAT,
-            label="goal_nearest",
-            kind="goal_nearest",
-            remedy="fit it again with GoalNearestSequencer.fit, or load only files you wrote "
-            "with GoalNearestSequencer.save",
+        return load_checkpoint(path, CHECKPOINT, cls._from_payload)
+
+    @classmethod
+    def _from_payload(cls, payload: dict[str, Any], version: int) -> GoalNearestSequencer:
+        """Rebuild from a checkpoint payload (of :data:`CHECKPOINT_VERSION`)."""
+        graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
+        state = payload["predictor"]
+        predictor = NearestProgress(
+            [tuple(k) for k in payload["node_keys"]],
+            len(payload["feature_names"]),
+            int(state["samples"].shape[0]),
         )
-        if payload.get("version") != CHECKPOINT_VERSION:
-            raise CpmpFileError(
-                f"{path} has goal_nearest checkpoint version {payload.get('version')}; this cpmp "
-                f"reads version {CHECKPOINT_VERSION}"
-            )
-        try:
-            graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
-            state = payload["predictor"]
-            predictor = NearestProgress(
-                [tuple(k) for k in payload["node_keys"]],
-                len(payload["feature_names"]),
-                int(state["samples"].shape[0]),
-            )
-            predictor.load_state_dict(state)
-            entries = {
-                (r["variable"], r["source"], r["target"]): r["states"].numpy()
-                for r in payload["entries"]
-            }
-            finals = {(r["variable"], r["mp"]): r["states"].numpy() for r in payload["finals"]}
-            motion = {
-                v: {mp: m.numpy() for mp, m in masks.items()}
-                for v, masks in payload["motion"].items()
-            }
-            return cls(
-                graphs,
-                payload["feature_names"],
-                goal_nearest_options(payload["config"]),
-                predictor,
-                motion,
-                entries,
-                finals,
-                {**payload.get("fit_summary", {}), "warnings": []},
-            )
-        except (CpmpError, KeyError, TypeError, ValueError, RuntimeError, AttributeError) as err:
-            raise CpmpFileError(
-                f"{path} is a damaged goal_nearest checkpoint ({type(err).__name__}: {err}); "
-                "fit it again"
-            ) from err
-
-
-def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequencer:
-    """Load any sequencer checkpoint cpmp writes (the main job's ``model_D<d>.pt``,
-    ``train.py``'s ``model.pt``): a :class:`~cpmp.sequencer.ConcurrentSequencer` with any
-    predictor, or a :class:`GoalNearestSequencer`; the checkpoint's own format decides.
-
-    Both share the :meth:`~cpmp.sequencer.ConcurrentSequencer.load` interface offline
-    evaluation needs (``graphs``, ``feature_names``, ``node_keys``, ``progress``, ``predictor``
-    with ``scaler`` and ``stateful``, ``replay``). A missing, damaged or untrusted file raises
-    :class:`CpmpFileError` as that loader does; a file of neither format names both.
-    """
-    try:
-        return ConcurrentSequencer.load(path)
-    except CheckpointFormatError as err:
-        if err.found != CHECKPOINT_FORMAT:
-            raise CpmpFileError(
-                f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
-                "written by scripts/train.py or a model_D<d>.pt of scripts/experiment.py"
-            ) from err
-    return GoalNearestSequencer.load(path)
-
-
-class GoalNearestBatch(EpisodeBatch):
-    """``N`` independent episodes of one fitted :class:`GoalNearestSequencer` (build with
-    ``seq.batched(n)``), with the interface of :class:`~cpmp.sequencer.BatchedSequencer`:
-    ``reset``/``step`` take ``t`` (scalar or ``(N,)``) [s], features ``x (N, d)`` and an
-    optional ``live (N,)`` bool mask (other episodes are left untouched) and return every
-    episode's active MPs; ``episodes[i]`` holds episode ``i``'s ``events`` and ``last_tick``.
-    """
-
-    def __init__(self, episodes: Sequence[GoalNearestSequencer]) -> None:
-        self.episodes = list(episodes)
-
-    def reset(
-        self, t: float | np.ndarray, x: np.ndarray, live: Sequence[bool] | None = None
-    ) -> list[dict[str, str]]:
-        """Start the ``live`` episodes (default: all)."""
-        for i, (ti, xi) in self._rows(t, x, live):
-            self.episodes[i].reset(ti, xi)
-        return self.active
-
-    def step(
-        self, t: float | np.ndarray, x: np.ndarray, live: Sequence[bool] | None = None
-    ) -> list[dict[str, str]]:
-        """Advance the ``live`` episodes (default: all) one tick."""
-        for i, (ti, xi) in self._rows(t, x, live):
-            try:
-                self.episodes[i].step(ti, xi)
-            except CpmpError as err:
-                raise type(err)(f"episode {i}: {err}") from err
-        return self.active
-
-    def _rows(
-        self, t: float | np.ndarray, x: np.ndarray, live: Sequence[bool] | None
-    ) -> list[tuple[int, tuple[float, np.ndarray]]]:
-        n = len(self.episodes)
-        xn = np.asarray(x, dtype=np.float64)
-        if xn.ndim != 2 or xn.shape[0] != n:
-            raise DataError(f"a batch of {n} episodes needs features (N={n}, d), got {xn.shape}")
-        try:
-            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
-        except ValueError as err:
-            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
-        keep = np.ones(n, dtype=bool) if live is None else np.asarray(live, dtype=bool)
-        if keep.shape != (n,):
-            raise DataError(f"live must be {n} booleans, got shape {keep.shape}")
-        return [(i, (float(times[i]), xn[i])) for i in np.flatnonzero(keep).tolist()]
+        predictor.load_state_dict(state)
+        entries = {
+            (r["variable"], r["source"], r["target"]): r["states"].numpy()
+            for r in payload["entries"]
+        }
+        finals = {(r["variable"], r["mp"]): r["states"].numpy() for r in payload["finals"]}
+        motion = {
+            v: {mp: m.numpy() for mp, m in masks.items()} for v, masks in payload["motion"].items()
+        }
+        return cls(
+            graphs,
+            payload["feature_names"],
+            goal_nearest_options(payload["config"]),
+            predictor,
+            motion,
+            entries,
+            finals,
+            {**payload.get("fit_summary", {}), "warnings": []},
+        )

@@ -1,4 +1,5 @@
-"""Atomic file writing: a failed write never leaves a partial file behind."""
+"""Atomic file writing (a failed write never leaves a partial file behind) and the checkpoint
+files of the sequencers: one writer, one loader that checks format, version and trust."""
 
 from __future__ import annotations
 
@@ -7,13 +8,15 @@ import glob
 import math
 import os
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
-from cpmp.errors import CheckpointFormatError, CpmpFileError
+from cpmp.errors import CheckpointFormatError, CpmpError, CpmpFileError
+
+T = TypeVar("T")
 
 
 @contextlib.contextmanager
@@ -136,40 +139,103 @@ def to_builtin(obj: Any) -> Any:
     return obj
 
 
-def load_checkpoint(
-    path: str | os.PathLike[str], fmt: str, label: str, kind: str, remedy: str
-) -> dict:
-    """The payload dict of a checkpoint written by ``torch.save``, loaded with
-    ``weights_only=True``; every failure is a :class:`CpmpFileError`.
+def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) -> Path:
+    """Write a checkpoint ``payload`` (tensors and plain Python only, so that
+    :func:`load_checkpoint` reads it with ``weights_only=True``) atomically to ``path`` with
+    ``torch.save``; returns the path."""
+    import torch
 
-    ``fmt``: the payload's ``"format"`` entry; ``label``: how messages name an unreadable file
-    (``"a readable {label} checkpoint"``); ``kind``: how they name a payload of another format;
-    ``remedy``: what to do instead (a missing or untrusted file). A file holding Python objects
-    is refused as untrusted, never with torch's hint to switch the protection off. Version
-    checks stay with the caller.
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(dict(payload), tmp)
+    return path
+
+
+REBUILD_ERRORS = (CpmpError, KeyError, TypeError, ValueError, RuntimeError, AttributeError)
+"""What rebuilding a model from a readable payload raises on a damaged or incompatible one."""
+
+
+class CheckpointSpec(NamedTuple):
+    """What a checkpoint kind is and how messages speak of it.
+
+    Attributes:
+        fmt: the payload's ``"format"`` entry.
+        versions: the payload versions this cpmp reads.
+        name: how messages name the kind (``"not a readable {name} checkpoint"``).
+        remedy: what to do instead of loading a missing, untrusted or damaged file.
     """
+
+    fmt: str
+    versions: tuple[int, ...]
+    name: str
+    remedy: str
+
+
+def load_checkpoint(
+    path: str | os.PathLike[str], spec: CheckpointSpec, rebuild: Callable[[dict[str, Any], int], T]
+) -> T:
+    """Read a checkpoint written by :func:`save_checkpoint` and rebuild its model; every failure
+    is a :class:`CpmpFileError`.
+
+    The payload is loaded with ``torch.load(weights_only=True)``: a file holding Python objects
+    is refused as untrusted, never with torch's hint to switch the protection off. Then its
+    ``"format"`` entry must be ``spec.fmt`` (else :class:`CheckpointFormatError` carrying the
+    format found) and its ``"version"`` one of ``spec.versions``; ``rebuild(payload, version)``
+    builds the model, and what it raises (:data:`REBUILD_ERRORS`) is reported as a damaged
+    checkpoint.
+
+    Args:
+        path: the checkpoint file.
+        spec: the checkpoint kind expected.
+        rebuild: ``(payload, version) -> model``.
+
+    Returns:
+        What ``rebuild`` returns.
+
+    Raises:
+        CpmpFileError: missing, unreadable, untrusted, of another version, or damaged.
+        CheckpointFormatError: a readable checkpoint of another format.
+    """
+    payload = _load_payload(Path(path), spec)
+    if not isinstance(payload, dict) or payload.get("format") != spec.fmt:
+        found = payload.get("format") if isinstance(payload, dict) else None
+        raise CheckpointFormatError(f"{path} is not a {spec.name} checkpoint", found)
+    version = payload.get("version")
+    if version not in spec.versions:
+        known = " and ".join(str(v) for v in sorted(spec.versions))
+        raise CpmpFileError(
+            f"{path} has {spec.name} checkpoint version {version}; this cpmp reads "
+            f"version{'s' if len(spec.versions) > 1 else ''} {known}"
+        )
+    try:
+        return rebuild(payload, version)
+    except REBUILD_ERRORS as err:
+        raise CpmpFileError(
+            f"{path} is a damaged {spec.name} checkpoint or one this cpmp cannot read "
+            f"({type(err).__name__}: {err}); {spec.remedy}"
+        ) from err
+
+
+def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
+    """What ``torch.load(path, weights_only=True)`` returns; :class:`CpmpFileError` for a
+    missing, unreadable or untrusted file (see :func:`load_checkpoint`)."""
     import pickle
 
     import torch
 
-    path = Path(path)
     if not path.is_file():
-        raise CpmpFileError(f"checkpoint {path} does not exist; {remedy}")
+        raise CpmpFileError(f"checkpoint {path} does not exist; {spec.remedy}")
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+        return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as err:
         if "global" not in str(err).lower():  # not a refused class: a damaged file
             raise CpmpFileError(
-                f"{path} is not a readable {label} checkpoint (the file is damaged or of "
+                f"{path} is not a readable {spec.name} checkpoint (the file is damaged or of "
                 "another kind)"
             ) from err
         raise CpmpFileError(
-            f"{path} is not a trusted {label} checkpoint: it holds Python objects that a cpmp "
-            f"checkpoint never contains, so it was not loaded; {remedy}"
+            f"{path} is not a trusted {spec.name} checkpoint: it holds Python objects that a cpmp "
+            f"checkpoint never contains, so it was not loaded; {spec.remedy}"
         ) from err
     except Exception as err:
-        raise CpmpFileError(f"{path} is not a readable {label} checkpoint: {err}") from err
-    if not isinstance(payload, dict) or payload.get("format") != fmt:
-        found = payload.get("format") if isinstance(payload, dict) else None
-        raise CheckpointFormatError(f"{path} is not a {kind} checkpoint", found)
-    return payload
+        raise CpmpFileError(f"{path} is not a readable {spec.name} checkpoint: {err}") from err

@@ -241,11 +241,7 @@ def _count_for_length(
 
 
 def support_point_count(
-    features: np.ndarray,
-    scale: float = 2.0,
-    min_support: int = 3,
-    max_support: int | None = None,
-    noise: str = "none",
+    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: str
 ) -> int:
     """How many points :func:`support_points` places along ``features (n, d)``, without
     placing them."""
@@ -253,11 +249,7 @@ def support_point_count(
 
 
 def support_points(
-    features: np.ndarray,
-    scale: float = 2.0,
-    min_support: int = 3,
-    max_support: int | None = None,
-    noise: str = "none",
+    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: str
 ) -> np.ndarray:
     """Support points ``(S, d)`` equidistant by L1 arc length along a trajectory ``(n, d)``.
 
@@ -266,6 +258,9 @@ def support_points(
     samples. A trajectory of zero length yields a single support point (its constant value).
     With ``noise="auto"`` the trajectory is first denoised (:func:`denoise_trajectory`), so
     the points lie on the estimate of the noise-free path and their count follows its length.
+    ``scale``, ``min_support``, ``max_support`` and ``noise`` are a predictor's options
+    (:class:`~cpmp.config.KLRConfig` ``support_scale``, ``min_support``, ``max_support``,
+    ``path_noise``).
     """
     x = _as_trajectory(features)
     if _check_noise(noise) == "auto":

@@ -99,7 +99,7 @@ class Policy(Protocol):
 
 
 class BatchedPolicy(Protocol):
-    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.sequencer.BatchedSequencer`.
+    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.batches.BatchedSequencer`.
     ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool marks the episodes still running (the others'
     rows are to be ignored); the result holds one mapping variable -> MP per episode."""
 

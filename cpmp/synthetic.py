@@ -33,21 +33,24 @@ class SyntheticTask:
     """The two-point concurrent task.
 
     Attributes:
-        gain: attractor gains K of ``a`` and ``b`` [1/s].
         dt: control period [s].
+        max_time: episode time limit [s].
+        gain: attractor gains K of ``a`` and ``b`` [1/s].
         tolerance: the demonstrator switches when a point is this close to its goal.
+        start_jitter: half-width of the uniform jitter of the start positions around 0.
         goal_jitter: half-width of the uniform jitter of the "out" goals around 1 (goals are not
             features, so a jitter makes the end of an MP unobservable; 0 by default).
-        start_jitter: half-width of the uniform jitter of the start positions around 0.
-        max_time: episode time limit [s].
     """
 
-    gain: tuple[float, float] = (2.5, 4.0)
+    # the world
     dt: float = 0.01
-    tolerance: float = 0.02
-    goal_jitter: float = 0.0
-    start_jitter: float = 0.05
     max_time: float = 8.0
+    gain: tuple[float, float] = (2.5, 4.0)
+    # the demonstrator
+    tolerance: float = 0.02
+    # the episodes
+    start_jitter: float = 0.05
+    goal_jitter: float = 0.0
 
     def __post_init__(self) -> None:
         if min(self.gain) <= 0 or self.dt <= 0 or self.tolerance <= 0 or self.max_time <= 0:

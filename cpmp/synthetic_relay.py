@@ -22,51 +22,28 @@ receiver's fingers reads it (0 until the closing fingers touch the object, ``a <
 object_width``, then rising as they squeeze); the context feature is ``CONTEXT_SCALE * c``, in
 [0, 2] like the positions (the paper scales its features to similar ranges).
 
-The scripted demonstrator (a finite state machine) switches as soon as a guard holds, with no
-settle time:
-
-* gripper ``open -> close``: carrier within ``tolerance`` of its goal and receiver within
-  ``tolerance`` of the object; ``close -> hold``: grip force >= ``contact_force`` (``close``
-  would settle at ``light_force``); ``hold -> release``: receiver within ``tolerance`` of the
-  destination.
-* carrier ``carry/present -> retreat`` and receiver ``approach -> withdraw/stow``: the gripper
-  was holding at the previous tick (they feel the receiver take the object); carrier ``retreat
-  -> rest``: within ``tolerance`` of home.
-
-The synchronisation the features alone leave ambiguous: once the gripper starts closing, its
-fingers travel for about 0.3 s before they touch the object, and no feature moves meanwhile.
-That state lies far along ``carry``/``present`` and ``approach`` in feature space (both hands
-have arrived; only a small rise of the force is left) and close to where ``retreat`` and
-``withdraw``/``stow`` start, so graphs coupled only through the features (sequencer option
-``coupling="none"``) fire them during the pause: the object leaves with the carrier, or the
-receiver leaves without it, and the task cannot complete. The labels tell the difference: those
-switches were only demonstrated while the gripper was in ``hold``, which the learned coupling
-(``coupling="context"``) requires.
-
 The object moves with its holder: the carrier until the receiver grips it (force >=
 ``grip_force``), then the receiver until the force drops again (it is released where it is).
 Fingers that are already closed cannot get around the object. The goal state: the object
 released within ``goal_tolerance`` of its strategy's destination, the gripper open (``a >=
 0.9``) and the carrier within ``goal_tolerance`` of home.
+
+The scripted demonstrator is :mod:`cpmp.synthetic_relay_demonstrator`; closed-loop runs and
+their outcomes are :mod:`cpmp.synthetic_relay_evaluation`.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from cpmp.data import Demonstration, DemonstrationLog
+from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError, UnknownMPError
-from cpmp.records import Policy
 
 FEATURE_NAMES = ["carrier_x", "carrier_y", "receiver_x", "receiver_y", "grip_force", "context"]
 VARIABLES = ["carrier", "gripper", "receiver"]
 STRATEGIES = ("meet", "fetch")
-OUTCOMES = ("complete", "wrong_start", "incomplete")
 
 CARRIER_HOME = (0.0, 0.0)
 RECEIVER_HOME = (2.0, 0.0)
@@ -79,8 +56,6 @@ OPEN_APERTURE = 0.9
 """The gripper counts as open at the goal from this aperture on."""
 CONTEXT_SCALE = 2.0
 """The context feature is ``CONTEXT_SCALE * c`` (the positions' range)."""
-
-_CARRIER_OUT = ("carry", "present")
 _MPS = {
     "carrier": ("carry", "present", "retreat", "rest"),
     "gripper": ("open", "close", "hold", "release"),
@@ -146,29 +121,6 @@ class RelayState:
 
 
 @dataclass
-class RolloutResult:
-    """One closed-loop execution.
-
-    Attributes:
-        outcome: ``wrong_start`` (initial MPs differ from the demonstrator's), ``incomplete``
-            (goal state not reached within ``max_time``) or ``complete``.
-        sequences: variable -> executed MPs in order.
-        time: time [s] the goal state was reached, or the time the episode stopped.
-        initial: the policy's initial MPs; ``expected_initial``: the demonstrator's.
-        reached_goal: whether the goal state was reached (also after a wrong start).
-        strategy: the episode's strategy.
-    """
-
-    outcome: str
-    sequences: dict[str, list[str]]
-    time: float
-    initial: dict[str, str]
-    expected_initial: dict[str, str]
-    reached_goal: bool
-    strategy: str
-
-
-@dataclass
 class RelayTask:
     """The hand-over task (see module doc).
 
@@ -207,28 +159,8 @@ class RelayTask:
     max_time: float = 10.0
 
     def __post_init__(self) -> None:
-        for name in (
-            "gain_carrier",
-            "gain_receiver",
-            "gain_gripper",
-            "dt",
-            "tolerance",
-            "object_width",
-            "grip_force",
-            "contact_force",
-            "light_force",
-            "contact_radius",
-            "start_jitter",
-            "goal_jitter",
-            "context_gap",
-            "goal_tolerance",
-            "max_time",
-        ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"RelayTask.{name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ConfigError(f"RelayTask.{name} must be finite, got {value}")
+        for option in fields(self):
+            finite_number(getattr(self, option.name), f"RelayTask.{option.name}")
         for name in ("gain_carrier", "gain_receiver", "gain_gripper", "dt", "tolerance"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"RelayTask.{name} must be > 0, got {getattr(self, name)}")
@@ -380,186 +312,3 @@ class RelayTask:
             and state.aperture >= OPEN_APERTURE
             and np.linalg.norm(state.carrier - episode.carrier_home) < tol
         )
-
-    # ----------------------------------------------------------------------------- demonstrator
-    def script(
-        self, x: np.ndarray, episode: RelayEpisode, active: dict[str, str]
-    ) -> dict[str, str]:
-        """The demonstrator's switches from features ``x (6,)`` and the current MPs ``active``.
-
-        Guards on other variables' MPs read ``active`` (this tick's labels), so such a switch
-        comes one tick after the one it waits for.
-        """
-        carrier, receiver, force = x[0:2], x[2:4], x[4]
-        tol = self.tolerance
-        new = dict(active)
-        if active["gripper"] == "open" and active["carrier"] in _CARRIER_OUT:
-            goal = episode.meeting_point if active["carrier"] == "carry" else episode.present_point
-            if np.linalg.norm(carrier - goal) < tol and np.linalg.norm(receiver - carrier) < tol:
-                new["gripper"] = "close"
-        if active["gripper"] == "close" and force >= self.contact_force:
-            new["gripper"] = "hold"
-        if active["carrier"] == "retreat" and np.linalg.norm(carrier - episode.carrier_home) < tol:
-            new["carrier"] = "rest"
-        if active["gripper"] == "hold":
-            if active["carrier"] in _CARRIER_OUT:
-                new["carrier"] = "retreat"
-            if active["receiver"] == "approach":
-                new["receiver"] = "withdraw" if episode.strategy == "meet" else "stow"
-            if (
-                active["receiver"] in ("withdraw", "stow")
-                and np.linalg.norm(receiver - episode.destination) < tol
-            ):
-                new["gripper"] = "release"
-        return new
-
-    def demonstrate(self, episode: RelayEpisode, name: str | None = None) -> Demonstration:
-        """The scripted demonstrator's labelled demonstration of ``episode``, recorded every
-        ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``)."""
-        state = self.initial_state(episode)
-        active = self.initial_mps(episode)
-        log = DemonstrationLog(VARIABLES)
-        t = 0.0
-        while True:
-            x = self.features(state, episode)
-            log.append(t, x, active)
-            if self.at_goal(state, episode) or t >= self.max_time:
-                break
-            active = self.script(x, episode, active)
-            self.advance(state, episode, active)
-            t = round(t + self.dt, 10)
-        metadata = {
-            "task": "relay",
-            "context": episode.context,
-            "strategy": episode.strategy,
-            "reached_goal": self.at_goal(state, episode),
-        }
-        return log.to_demonstration(FEATURE_NAMES, name, metadata)
-
-    def scripted_policy(self, episode: RelayEpisode) -> ScriptedPolicy:
-        """The demonstrator as a closed-loop policy for ``episode``."""
-        return ScriptedPolicy(self, episode)
-
-    # ----------------------------------------------------------------------------- closed loop
-    def rollout(
-        self,
-        episode: RelayEpisode,
-        policy: Policy,
-        observe: Callable[[np.ndarray], np.ndarray] | None = None,
-    ) -> RolloutResult:
-        """Run ``policy`` closed-loop on ``episode`` until the goal state or ``max_time``.
-
-        ``observe`` maps the true features ``(6,)`` to what the policy sees (e.g. observation
-        noise with :func:`cpmp.augment.noisy_features`); default: the true features.
-        """
-        see = observe or (lambda x: x)
-        state = self.initial_state(episode)
-        expected = self.initial_mps(episode)
-        active = dict(policy.reset(0.0, see(self.features(state, episode))))
-        initial = dict(active)
-        seqs = {v: [active[v]] for v in VARIABLES}
-        t = 0.0
-        reached = self.at_goal(state, episode)
-        while not reached and t < self.max_time - 1e-9:
-            self.advance(state, episode, active)
-            t = round(t + self.dt, 10)
-            active = dict(policy.step(t, see(self.features(state, episode))))
-            for v in VARIABLES:
-                if active[v] != seqs[v][-1]:
-                    seqs[v].append(active[v])
-            reached = self.at_goal(state, episode)
-        if initial != expected:
-            outcome = "wrong_start"
-        else:
-            outcome = "complete" if reached else "incomplete"
-        return RolloutResult(outcome, seqs, t, initial, expected, reached, episode.strategy)
-
-
-class ScriptedPolicy:
-    """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy`
-    interface (it knows the episode's goals, as the demonstrator does)."""
-
-    def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
-        self.task = task
-        self.episode = episode
-        self.active: dict[str, str] = {}
-
-    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        self.active = self.task.initial_mps(self.episode)
-        return dict(self.active)
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        self.active = self.task.script(np.asarray(x, float), self.episode, self.active)
-        return dict(self.active)
-
-
-def make_demonstrations(
-    n: int, seed: int = 0, task: RelayTask | None = None
-) -> list[Demonstration]:
-    """``n`` demonstrations alternating meet and fetch (``demo_0`` meet), reproducible from
-    ``seed``."""
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ConfigError(f"n must be a positive integer, got {n!r}")
-    task = task or RelayTask()
-    rng = np.random.default_rng(seed)
-    return [
-        task.demonstrate(task.sample_episode(rng, STRATEGIES[i % 2]), name=f"demo_{i}")
-        for i in range(n)
-    ]
-
-
-def evaluate(
-    seq: Policy,
-    task: RelayTask | None = None,
-    n_episodes: int = 20,
-    seed: int = 0,
-    observe: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> dict[str, Any]:
-    """Closed-loop outcomes of a sequencer (or any policy) ``seq`` on ``n_episodes`` random
-    episodes alternating the strategies, reproducible from ``seed`` (use a seed other than the
-    demonstrations' for held-out episodes; ``observe`` as in :meth:`RelayTask.rollout`).
-
-    Returns ``{"complete": int, "wrong_start": int, "incomplete": int, "n_episodes": int,
-    "per_episode": [{"strategy", "context", "outcome", "time", "sequences"}, ...]}``.
-    """
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
-        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
-    task = task or RelayTask()
-    rng = np.random.default_rng(seed)
-    episodes = [task.sample_episode(rng, STRATEGIES[i % 2]) for i in range(n_episodes)]
-    results = [task.rollout(episode, seq, observe) for episode in episodes]
-    rows = [
-        {
-            "strategy": r.strategy,
-            "context": e.context,
-            "outcome": r.outcome,
-            "time": r.time,
-            "sequences": r.sequences,
-        }
-        for e, r in zip(episodes, results, strict=True)
-    ]
-    return {**outcome_counts(results), "n_episodes": n_episodes, "per_episode": rows}
-
-
-def outcome_counts(results: Sequence[RolloutResult]) -> dict[str, int]:
-    """Number of results per outcome (every outcome present)."""
-    counts = dict.fromkeys(OUTCOMES, 0)
-    for r in results:
-        counts[r.outcome] += 1
-    return counts
-
-
-__all__ = [
-    "FEATURE_NAMES",
-    "OUTCOMES",
-    "STRATEGIES",
-    "VARIABLES",
-    "RelayEpisode",
-    "RelayState",
-    "RelayTask",
-    "RolloutResult",
-    "ScriptedPolicy",
-    "evaluate",
-    "make_demonstrations",
-    "outcome_counts",
-]

@@ -25,7 +25,19 @@ def test_demos():
 
 
 @pytest.fixture(scope="session")
-def fitted_klr(train_demos):
+def fit_on_train(train_demos):
+    """``fit_on_train(predictor, **options)``: a :class:`~cpmp.sequencer.ConcurrentSequencer`
+    fitted on :func:`train_demos` with seed 0 and no logger (``options``: the predictor's and
+    the sequencer's, as ``ConcurrentSequencer.fit`` takes them)."""
     from cpmp.sequencer import ConcurrentSequencer
 
-    return ConcurrentSequencer.fit(train_demos, predictor="klr", seed=0, logger=None)
+    def fit(predictor: str = "klr", **options):
+        return ConcurrentSequencer.fit(train_demos, predictor, seed=0, logger=None, **options)
+
+    return fit
+
+
+@pytest.fixture(scope="session")
+def fitted_klr(fit_on_train):
+    """The default ``klr`` sequencer fitted on :func:`train_demos`."""
+    return fit_on_train("klr")

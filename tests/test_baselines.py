@@ -11,19 +11,19 @@ import torch
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation import activation_progress, progress_errors, stream_progress
+from cpmp.fit_data import node_training_data
 from cpmp.graph import build_graphs
 from cpmp.predictors import make_config, make_predictor
 from cpmp.predictors.dtw import interpolate_progress
 from cpmp.progress import expected_progress, time_labels
-from cpmp.sequencer import ConcurrentSequencer, node_training_data
+from cpmp.sequencer import ConcurrentSequencer
 from cpmp.synthetic import make_demonstrations
 
 BASELINES = ["sklearn_klr", "regression_clip", "time_phase", "dtw"]
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
-# Held-out MAE against eq. 1 measured on this data (seed 0 train / seed 1 test): klr 0.028,
-# sklearn_klr 0.028, regression_clip 0.012, dtw 0.017 (time_phase learns other labels: 0.31).
-# The bound is test_predictors' (about twice the worst of them).
+# Held-out MAE bound against eq. 1 (seed 0 train / seed 1 test), test_predictors' bound: about
+# twice the worst baseline's on this data (see docs/benchmarks.md).
 MAE_BOUND = 0.06
 
 
@@ -37,12 +37,11 @@ def fitted(train_demos):
 
 # ----------------------------------------------------------------------------- all baselines
 @pytest.mark.parametrize("kind", BASELINES)
-def test_fits_and_predicts_progress_in_unit_interval(fitted, test_demos, kind):
+def test_fits_and_predicts_progress_that_moves(fitted, test_demos, kind):
     seq = fitted[kind]
     phi = stream_progress(seq, test_demos[0].features)
     assert phi.shape == (test_demos[0].n_samples, len(seq.node_keys))
     assert np.isfinite(phi).all()
-    assert (phi >= 0).all() and (phi <= 1).all()
     assert np.ptp(phi, axis=0).max() > 0.5  # progress moves along the demonstration
 
 
@@ -117,7 +116,7 @@ def test_sklearn_klr_reaches_klr_loss(train_demos, fitted, options):
 
 
 # ----------------------------------------------------------------------------- regression_clip
-def test_regression_clip_stays_in_unit_interval_far_outside_the_data(fitted, train_demos):
+def test_regression_clip_far_from_the_data_is_its_clipped_intercept(fitted, train_demos):
     seq = fitted["regression_clip"]
     model = seq.predictor
     far = np.array(
@@ -125,15 +124,12 @@ def test_regression_clip_stays_in_unit_interval_far_outside_the_data(fitted, tra
         dtype=np.float64,
     )
     phi = seq.progress(far)
-    assert np.isfinite(phi).all()
-    assert (phi >= 0).all() and (phi <= 1).all()
     # far from every support point the kernel vanishes: the clipped intercept remains
     intercept = model.bias.detach().clamp(0, 1).numpy()[: phi.shape[1]]
     np.testing.assert_allclose(phi, np.broadcast_to(intercept, phi.shape), atol=1e-12)
     # on the training data the ridge fit overshoots at the ends; the clip makes that exact
     on_data = seq.progress(np.concatenate([d.features for d in train_demos]))
     assert ((on_data == 0.0) | (on_data == 1.0)).any()
-    assert (on_data >= 0).all() and (on_data <= 1).all()
 
 
 # ----------------------------------------------------------------------------- time_phase
@@ -262,10 +258,9 @@ def test_dtw_interpolates_progress_between_kept_samples():
 
 
 def test_dtw_progress_keeps_rising_while_the_features_move(fitted, test_demos):
-    """Regression: φ was the progress of the matched kept sample, a staircase that held still
-    for up to ``stride`` ticks while the MP moved; the switching rule read that as "not
-    improved for 50 ms" and fired mid-motion (dtw + coupled completed nothing closed loop).
-    Without the interpolation φ held still on 47 % of the ticks counted here."""
+    """φ interpolates between kept samples: a staircase (the matched kept sample's progress,
+    held for up to ``stride`` ticks while the MP moves) reads to the switching rule as "not
+    improved for 50 ms" and fires mid-motion (see docs/benchmarks.md)."""
     seq = fitted["dtw"]
     lag = 5  # the rule's 50 ms patience at the synthetic task's 100 Hz
     keys = seq.node_keys
@@ -281,7 +276,7 @@ def test_dtw_progress_keeps_rising_while_the_features_move(fitted, test_demos):
                 rising += int(moving.sum())
                 stalled += int((moving & (f[lag:] <= f[:-lag] + 1e-3)).sum())
     assert rising > 1000  # the count means something
-    assert stalled / rising < 0.05, stalled / rising  # 0 on this data when written
+    assert stalled / rising < 0.05, stalled / rising
 
 
 def test_dtw_batched_episodes_decide_as_single_ones(fitted, test_demos):
@@ -314,9 +309,11 @@ def test_stateless_predictors_ignore_reset_state(fitted, test_demos):
 
 @pytest.mark.parametrize("kind", ["sklearn_klr", "regression_clip", "time_phase", "dtw"])
 def test_baseline_fits_with_the_lbfgs_trainer(kind: str) -> None:
-    """``trainer.solver=lbfgs`` must work for every predictor (dtw has nothing to optimise and
-    keeps its own fit)."""
+    """``trainer.solver=lbfgs`` works for every predictor and reaches the default solver's
+    progress (dtw has nothing to optimise and keeps its own fit)."""
     demos = make_demonstrations(2, seed=0)
     seq = ConcurrentSequencer.fit(demos, predictor=kind, seed=0, solver="lbfgs", logger=None)
-    phi = seq.progress(demos[0].features[::20])
-    assert np.isfinite(phi).all() and ((phi >= 0) & (phi <= 1)).all()
+    default = ConcurrentSequencer.fit(demos, predictor=kind, seed=0, logger=None)
+    x = demos[0].features[::20]
+    # the same convex loss; LBFGS stops at a looser gradient tolerance than the exact solvers
+    np.testing.assert_allclose(seq.progress(x), default.progress(x), rtol=0, atol=1e-3)

@@ -152,7 +152,10 @@ def test_nearest_progress_reproduces_the_training_targets(two_successors):
     demo = two_successors[0]
     phi = seq.progress(demo.features)  # (n, K) with K = nodes a, b, c
     assert phi.shape == (demo.n_samples, 3)
-    assert np.all((phi >= 0) & (phi <= 1))
+    # every φ is the expected progress of one of its own node's training samples
+    targets, node = seq.predictor.targets.numpy(), seq.predictor.node.numpy()
+    for k in range(phi.shape[1]):
+        assert np.isin(phi[:, k], targets[node == k]).all()
     index = seq.node_keys.index(("v", "b"))
     for segment in demo.segments("v"):
         if segment.mp != "b":

@@ -1,3 +1,6 @@
+"""Sequence graphs (cpmp.graph): nodes, edges, initial nodes, activations, text/dot output,
+dict round trip and unknown names."""
+
 from dataclasses import replace
 
 import numpy as np

@@ -3,8 +3,14 @@ import stat
 
 import pytest
 
-from cpmp.errors import CpmpFileError
-from cpmp.io import atomic_path, atomic_write_text
+from cpmp.errors import CheckpointFormatError, CpmpFileError
+from cpmp.io import (
+    CheckpointSpec,
+    atomic_path,
+    atomic_write_text,
+    load_checkpoint,
+    save_checkpoint,
+)
 
 
 def test_atomic_write_replaces_and_keeps_normal_mode(tmp_path):
@@ -98,3 +104,43 @@ def test_data_reaches_the_disk_before_the_rename(tmp_path, monkeypatch):
     )
     atomic_write_text(tmp_path / "a.txt", "x")
     assert calls[:2] == ["fsync", "replace"]
+
+
+def _rebuild(payload, version):
+    if "value" not in payload:
+        raise KeyError("value")
+    return payload["value"], version
+
+
+def _load(path, versions=(1, 2)):
+    return load_checkpoint(path, CheckpointSpec("fmt-x", versions, "x model", "R"), _rebuild)
+
+
+def test_checkpoint_round_trip_passes_the_version_to_rebuild(tmp_path):
+    path = save_checkpoint(tmp_path / "m.pt", {"format": "fmt-x", "version": 1, "value": 7})
+    assert path == tmp_path / "m.pt"
+    assert _load(path) == (7, 1)
+
+
+def test_checkpoint_of_another_format_carries_the_format_found(tmp_path):
+    path = save_checkpoint(tmp_path / "m.pt", {"format": "fmt-y", "version": 1})
+    with pytest.raises(CheckpointFormatError, match="not a x model checkpoint") as info:
+        _load(path)
+    assert info.value.found == "fmt-y"
+
+
+def test_checkpoint_version_and_damage_are_file_errors(tmp_path):
+    path = save_checkpoint(tmp_path / "m.pt", {"format": "fmt-x", "version": 3, "value": 1})
+    with pytest.raises(
+        CpmpFileError, match="x model checkpoint version 3; this cpmp reads versions 1 and 2"
+    ):
+        _load(path)
+    with pytest.raises(CpmpFileError, match=r"reads version 1$"):
+        _load(path, versions=(1,))
+    damaged = save_checkpoint(tmp_path / "d.pt", {"format": "fmt-x", "version": 2})
+    with pytest.raises(
+        CpmpFileError, match=r"damaged x model checkpoint .*\(KeyError: 'value'\); R$"
+    ):
+        _load(damaged)
+    with pytest.raises(CpmpFileError, match="does not exist; R"):
+        _load(tmp_path / "missing.pt")

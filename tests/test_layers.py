@@ -8,7 +8,13 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "cpmp"
-CORE = sorted(p for p in [*PACKAGE.glob("*.py"), *(PACKAGE / "predictors").glob("*.py")])
+CORE = sorted(
+    [
+        *PACKAGE.glob("*.py"),
+        *(PACKAGE / "predictors").glob("*.py"),
+        *(PACKAGE / "config").glob("*.py"),
+    ]
+)
 FORBIDDEN = ("cpmp.sim", "cpmp.experiment", "hydra", "omegaconf", "mujoco", "rerun")
 
 
@@ -26,7 +32,7 @@ def imported_modules(path: Path) -> set[str]:
 
 def test_core_modules_found() -> None:
     names = {p.name for p in CORE}
-    assert {"sequencer.py", "graph.py", "progress.py", "klr.py"} <= names
+    assert {"sequencer.py", "graph.py", "progress.py", "klr.py", "predictors.py"} <= names
 
 
 @pytest.mark.parametrize("path", CORE, ids=lambda p: str(p.relative_to(PACKAGE)))

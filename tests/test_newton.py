@@ -6,8 +6,9 @@ import pytest
 import torch
 
 from cpmp.errors import ConfigError
+from cpmp.fit_data import node_training_data
 from cpmp.predictors.newton import newton_fit, newton_solve, penalised_loss
-from cpmp.sequencer import ConcurrentSequencer, node_training_data
+from cpmp.sequencer import ConcurrentSequencer
 from cpmp.training import TrainerConfig
 
 

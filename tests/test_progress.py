@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from cpmp.config import KLRConfig
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors import make_predictor
 from cpmp.predictors.base import FeatureScaler
@@ -17,6 +18,9 @@ from cpmp.progress import (
     tv_denoise,
     white_noise_std,
 )
+
+RULE = (KLRConfig().support_scale, KLRConfig().min_support, KLRConfig().max_support)
+"""The klr predictor's default support rule (points per unit path length, minimum, maximum)."""
 
 
 def test_hand_computed_example():
@@ -61,7 +65,7 @@ def test_bad_input():
 
 def test_support_points_equidistant_in_l1_arc_length():
     x = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])  # L1 length 4
-    pts = support_points(x, scale=1.0, min_support=3)
+    pts = support_points(x, scale=1.0, min_support=3, max_support=None, noise="none")
     assert pts.shape == (4, 2)  # ceil(1.0 * 4) = 4
     np.testing.assert_allclose(pts, [[0, 0], [4 / 3, 0], [2, 2 / 3], [2, 2]])
     steps = np.abs(np.diff(pts, axis=0)).sum(1)
@@ -74,7 +78,8 @@ def test_support_count_rule():
     assert support_count(100.0, 2.0, 3, 10) == 10  # capped
     with pytest.raises(ConfigError):
         support_count(1.0, -1.0, 3, None)
-    assert support_points(np.ones((5, 2)), 2.0, 3).shape == (1, 2)  # zero length: one point
+    # zero length: one point
+    assert support_points(np.ones((5, 2)), 2.0, 3, None, "none").shape == (1, 2)
 
 
 @pytest.mark.parametrize("max_support", [None, 4])
@@ -87,8 +92,8 @@ def test_support_point_count_is_what_support_points_places(max_support):
         np.linspace([0.0, 0.0], [0.1, 0.0], 5),  # short: the minimum
     ]
     for x in trajectories:
-        placed = support_points(x, 2.0, 3, max_support)
-        assert support_point_count(x, 2.0, 3, max_support) == len(placed)
+        placed = support_points(x, 2.0, 3, max_support, "none")
+        assert support_point_count(x, 2.0, 3, max_support, "none") == len(placed)
 
 
 # --- eq. 1 under feature noise (noise="auto") ---------------------------------------------
@@ -171,7 +176,9 @@ def test_clean_labels_and_supports_unchanged():
         np.testing.assert_array_equal(
             progress_labels(x, t, "path_denoised"), progress_labels(x, t, "path")
         )
-        np.testing.assert_array_equal(support_points(x, noise="auto"), support_points(x))
+        np.testing.assert_array_equal(
+            support_points(x, *RULE, "auto"), support_points(x, *RULE, "none")
+        )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -192,10 +199,10 @@ def test_labels_of_a_noisy_line_stay_close_to_the_clean_labels(seed):
 def test_support_count_follows_the_motion_not_the_noise():
     clean = _moving_then_resting()
     x = clean + 0.05 * np.random.default_rng(0).standard_normal(clean.shape)
-    count = support_point_count(clean)
-    assert support_point_count(x, noise="auto") == count
-    assert len(support_points(x, noise="auto")) == count
-    assert support_point_count(x) > 10 * count  # every noisy step adds length
+    count = support_point_count(clean, *RULE, "none")
+    assert support_point_count(x, *RULE, "auto") == count
+    assert len(support_points(x, *RULE, "auto")) == count
+    assert support_point_count(x, *RULE, "none") > 10 * count  # every noisy step adds length
 
 
 def test_feature_path_lengths_split_the_path_length():

@@ -1,5 +1,6 @@
 """The concurrent sequencer: transition rule, replay, closed loop, persistence, bad input."""
 
+import dataclasses
 from pathlib import Path
 from typing import ClassVar
 
@@ -7,11 +8,12 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
 from cpmp.evaluation import replay_demonstrations
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig, ProgressPredictor
-from cpmp.sequencer import ConcurrentSequencer, SequencerConfig
+from cpmp.sequencer import ConcurrentSequencer
 from cpmp.synthetic import SyntheticTask, make_demonstrations
 
 
@@ -192,7 +194,7 @@ def test_load_errors(tmp_path):
         ConcurrentSequencer.load(tmp_path / "missing.pt")
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(b"not a checkpoint")
-    with pytest.raises(CpmpFileError, match="not a readable cpmp checkpoint"):
+    with pytest.raises(CpmpFileError, match="not a readable cpmp sequencer checkpoint"):
         ConcurrentSequencer.load(garbage)
     other = tmp_path / "other.pt"
     torch.save({"format": "something-else"}, other)
@@ -200,7 +202,7 @@ def test_load_errors(tmp_path):
         ConcurrentSequencer.load(other)
     hostile = tmp_path / "hostile.pt"
     torch.save({"format": "cpmp-sequencer", "payload": Path("/etc/passwd")}, hostile)
-    with pytest.raises(CpmpFileError, match="not a trusted cpmp checkpoint") as info:
+    with pytest.raises(CpmpFileError, match="not a trusted cpmp sequencer checkpoint") as info:
         ConcurrentSequencer.load(hostile)
     assert "weights_only=False" not in str(info.value)
 
@@ -271,8 +273,8 @@ def test_joint_start_never_mixes_strategies():
     assert _two_graph_sequencer("joint").reset(0.0, x2) == {"u": "U2", "w": "W2"}
 
 
-def test_fit_records_initial_combinations_and_checkpoint_keeps_them(train_demos, tmp_path):
-    seq = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None, start_rule="joint")
+def test_fit_records_initial_combinations_and_checkpoint_keeps_them(fit_on_train, tmp_path):
+    seq = fit_on_train("klr", start_rule="joint")
     assert sorted(c["b"] for c in seq.initial_combinations) == ["b_go", "b_wait"]
     assert all(c["a"] == "a_go" for c in seq.initial_combinations)
     loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
@@ -280,22 +282,6 @@ def test_fit_records_initial_combinations_and_checkpoint_keeps_them(train_demos,
     assert loaded.config.start_rule == "joint"
     with pytest.raises(ConfigError, match="start_rule"):
         SequencerConfig(start_rule="vote")
-
-
-def test_subsample_keeps_every_kth_and_last(train_demos, test_demos):
-    from cpmp.evaluation import activation_progress, progress_errors
-    from cpmp.sequencer import _stride
-
-    np.testing.assert_array_equal(_stride(10, 3), [0, 3, 6, 9])
-    np.testing.assert_array_equal(_stride(11, 3), [0, 3, 6, 9, 10])
-    full = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None)
-    sub = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None, subsample=4)
-    # same supports (placed on the full trajectories), fewer loss samples, a fit as good:
-    # held-out MAE 0.031 with all samples; 0.06 is the bound of tests/test_predictors.py
-    assert sub.fit_summary["support_counts"] == full.fit_summary["support_counts"]
-    assert progress_errors(activation_progress(sub, test_demos))["mae"] < 0.06
-    with pytest.raises(ConfigError, match="subsample"):
-        ConcurrentSequencer.fit(train_demos, "klr", subsample=0)
 
 
 def test_min_exit_gate_keeps_unfinished_mp():
@@ -313,15 +299,8 @@ def test_min_exit_gate_keeps_unfinished_mp():
         SequencerConfig(min_exit=1.0)
 
 
-def test_isotropic_start_heads(train_demos, tmp_path):
-    seq = ConcurrentSequencer.fit(
-        train_demos,
-        "klr",
-        seed=0,
-        logger=None,
-        feature_weighting="path",
-        start_kernel="isotropic",
-    )
+def test_isotropic_start_heads(fit_on_train, train_demos, tmp_path):
+    seq = fit_on_train("klr", feature_weighting="path", start_kernel="isotropic")
     n = len(seq.node_keys)
     heads = seq.predictor.node_keys[n:]
     assert heads == [("a", "start:a_go"), ("b", "start:b_go"), ("b", "start:b_wait")]
@@ -362,3 +341,15 @@ def test_synthetic_evaluate_classifies_outcomes(fitted_klr):
     assert parallel["incomplete"] + parallel["wrong_start"] == 6
     counts = evaluate(fitted_klr, None, 10, seed=5)
     assert sum(counts.values()) == 10 and counts["complete"] >= 8
+
+
+def test_with_config_shares_the_fit_and_changes_only_the_rule(fitted_klr, test_demos):
+    """``with_config`` is the way to try other transition-rule options without refitting."""
+    paper = fitted_klr.with_config(threshold=0.9, coupling="none")
+    assert paper.predictor is fitted_klr.predictor and paper.graphs == fitted_klr.graphs
+    assert paper.config == dataclasses.replace(fitted_klr.config, threshold=0.9, coupling="none")
+    assert fitted_klr.config.threshold != 0.9  # the original is untouched
+    x = test_demos[0].features
+    np.testing.assert_array_equal(paper.progress(x), fitted_klr.progress(x))
+    with pytest.raises(ConfigError, match="threshold must be in"):
+        fitted_klr.with_config(threshold=1.5)

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp.config import SequencerConfig
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig, ProgressPredictor
-from cpmp.sequencer import ConcurrentSequencer, SequencerConfig
+from cpmp.sequencer import ConcurrentSequencer
 from cpmp.switching import Coupling, PaperRule, PlateauRule, recovery_choice
 
 DT = 0.01

@@ -1,3 +1,6 @@
+"""Fitting predictors (cpmp.training): the Lightning fit and its logs, the loss-plateau rule
+and early stopping, trainer options and the global random state."""
+
 import csv
 import functools
 import itertools

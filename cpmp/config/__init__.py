@@ -12,6 +12,7 @@ either is loaded; the classes are re-exported where they are used (:mod:`cpmp.pr
 """
 
 from cpmp.config.fit import FIT_OPTIONS, FitConfig
+from cpmp.config.goal_nearest import GoalNearestConfig, goal_nearest_options
 from cpmp.config.predictors import (
     ACTIVATIONS,
     PREDICTOR_CONFIGS,
@@ -55,6 +56,7 @@ __all__ = [
     "SWITCH_RULES",
     "DTWConfig",
     "FitConfig",
+    "GoalNearestConfig",
     "KLRConfig",
     "MLPConfig",
     "PredictorConfig",
@@ -65,6 +67,7 @@ __all__ = [
     "TaskConfig",
     "TimePhaseConfig",
     "TrainerConfig",
+    "goal_nearest_options",
     "predictor_config",
     "predictor_config_class",
     "predictor_option_names",

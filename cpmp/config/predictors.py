@@ -7,10 +7,10 @@ here); the options live apart so that they can be read and checked without impor
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError
 from cpmp.progress import PATH_NOISE
 
@@ -61,12 +61,7 @@ class PredictorConfig:
             raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
 
     def _number(self, name: str) -> float:
-        value = getattr(self, name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"predictor option {name} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"predictor option {name} must be finite, got {value!r}")
-        return float(value)
+        return finite_number(getattr(self, name), f"predictor option {name}")
 
     def _positive(self, *names: str) -> None:
         for name in names:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
+from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError
 
 SWITCH_RULES = ("paper", "plateau")
@@ -92,11 +92,7 @@ class SequencerConfig:
             "recovery_threshold",
             "min_exit",
         ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"sequencer option {name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ConfigError(f"sequencer option {name} must be finite, got {value}")
+            finite_number(getattr(self, name), f"sequencer option {name}")
         if not 0.0 <= self.threshold < 1.0:
             raise ConfigError(f"threshold must be in [0, 1), got {self.threshold}")
         margin = self.progress_margin

@@ -38,7 +38,8 @@ class TaskConfig:
         max_time: episode limit [s].
         seed: the task's seed (box sampling of ``collect``).
         compile_kinematics: run the IK's pytorch-kinematics Jacobian through ``torch.compile``
-            (see :mod:`cpmp.sim.kinematics`; about 2x faster per tick, same Jacobian to 1e-12).
+            (see :mod:`cpmp.sim.kinematics`; the same Jacobian to 1e-12; timings: see
+            docs/benchmarks.md).
         pos_gain: position MP attractor gain [1/s].
         rot_gain: orientation MP attractor gain [1/s].
         finger_gain: finger MP attractor gain [1/s].
@@ -186,3 +187,9 @@ class TaskConfig:
         out["width_range"] = list(self.width_range)
         out["depth_range"] = list(self.depth_range)
         return out
+
+
+def as_task_config(cfg: TaskConfig | Mapping[str, Any] | None) -> TaskConfig:
+    """``cfg`` as a :class:`TaskConfig`: itself, built from a mapping, or the defaults for
+    ``None``."""
+    return cfg if isinstance(cfg, TaskConfig) else TaskConfig.from_dict(cfg)

@@ -5,12 +5,12 @@
 A Hydra command checks its configuration before it imports anything heavy
 (:mod:`cpmp.experiment.cli_checks`):
 
-1. **compose** (Hydra and OmegaConf only, well under a second): the command line is parsed and
-   the configuration composed as Hydra will compose it (for a multirun: every job of the
-   sweep) on the schema of :mod:`cpmp.experiment.config`; an unknown group option or key, an
-   override Hydra cannot parse, a value of the wrong type (against the type of its default
-   and the schema), an interpolation that does not resolve, a required path that is unset or
-   names no file fail here — :func:`check_command`;
+1. **compose** (Hydra and OmegaConf only, :mod:`cpmp.experiment.cli_compose`): the command
+   line is parsed and the configuration composed as Hydra will compose it (for a multirun:
+   every job of the sweep) on the schema of :mod:`cpmp.experiment.config`; an unknown group
+   option or key, an override Hydra cannot parse, a value of the wrong type (against the type
+   of its default and the schema), an interpolation that does not resolve, a required path
+   that is unset or names no file fail here — :func:`check_command`;
 2. **the job's own checks** (value ranges, predictor/sequencer/trainer options, the task): the
    composed config is converted into the typed configs of :mod:`cpmp.config`, which validate
    themselves, before any long work, for every job of a sweep before the first one starts;
@@ -32,13 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from cpmp.errors import CpmpError, CpmpFileError
-from cpmp.experiment.cli_checks import (
-    CONF_DIR,
-    CheckedJob,
-    Command,
-    check_command_line,
-    check_jobs,
-)
+from cpmp.experiment.cli_checks import CheckedJob, Command, check_command_line, check_jobs
+from cpmp.experiment.cli_compose import CONF_DIR
 
 log = logging.getLogger("cpmp")
 
@@ -51,13 +46,13 @@ def _experiment_job(cfg: Any, run_dir: Path) -> Path:
 
 
 def _train_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.experiment.jobs import train_from_file
+    from cpmp.experiment.checkpoint_jobs import train_from_file
 
     return train_from_file(cfg, run_dir)
 
 
 def _evaluate_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.experiment.jobs import evaluate_checkpoint
+    from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint
 
     return evaluate_checkpoint(cfg, run_dir)
 
@@ -127,25 +122,52 @@ def _check_progress_field(cfg: Any) -> None:
 COMMANDS: dict[str, Command] = {
     command.name: command
     for command in (
-        Command("experiment", _experiment_job, _check_experiment),
-        Command("train", _train_job, _check_train, required=("data.path",), files=("data.path",)),
+        Command(
+            "experiment",
+            "the main job (collect, train, evaluate, report)",
+            _experiment_job,
+            _check_experiment,
+        ),
+        Command(
+            "train",
+            "train a sequencer from an HDF5 demonstration file",
+            _train_job,
+            _check_train,
+            required=("data.path",),
+            files=("data.path",),
+        ),
         Command(
             "evaluate",
+            "evaluate a checkpoint offline on a file's test split",
             _evaluate_job,
             required=("checkpoint", "data.path"),
             files=("checkpoint", "data.path"),
         ),
-        Command("collect", _collect_job, _check_collect, positive=("n_demos",)),
-        Command("aggregate", _aggregate_job, required=("sweep_dir",), dirs=("sweep_dir",)),
+        Command(
+            "collect",
+            "record scripted demonstrations in the simulator",
+            _collect_job,
+            _check_collect,
+            positive=("n_demos",),
+        ),
+        Command(
+            "aggregate",
+            "one table and plot of a multirun of the main job",
+            _aggregate_job,
+            required=("sweep_dir",),
+            dirs=("sweep_dir",),
+        ),
         Command(
             "progress_field",
+            "the paper's Fig. 3 on synthetic trajectories",
             _progress_field_job,
             _check_progress_field,
             positive=("n_trajectories",),
         ),
     )
 }
-"""Every Hydra command by name."""
+"""Every Hydra command by name: its console script is ``cpmp-<name>`` (``_`` as ``-``), run by
+``<name>_main`` below."""
 
 
 def check_command(name: str, argv: Sequence[str]) -> list[CheckedJob]:
@@ -205,34 +227,23 @@ def run_command(name: str) -> None:
     hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name=name)(_Task(name))()
 
 
-def experiment_main() -> None:
-    """``cpmp-experiment``: the main job (collect, train, evaluate, report)."""
-    run_command("experiment")
+def _entry_point(name: str) -> Callable[[], None]:
+    """The console-script function of Hydra command ``name``: :func:`run_command` ``(name)``."""
+
+    def main() -> None:
+        run_command(name)
+
+    main.__name__ = main.__qualname__ = f"{name}_main"
+    main.__doc__ = f"``cpmp-{name.replace('_', '-')}``: {COMMANDS[name].summary}."
+    return main
 
 
-def train_main() -> None:
-    """``cpmp-train``: train a sequencer from an HDF5 demonstration file."""
-    run_command("train")
-
-
-def evaluate_main() -> None:
-    """``cpmp-evaluate``: evaluate a checkpoint offline on a file's test split."""
-    run_command("evaluate")
-
-
-def collect_main() -> None:
-    """``cpmp-collect``: record scripted demonstrations in the simulator."""
-    run_command("collect")
-
-
-def aggregate_main() -> None:
-    """``cpmp-aggregate``: one table and plot of a multirun of the main job."""
-    run_command("aggregate")
-
-
-def progress_field_main() -> None:
-    """``cpmp-progress-field``: the paper's Fig. 3 on synthetic trajectories."""
-    run_command("progress_field")
+experiment_main = _entry_point("experiment")
+train_main = _entry_point("train")
+evaluate_main = _entry_point("evaluate")
+collect_main = _entry_point("collect")
+aggregate_main = _entry_point("aggregate")
+progress_field_main = _entry_point("progress_field")
 
 
 def inspect_rrd_main(argv: Sequence[str] | None = None) -> int:

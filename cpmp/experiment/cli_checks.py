@@ -3,18 +3,16 @@
 
 :func:`check_command_line` parses the command line with Hydra's own parser and composes the
 configuration as Hydra will (for a multirun: every job of the sweep) with Hydra, OmegaConf and
-the schema of :mod:`cpmp.experiment.config` only; an unknown group option or key, an override
-Hydra cannot parse, a value of the wrong type (against the type of its default and the schema),
-an interpolation that does not resolve, a required path that is unset or names no file become
-one-line :class:`~cpmp.errors.ConfigError` /
+the schema of :mod:`cpmp.experiment.config` only (:mod:`~cpmp.experiment.cli_compose`); an
+unknown group option or key, an override Hydra cannot parse, a value of the wrong type (against
+the type of its default and the schema), an interpolation that does not resolve, a required
+path that is unset or names no file become one-line :class:`~cpmp.errors.ConfigError` /
 :class:`~cpmp.errors.CpmpFileError` messages naming the override. :func:`check_jobs` then runs
 the command's own value checks (the typed configs) on every job, before the first starts.
 """
 
 from __future__ import annotations
 
-import argparse
-import difflib
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -22,10 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
-from cpmp.experiment.config import register_configs
-
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-"""The Hydra config directory: ``conf/`` of the repository this package is installed from."""
+from cpmp.experiment.cli_compose import (
+    CONF_DIR,
+    compose_config,
+    one_line,
+    parse_command_line,
+    parse_overrides,
+    resolved_job,
+    sweep_jobs,
+)
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,7 @@ class Command:
 
     Attributes:
         name: config and job name.
+        summary: what the command does, in a few words (the docstring of its entry point).
         job: ``job(cfg, run_dir) -> output path``; imports its heavy parts itself.
         check: the job's own value checks ``check(cfg)`` (may import torch), or ``None``.
         required: keys that must be set (a path each).
@@ -44,170 +48,13 @@ class Command:
     """
 
     name: str
+    summary: str
     job: Callable[[Any, Path], Path]
     check: Callable[[Any], None] | None = None
     required: tuple[str, ...] = ()
     files: tuple[str, ...] = ()
     dirs: tuple[str, ...] = ()
     positive: tuple[str, ...] = ()
-
-
-# ------------------------------------------------------------------- composing the config
-def _parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """``argv`` parsed by Hydra's own command-line parser; a bad flag is a :class:`ConfigError`
-    (argparse would print its usage and exit)."""
-    from hydra._internal.utils import get_args_parser
-
-    def error(message: str) -> None:
-        raise ConfigError(f"{message} (see --help)")
-
-    parser = get_args_parser()
-    parser.error = error  # type: ignore[method-assign]
-    return parser.parse_args(list(argv))
-
-
-def _one_line(text: str) -> str:
-    """A Hydra/OmegaConf message as one line: search paths, documentation links and
-    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined."""
-    lines: list[str] = []
-    options: list[str] = []
-    for raw in str(text).splitlines():
-        line = raw.strip()
-        if re.match(r"(Config search path|Search path):", line):
-            break
-        if not line or line.startswith(("See https://", "full_key:", "object_type=")):
-            continue
-        if raw.startswith("\t"):
-            options.append(line)
-            continue
-        if options:
-            lines[-1] += " " + ", ".join(options)
-            options = []
-        lines.append(line.rstrip("."))
-    if options and lines:
-        lines[-1] += " " + ", ".join(options)
-    return "; ".join(lines)
-
-
-def _parse_overrides(overrides: Sequence[str]) -> list[Any]:
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import HydraException
-
-    parser = OverridesParser.create()
-    parsed = []
-    for line in overrides:
-        try:
-            parsed.append(parser.parse_override(line))
-        except HydraException as err:
-            raise ConfigError(
-                f"cannot parse the override {line!r}: {_one_line(str(err))} (Hydra's override "
-                "syntax: key=value, +new_key=value, ~key; quote values with spaces or commas)"
-            ) from None
-    return parsed
-
-
-def _composition_error(
-    err: Exception, overrides: Sequence[Any], config_name: str, config_dir: str | None
-) -> ConfigError:
-    """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
-    from hydra.errors import MissingConfigException
-
-    text = str(err)
-    missing = re.search(r"Could not find '([^']+)/([^']+)'", text)
-    if isinstance(err, MissingConfigException) and missing:
-        group, option = missing.groups()
-        found = re.search(r"Available options in '[^']+':\n((?:\t.*\n?)*)", text)
-        choices = found.group(1).split() if found else []
-        close = difflib.get_close_matches(option, choices, n=1)
-        hint = f" (did you mean {group}={close[0]}?)" if close else ""
-        return ConfigError(
-            f"{group}={option}: no such option{hint}; choose one of {', '.join(choices)}"
-        )
-    key = re.match(r"Could not override '([^']+)'", text)
-    if key:
-        name = key.group(1)
-        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
-        others = [o.input_line for o in overrides if "." not in o.key_or_group]
-        hint = _key_hint(name, config_name, others, config_dir)
-        return ConfigError(
-            f"{line}: the {config_name} config has no key {name!r}{hint}; "
-            f"to add a new key write +{line}"
-        )
-    exists = re.match(r"Could not append to config. An item is already at '([^']+)'", text)
-    if exists:
-        name = exists.group(1)
-        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
-        return ConfigError(f"{line}: {name} exists already; set it without the +: {line[1:]}")
-    if "Ambiguous value for argument" in text or "requires --multirun" in text:
-        line = re.search(r"'([^']+)'", text)
-        return ConfigError(
-            f"{line.group(1) if line else 'an override'} lists several values: add -m "
-            "(--multirun) to run one job per value; for a list write key=[a,b], for a string "
-            "with commas quote it: key='a,b'"
-        )
-    merging = re.match(r"Error merging override (.+)", text)
-    if merging and err.__cause__ is not None:
-        return ConfigError(f"{merging.group(1)}: {_one_line(str(err.__cause__))}")
-    if "Cannot find primary config" in text:
-        return ConfigError(f"{_one_line(text)}; the configs live in {CONF_DIR}")
-    if "Primary config directory not found" in text:
-        return ConfigError(
-            f"cpmp's config directory {CONF_DIR} is missing: the cpmp commands run from a "
-            "source checkout installed with pip install -e ."
-        )
-    cause = err.__cause__
-    detail = f": {_one_line(str(cause))}" if cause is not None and str(cause) else ""
-    return ConfigError(f"{_one_line(text)}{detail}")
-
-
-def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
-    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it in the config
-    composed with ``groups`` (the overrides of groups and top-level keys)."""
-    from omegaconf import DictConfig, OmegaConf
-
-    parent, _, leaf = key.rpartition(".")
-    try:
-        cfg = _compose(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
-    except CpmpError:
-        return ""
-    node = OmegaConf.select(cfg, parent) if parent else cfg
-    names = [str(k) for k in node if k != "hydra"] if isinstance(node, DictConfig) else []
-    close = difflib.get_close_matches(leaf, names, n=1)
-    return f" (did you mean {'.'.join([*filter(None, [parent]), close[0]])!r}?)" if close else ""
-
-
-def _compose(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
-    """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``, raising
-    :class:`ConfigError` for anything Hydra cannot compose."""
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
-
-    register_configs()  # the schema of conf/, in case Hydra's ConfigStore was cleared
-    overrides = list(overrides)
-    if config_dir is not None:
-        overrides = _with_search_path(overrides, config_dir)
-    parsed = _parse_overrides(overrides)
-    try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            return compose(config_name, overrides=overrides, return_hydra_config=True)
-    except (HydraException, OmegaConfBaseException, ValueError) as err:
-        raise _composition_error(err, parsed, config_name, config_dir) from None
-
-
-def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:
-    """``overrides`` with ``--config-dir`` added to ``hydra.searchpath`` (as Hydra adds it)."""
-    path = Path(config_dir).absolute()
-    if not path.is_dir():
-        raise CpmpFileError(f"--config-dir {config_dir}: no such directory")
-    rest, searchpath = [], []
-    for override, line in zip(_parse_overrides(overrides), overrides, strict=True):
-        if override.get_key_element() == "hydra.searchpath":
-            searchpath = [str(v) for v in override.value()]
-        else:
-            rest.append(line)
-    entries = ",".join(f"'{p}'" for p in [*searchpath, f"file://{path}"])
-    return [*rest, f"hydra.searchpath=[{entries}]"]
 
 
 # ------------------------------------------------------------------------ checking values
@@ -255,25 +102,6 @@ def _check_type(key: str, value: Any, default: Any) -> None:
                         f"{key}: element {v!r} should be {element} (the default is "
                         f"{list(default)!r})"
                     )
-
-
-def _resolved(cfg: Any) -> dict[str, Any]:
-    """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved."""
-    from hydra.core.hydra_config import HydraConfig
-    from omegaconf import OmegaConf
-    from omegaconf.errors import OmegaConfBaseException
-
-    hydra_config = HydraConfig.instance()  # for ${hydra:...}; restored after
-    previous = hydra_config.cfg
-    hydra_config.set_config(cfg)
-    job = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])
-    try:
-        return OmegaConf.to_container(job, resolve=True)  # type: ignore[return-value]
-    except OmegaConfBaseException as err:
-        key = getattr(err, "full_key", None)
-        raise ConfigError(f"{key or 'config'}: {_one_line(str(err))}") from None
-    finally:
-        hydra_config.cfg = previous
 
 
 def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
@@ -354,7 +182,7 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
     """
     from omegaconf import OmegaConf
 
-    args = _parse_args(argv)
+    args = parse_command_line(argv)
     if args.help or args.hydra_help or args.shell_completion or args.experimental_rerun:
         return []
     inspection = args.cfg is not None or args.info is not None
@@ -365,22 +193,22 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
         )
     config_name = args.config_name or command.name
     overrides = list(args.overrides)
-    parsed = _parse_overrides(overrides)
+    parsed = parse_overrides(overrides)
     multirun = args.multirun or any(
         o.get_key_element() == "hydra.mode" and str(o.value()) == "MULTIRUN" for o in parsed
     )
-    jobs = _sweep(parsed) if multirun else [overrides]
+    jobs = sweep_jobs(parsed) if multirun else [overrides]
     checked: list[CheckedJob] = []
     bases: dict[tuple[str, ...], dict[str, Any]] = {}
     group_names: set[str] | None = None
     for job_overrides in jobs:
         try:
             if inspection:
-                _compose(config_name, job_overrides, args.config_dir)
+                compose_config(config_name, job_overrides, args.config_dir)
                 continue
-            job_parsed = _parse_overrides(job_overrides)
+            job_parsed = parse_overrides(job_overrides)
             if group_names is None:
-                default = _compose(config_name, [], args.config_dir)
+                default = compose_config(config_name, [], args.config_dir)
                 group_names = set(default.hydra.runtime.choices)
             groups = tuple(
                 line
@@ -388,36 +216,18 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
                 if o.key_or_group in group_names or o.is_hydra_override()
             )
             if groups not in bases:
-                bases[groups] = _resolved(_compose(config_name, list(groups), args.config_dir))
+                bases[groups] = resolved_job(
+                    compose_config(config_name, list(groups), args.config_dir)
+                )
             _check_types(bases[groups], [o for o in job_parsed if o.input_line not in groups])
-            cfg = _compose(config_name, job_overrides, args.config_dir)
-            _check_values(command, _resolved(cfg))
+            cfg = compose_config(config_name, job_overrides, args.config_dir)
+            _check_values(command, resolved_job(cfg))
         except CpmpError as err:
             raise _in_job(err, job_overrides, len(jobs)) from None
         checked.append(
             CheckedJob(job_overrides, OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
         )
     return checked
-
-
-def _sweep(parsed: list[Any]) -> list[list[str]]:
-    """The job override lists of a multirun (Hydra's basic sweeper: every combination)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.errors import HydraException
-
-    hydra_lines, task = [], []
-    for o in parsed:
-        if o.is_hydra_override():
-            if o.is_sweep_override():
-                raise ConfigError(f"{o.input_line}: Hydra's own settings cannot be swept")
-            hydra_lines.append(o.input_line)
-        else:
-            task.append(o)
-    try:
-        (batch,) = BasicSweeper.split_arguments(task, max_batch_size=None)
-    except HydraException as err:
-        raise ConfigError(_one_line(str(err))) from None
-    return [[*hydra_lines, *job] for job in batch]
 
 
 def _in_job(err: CpmpError, overrides: list[str], n_jobs: int) -> CpmpError:
@@ -442,7 +252,7 @@ def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
             check(job.cfg)
         except OmegaConfBaseException as err:  # a section removed with ~group
             error = ConfigError(
-                f"{getattr(err, 'full_key', None) or 'config'}: {_one_line(str(err))}"
+                f"{getattr(err, 'full_key', None) or 'config'}: {one_line(str(err))}"
             )
         except CpmpError as err:
             error = _with_override(err, job.overrides)

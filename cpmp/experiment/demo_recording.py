@@ -76,7 +76,7 @@ def record_demo_rrd(
     from cpmp.errors import DataError
     from cpmp.experiment.recording import EpisodeRecorder
     from cpmp.sim import Simulation, run_episode
-    from cpmp.sim.runner import ReplayPolicy
+    from cpmp.sim.policies import ReplayPolicy
 
     sim = Simulation(task, box)
     if list(demo.feature_names) != list(sim.feature_names):

@@ -31,7 +31,8 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 CURVE_KEYS = ("time", "predicted_mean", "predicted_std", "expected_mean")
-"""Keys :func:`plot_progress_curves` needs in each curves dict (see :func:`progress_curves`)."""
+"""Keys :func:`plot_progress_curves` needs in each curves dict (see
+:func:`cpmp.evaluation.progress_curves`)."""
 
 _STRATEGY_COLOURS = ("#4daf4a", "#ffd92f", "#377eb8")  # green, yellow, blue as in the paper
 _OTHER_COLOUR = "#e41a1c"  # red: a strategy that was never demonstrated
@@ -147,69 +148,6 @@ def plot_progress_field(
     return _save(figure, path)
 
 
-def progress_curves(
-    activations: Sequence[tuple[np.ndarray, np.ndarray]], n_bins: int = 50
-) -> dict[str, Any]:
-    """Average predicted progress over MP activations (the statistics of Fig. 6).
-
-    ``activations``: (expected (n,), predicted (n,)) per activation, n >= 2 samples in time
-    order. Each is resampled (linear interpolation) onto ``n_bins`` points of normalised time
-    in [0, 1]; all samples are also binned by expected progress into ``n_bins`` equal bins.
-
-    Returns arrays of shape (n_bins,): ``time``, ``predicted_mean``, ``predicted_std``,
-    ``expected_mean``, ``expected_std`` (over activations, per time point); ``progress_bins``
-    (bin centres), ``binned_mean``, ``binned_std`` (predicted progress per expected-progress
-    bin, NaN where empty), ``binned_count``; and ``n_activations``. Standard deviations are
-    population (ddof=0) values.
-    """
-    if int(n_bins) < 2:
-        raise ConfigError(f"n_bins must be >= 2, got {n_bins}")
-    n_bins = int(n_bins)
-    if len(activations) == 0:
-        raise DataError("progress_curves needs at least one activation")
-    time = np.linspace(0.0, 1.0, n_bins)
-    resampled_expected, resampled_predicted = [], []
-    all_expected, all_predicted = [], []
-    for i, pair in enumerate(activations):
-        if len(pair) != 2:
-            raise DataError(f"activations[{i}] must be a pair (expected, predicted)")
-        expected, predicted = (np.asarray(a, dtype=float) for a in pair)
-        if expected.ndim != 1 or expected.shape != predicted.shape or len(expected) < 2:
-            raise DataError(
-                f"activations[{i}]: expected and predicted must both have shape (n,) with "
-                f"n >= 2, got {expected.shape} and {predicted.shape}"
-            )
-        if not (np.all(np.isfinite(expected)) and np.all(np.isfinite(predicted))):
-            raise DataError(f"activations[{i}] contains NaN or inf")
-        own_time = np.linspace(0.0, 1.0, len(expected))
-        resampled_expected.append(np.interp(time, own_time, expected))
-        resampled_predicted.append(np.interp(time, own_time, predicted))
-        all_expected.append(expected)
-        all_predicted.append(predicted)
-
-    expected_flat, predicted_flat = np.concatenate(all_expected), np.concatenate(all_predicted)
-    edges = np.linspace(0.0, 1.0, n_bins + 1)
-    bin_index = np.clip(np.digitize(expected_flat, edges) - 1, 0, n_bins - 1)
-    count = np.bincount(bin_index, minlength=n_bins)
-    total = np.bincount(bin_index, weights=predicted_flat, minlength=n_bins)
-    total_sq = np.bincount(bin_index, weights=predicted_flat**2, minlength=n_bins)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        binned_mean = np.where(count > 0, total / count, np.nan)
-        binned_var = np.where(count > 0, total_sq / count - binned_mean**2, np.nan)
-    return {
-        "time": time,
-        "predicted_mean": np.mean(resampled_predicted, axis=0),
-        "predicted_std": np.std(resampled_predicted, axis=0),
-        "expected_mean": np.mean(resampled_expected, axis=0),
-        "expected_std": np.std(resampled_expected, axis=0),
-        "progress_bins": 0.5 * (edges[:-1] + edges[1:]),
-        "binned_mean": binned_mean,
-        "binned_std": np.sqrt(np.maximum(binned_var, 0.0)),
-        "binned_count": count,
-        "n_activations": len(activations),
-    }
-
-
 def plot_progress_curves(
     curves_by_label: Mapping[str, Mapping[str, Any]],
     path: str | os.PathLike[str],
@@ -218,7 +156,8 @@ def plot_progress_curves(
     """Fig. 6: mean predicted progress over normalised time with a ±2 std band, the mean
     expected progress (dashed) and the ideal diagonal; one panel per label (e.g. "3 demos").
 
-    Each value is a dict from :func:`progress_curves` (needs :data:`CURVE_KEYS`).
+    Each value is a dict from :func:`cpmp.evaluation.progress_curves` (needs
+    :data:`CURVE_KEYS`).
     """
     if not curves_by_label:
         raise DataError("curves_by_label is empty")
@@ -451,5 +390,4 @@ __all__ = [
     "plot_progress_field",
     "plot_strategy_map",
     "plot_sweep",
-    "progress_curves",
 ]

@@ -1,7 +1,9 @@
 """Rerun recordings of episodes: write with :class:`EpisodeRecorder`
 (:mod:`~cpmp.experiment.recording_writer`), read back offline with :func:`read_recording` and
 :func:`read_views` (:mod:`~cpmp.experiment.recording_reader`). Every name is importable from
-here.
+here. The layout below (entity paths, record names, log texts, feature panels, blueprint, 3D
+scene) is written down in :mod:`~cpmp.experiment.recording_layout`, which both sides use; the
+per-tick series are buffered by :mod:`~cpmp.experiment.recording_columns`.
 
 Layout of a recording (one ``.rrd`` file per episode). Time-series data sit on two timelines:
 ``time`` (a duration, seconds since the episode start) and ``tick`` (sequence, 0-based index of
@@ -11,9 +13,10 @@ the :meth:`EpisodeRecorder.log_tick` call).
 entity path                            content
 =====================================  ===================================================
 ``world/<body>``                       ``Transform3D`` per tick: body pose in the world
-``world/<body>/geom_<i>``              static ``Transform3D`` (geom pose in the body frame)
+``world/<body>/<geom>``                static ``Transform3D`` (geom pose in the body frame)
                                        and one of ``Boxes3D``/``Capsules3D``/
-                                       ``Cylinders3D``/``Ellipsoids3D`` (sphere)
+                                       ``Cylinders3D``/``Ellipsoids3D`` (sphere); ``<geom>``
+                                       is the geom's ``name``, default ``geom_<i>``
 ``features/<name>``                    ``Scalars``: one feature per entity (static
                                        ``SeriesLines`` name: the feature name)
 ``progress/<variable>/<mp>/phi``       ``Scalars``: predicted progress φ of the node
@@ -56,14 +59,22 @@ text; metadata values that JSON cannot encode are stored as ``str``).
 
 Scalars and body poses are buffered and sent column-wise (``send_columns``) every
 ``flush_every`` ticks (default 5000) and on :meth:`EpisodeRecorder.close`, one row per tick and
-tuple of entities: one ``rr.log`` call costs ~30 µs, which at 100 entities per tick would cost
-more than the simulation itself, and an aborted episode sends nothing. The file is written
+tuple of entities: one ``rr.log`` call per entity and tick would cost more than the simulation
+itself (see docs/benchmarks.md), and an aborted episode sends nothing. The file is written
 beside the target under a temporary name and renamed onto it only by a successful
 :meth:`EpisodeRecorder.close`, so a failed or aborted episode leaves no partial file.
 """
 
 from __future__ import annotations
 
+from cpmp.experiment.recording_layout import (
+    GEOM_TYPES,
+    MAX_SERIES_PER_PANEL,
+    TOUCH_WORDS,
+    group_features,
+    outcome_text,
+    transition_text,
+)
 from cpmp.experiment.recording_reader import (
     RecordingSummary,
     SequencerNote,
@@ -73,15 +84,7 @@ from cpmp.experiment.recording_reader import (
     read_recording,
     read_views,
 )
-from cpmp.experiment.recording_writer import (
-    GEOM_TYPES,
-    MAX_SERIES_PER_PANEL,
-    TOUCH_WORDS,
-    EpisodeRecorder,
-    group_features,
-    outcome_text,
-    transition_text,
-)
+from cpmp.experiment.recording_writer import EpisodeRecorder
 
 __all__ = [
     "GEOM_TYPES",

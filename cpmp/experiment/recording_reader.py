@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from cpmp.errors import CpmpFileError
-from cpmp.experiment.recording_writer import (
-    _NOTE_ARCHETYPE,
-    _OUTCOME_ARCHETYPE,
-    _PROPERTY_NAME,
-    _TRANSITION_ARCHETYPE,
+from cpmp.experiment.recording_layout import (
+    NOTE_ARCHETYPE,
+    OUTCOME_ARCHETYPE,
+    PROPERTY_NAME,
+    TRANSITION_ARCHETYPE,
     outcome_text,
     transition_text,
 )
@@ -145,7 +145,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         if entity.startswith("__properties"):
             if "RecordingInfo:name" in columns:
                 names[index] = str(_first(batch.column("RecordingInfo:name")[0].as_py()))
-            if entity == f"__properties/{_PROPERTY_NAME}":
+            if entity == f"__properties/{PROPERTY_NAME}":
                 if "metadata" in columns:
                     metadata = json.loads(_first(batch.column("metadata")[0].as_py()) or "{}")
                 if "feature_groups" in columns:
@@ -161,12 +161,12 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
             ticks[index].update(v for v in batch.column("tick").to_pylist() if v is not None)
         if times is None:
             continue
-        if f"{_TRANSITION_ARCHETYPE}:variable" in columns:
+        if f"{TRANSITION_ARCHETYPE}:variable" in columns:
             fields = {
-                name: batch.column(f"{_TRANSITION_ARCHETYPE}:{name}").to_pylist()
+                name: batch.column(f"{TRANSITION_ARCHETYPE}:{name}").to_pylist()
                 for name in ("variable", "source", "target", "probability")
             }
-            kind_column = f"{_TRANSITION_ARCHETYPE}:kind"
+            kind_column = f"{TRANSITION_ARCHETYPE}:kind"
             kinds = (
                 batch.column(kind_column).to_pylist()
                 if kind_column in columns
@@ -185,9 +185,9 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                         kind=str(_first(kinds[row]) or "switch"),
                     )
                 )
-        if f"{_NOTE_ARCHETYPE}:kind" in columns:
+        if f"{NOTE_ARCHETYPE}:kind" in columns:
             cells = {
-                name: batch.column(f"{_NOTE_ARCHETYPE}:{name}").to_pylist()
+                name: batch.column(f"{NOTE_ARCHETYPE}:{name}").to_pylist()
                 for name in ("kind", "variable", "text")
             }
             for row, t in enumerate(times):
@@ -200,11 +200,11 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                             str(_first(cells["text"][row]) or ""),
                         )
                     )
-        if f"{_OUTCOME_ARCHETYPE}:outcome" in columns:
-            outcome_column = batch.column(f"{_OUTCOME_ARCHETYPE}:outcome").to_pylist()
+        if f"{OUTCOME_ARCHETYPE}:outcome" in columns:
+            outcome_column = batch.column(f"{OUTCOME_ARCHETYPE}:outcome").to_pylist()
             reason_column = (
-                batch.column(f"{_OUTCOME_ARCHETYPE}:reason").to_pylist()
-                if f"{_OUTCOME_ARCHETYPE}:reason" in columns
+                batch.column(f"{OUTCOME_ARCHETYPE}:reason").to_pylist()
+                if f"{OUTCOME_ARCHETYPE}:reason" in columns
                 else [None] * len(times)
             )
             for row, t in enumerate(times):

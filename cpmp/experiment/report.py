@@ -1,15 +1,20 @@
-"""Report files of the main job: ``report.json`` (machine-readable) and ``report.md``."""
+"""The main job's report: its seeds pooled (mean ± std), ``report.json`` (machine-readable),
+``report.md``, the figures, ``timings.json``, and the helpers other reports share."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cpmp.io import atomic_write_text, to_builtin
+
+if TYPE_CHECKING:
+    from cpmp.experiment.settings import ExperimentJob
 
 PAPER_TABLE_I: dict[str, dict[str, float]] = {
     "3": {"W": 3, "I": 4, "C": 13, "distance_mean": 0.13, "distance_std": 0.08},
@@ -79,6 +84,176 @@ def predictor_entry(
     return {"kind": kind, **predictor}
 
 
+# ------------------------------------------------------------------------- seed pooling
+def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+    """The report of the main job from its per-seed rows: mean ± std over seeds of every
+    number, distances pooled over all complete episodes, the configs that ran.
+
+    Args:
+        job: the typed job.
+        per_seed: ``{"seed", "by_train_size": {str(d): row}}`` per seed, each row as
+            :func:`cpmp.experiment.jobs.run_train_size` returns it.
+    """
+    settings = job.settings
+    reproduction: dict[str, Any] = {}
+    progress_by_d: dict[str, Any] = {}
+    for d in map(str, settings.train_sizes):
+        rows = [s["by_train_size"][d] for s in per_seed]
+        rep: dict[str, Any] = {}
+        for key in ("W", "I", "C", "diverged"):
+            rep[key], rep[f"{key}_std"] = mean_std([r["reproduction"][key] for r in rows])
+        rep["per_seed"] = {key: [r["reproduction"][key] for r in rows] for key in ("W", "I", "C")}
+        for prefix in ("distance", "distance_continuous"):
+            pooled_mean, pooled_sq, n = 0.0, 0.0, 0
+            for r in rows:
+                rr = r["reproduction"]
+                if rr["n_distances"] and rr.get(f"{prefix}_mean") is not None:
+                    k = rr["n_distances"]
+                    pooled_mean += rr[f"{prefix}_mean"] * k
+                    pooled_sq += (rr[f"{prefix}_std"] ** 2 + rr[f"{prefix}_mean"] ** 2) * k
+                    n += k
+            mean = pooled_mean / n if n else None
+            rep[f"{prefix}_mean"] = mean
+            rep[f"{prefix}_std"] = float(np.sqrt(max(pooled_sq / n - mean**2, 0))) if n else None
+        for key in ("recoveries", "recovered_episodes", "recovered_complete", "holds"):
+            rep[key], _ = mean_std([r["reproduction"].get(key) for r in rows])
+        rep["n_boxes"] = settings.n_boxes
+        rep["paper"] = PAPER_TABLE_I.get(d)
+        reproduction[d] = rep
+        prog: dict[str, Any] = {}
+        for key in ("mae", "mae_first", "mae_last"):
+            prog[key], prog[f"{key}_std"] = mean_std([r["progress"][key] for r in rows])
+        prog["replay_all_match"], _ = mean_std([r["replay"]["all_match"] for r in rows])
+        progress_by_d[d] = prog
+    largest = str(max(settings.train_sizes))
+    accuracy = [s["by_train_size"][largest].get("strategy_map_accuracy") for s in per_seed]
+    acc_mean, acc_std = mean_std(accuracy)
+    warnings = [
+        f"seed {s['seed']}, D = {d}: {text}"
+        for s in per_seed
+        for d, row in s["by_train_size"].items()
+        for text in row["fit"].get("warnings") or []
+    ]
+    return jsonable(
+        {
+            "experiment": {k: v for k, v in settings.__dict__.items() if k != "workers"},
+            **_configs(job),
+            "progress": {
+                "mae": progress_by_d[largest]["mae"],
+                "mae_first": progress_by_d[largest]["mae_first"],
+                "mae_last": progress_by_d[largest]["mae_last"],
+                "train_size": int(largest),
+                "by_train_size": progress_by_d,
+            },
+            "reproduction": reproduction,
+            "strategy_map": {
+                "accuracy": acc_mean,
+                "accuracy_std": acc_std,
+                "grid": settings.strategy_grid,
+                "train_size": int(largest),
+            },
+            "fit_warnings": warnings,
+            "per_seed": per_seed,
+        }
+    )
+
+
+def _configs(job: ExperimentJob) -> dict[str, Any]:
+    """The report's ``predictor``, ``sequencer`` and ``task`` sections: every option used."""
+    fit = job.fit
+    if fit.goal_nearest is not None:
+        from cpmp.config.goal_nearest import KIND
+
+        sequencer = {"kind": KIND, **dataclasses.asdict(fit.goal_nearest)}
+    else:
+        sequencer = dataclasses.asdict(fit.fit.sequencer)
+    return {
+        "predictor": predictor_entry(
+            fit.predictor, dataclasses.asdict(fit.fit.predictor_config), sequencer
+        ),
+        "sequencer": sequencer,
+        "task": job.task.to_dict(),
+    }
+
+
+def experiment_files(job: ExperimentJob) -> dict[str, str]:
+    """What the main job writes besides its figures: file (pattern) -> what it holds."""
+    files: dict[str, str] = {
+        "report.json": "all numbers, per seed too",
+        "episodes.json": "every reproduction episode: box, strategy, outcome, reason",
+        "timings.json": "wall time of the run and of every stage, summed over seeds",
+        "seed_<s>/demos.h5": "collected demonstrations with mask/train and mask/test",
+        "seed_<s>/model_D<d>.pt": "trained sequencer checkpoints",
+        "seed_<s>/recordings/*.rrd": "rerun recordings (open with `rerun FILE.rrd`)",
+        "seed_<s>/lightning/D<d>/": "Lightning CSV logs of the predictor fits",
+    }
+    if job.fit.goal_nearest is not None:  # no predictor: nothing for Lightning to fit
+        del files["seed_<s>/lightning/D<d>/"]
+        files["seed_<s>/model_D<d>.pt"] = (
+            "goal_nearest checkpoints (cpmp.checkpoints.load_sequencer)"
+        )
+    return files
+
+
+def write_figures(
+    job: ExperimentJob,
+    run_dir: Path,
+    pairs_by_d: Mapping[int, list[tuple[np.ndarray, np.ndarray]]],
+    strategy_map: Mapping[str, Any],
+) -> dict[str, str]:
+    """Fig. 6 (progress curves per training size) and Fig. 7 (the strategy map of the first
+    seed at the largest D) into ``run_dir``; returns their entries of the report's files.
+
+    Args:
+        job: the typed job.
+        run_dir: the run directory.
+        pairs_by_d: ``(expected (n,), predicted (n,))`` per held-out activation, by D.
+        strategy_map: :func:`cpmp.experiment.strategies.strategy_map`'s result with
+            ``train_boxes``, (width, depth) of the training demonstrations.
+    """
+    from cpmp.evaluation import progress_curves
+    from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map
+
+    settings = job.settings
+    curves = {f"D={d}": progress_curves(pairs_by_d[d]) for d in settings.train_sizes}
+    plot_progress_curves(
+        curves,
+        run_dir / "fig6_progress.png",
+        title="Predicted vs expected progress on held-out demos",
+    )
+    plot_strategy_map(
+        strategy_map["widths"],
+        strategy_map["depths"],
+        strategy_map["chosen"],
+        strategy_map["correct"],
+        run_dir / "fig7_strategy_map.png",
+        training_boxes=strategy_map["train_boxes"],
+        title=f"Initial strategy, D={max(settings.train_sizes)}, seed {settings.seeds[0]}",
+    )
+    return {
+        "fig6_progress.png": "predicted vs expected progress (Fig. 6)",
+        "fig7_strategy_map.png": "chosen vs correct initial strategy (Fig. 7)",
+    }
+
+
+def write_timings(
+    run_dir: Path, seconds: float, workers: int, stage_seconds: Mapping[str, float]
+) -> Path:
+    """``timings.json``: the run's wall time [s], its worker count and the wall seconds of
+    every stage, summed over seeds and training sizes."""
+    return write_json(
+        run_dir / "timings.json",
+        {
+            "seconds": seconds,
+            "workers": workers,
+            "stages": dict(stage_seconds),
+            "note": "stage times are wall seconds summed over seeds and training sizes; with "
+            "workers > 1 they add up to more than the run's wall time",
+        },
+    )
+
+
+# ----------------------------------------------------------------------------- markdown
 def _method_line(report: Mapping[str, Any]) -> str:
     """The sentence saying which predictor and sequencer ran, with their options."""
     seq = report.get("sequencer") or {}

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from cpmp.data import Demonstration
-from cpmp.experiment.pipeline import (
+from cpmp.experiment.strategies import (
     balanced_subset,
     classify_start,
     split_by_strategy,

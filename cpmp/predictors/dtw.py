@@ -15,10 +15,8 @@ matched sample), and φ is interpolated linearly between the two samples' progre
 Why the interpolation: kept samples are ``stride`` ticks apart (0.1 s at the defaults), so the
 matched sample's own progress holds still for up to ``stride`` ticks while the MP moves. The
 switching rule reads a p that has not improved for its patience (50 ms) as "converged" and
-fires. With the matched sample's own progress, dtw switched mid-motion in closed loop (the
-hands closed before they reached the box) and completed no correctly started episode; on the
-simulator's held-out demonstrations its φ held still over 50 ms on 51 % of the ticks on which
-the expected progress rose by more than 0.01 (klr_path: 5 %, interpolated dtw: 2 %).
+fires, so without the interpolation dtw switches mid-motion in closed loop (the closed-loop
+results: see docs/benchmarks.md).
 
 All nodes are aligned in *one* dtw-python call per stream and tick: the training activations
 of all nodes are laid side by side in one reference, two columns of infinite cost between
@@ -132,11 +130,11 @@ class DTWPredictor(ProgressPredictor):
     (``±inf`` at φ = 0 and 1, which the sigmoid of :meth:`forward` maps back exactly).
     """
 
+    config: DTWConfig
     kind: ClassVar[str] = "dtw"
     config_class = DTWConfig
     convex: ClassVar[bool] = True
     stateful: ClassVar[bool] = True
-    config: DTWConfig
 
     def __init__(
         self, node_keys: list[NodeKey], n_features: int, config: DTWConfig, n_reference: int = 1

@@ -283,10 +283,10 @@ class FullKLRPredictor(KLRPredictor):
 class SparseKLRPredictor(KLRPredictor):
     """``klr_sparse``: learn which of many candidate supports to keep (L1 + pruning)."""
 
+    config: SparseKLRConfig
     kind: ClassVar[str] = "klr_sparse"
     config_class = SparseKLRConfig
     convex: ClassVar[bool] = False
-    config: SparseKLRConfig
 
     def __init__(
         self,

@@ -4,23 +4,23 @@ A torso with two 7-DOF arms and a 4-DOF / 7-DOF hand (25 actuated DOF) picks a b
 width and depth from a plate and puts it into a container, using both hands, the right hand or
 the left hand depending on the box size. Six control variables are driven by concurrent
 first-order attractor MPs through damped-least-squares IK on pytorch-kinematics Jacobians.
+
+Modules: ``scene`` (MJCF model, boxes, strategy regions), ``kinematics`` (arm FK/Jacobians),
+``mps`` (the MP library), ``control`` (MPs to joint targets), ``features`` (the 33 features),
+``simulation`` (one episode's world), ``demonstrator`` (the scripted demonstrator),
+``collect`` (recording demonstrations, one box or many together), ``policies`` (replay and
+batching of policies), ``runner`` (closed-loop episodes and their outcomes), ``bench`` (speed
+benchmark). The options are :class:`~cpmp.config.task.TaskConfig`.
 """
 
-from cpmp.sim.config import TaskConfig
+from cpmp.config.task import TaskConfig
+from cpmp.data import mp_sequences
+from cpmp.records import BatchedPolicy, TickInfo
+from cpmp.sim.collect import record_demonstration, record_demonstrations
 from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.mps import VARIABLES, mp_names
-from cpmp.sim.runner import (
-    OUTCOMES,
-    BatchedPolicy,
-    EpisodeResult,
-    PolicyList,
-    TickInfo,
-    mp_sequences,
-    record_demonstration,
-    record_demonstrations,
-    run_episode,
-    run_episodes,
-)
+from cpmp.sim.policies import PolicyList
+from cpmp.sim.runner import OUTCOMES, EpisodeResult, run_episode, run_episodes
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
 from cpmp.sim.simulation import Simulation
 

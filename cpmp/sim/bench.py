@@ -10,17 +10,13 @@ import numpy as np
 import torch
 
 from cpmp.config import FitConfig
+from cpmp.config.task import TaskConfig
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.sim.collect import sample_boxes
-from cpmp.sim.config import TaskConfig
-from cpmp.sim.runner import (
-    Policy,
-    ReplayPolicy,
-    record_demonstration,
-    run_episode,
-    run_episodes,
-)
+from cpmp.records import Policy
+from cpmp.sim.collect import record_demonstration, sample_boxes
+from cpmp.sim.policies import ReplayPolicy
+from cpmp.sim.runner import run_episode, run_episodes
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import shared_kinematics
 

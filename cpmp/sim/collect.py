@@ -1,17 +1,145 @@
-"""Recording sets of scripted demonstrations into the project's HDF5 format."""
+"""Recording scripted demonstrations: one box (:func:`record_demonstration`) or many together
+(:func:`record_demonstrations`, one batched IK call per tick, the same data as one box at a
+time), and collecting seeded sets of them into the project's HDF5 format."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from cpmp.data import Demonstration, save_demonstrations
+from cpmp.config.task import TaskConfig, as_task_config
+from cpmp.data import Demonstration
+from cpmp.datafile import save_demonstrations
 from cpmp.errors import ConfigError
-from cpmp.sim.config import TaskConfig
-from cpmp.sim.runner import record_demonstrations
+from cpmp.sim.demonstrator import ScriptedDemonstrator
+from cpmp.sim.policies import per_episode
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
+from cpmp.sim.simulation import Simulation, prepare_steps
+
+
+def record_demonstration(
+    box: Box, cfg: TaskConfig | Mapping[str, Any] | None = None, name: str | None = None
+) -> Demonstration:
+    """Run the scripted demonstrator on ``box`` and record it at the control rate.
+
+    Returns a :class:`~cpmp.data.Demonstration` with ``time`` (n,) [s], ``features`` (n, 33),
+    the active MP per variable at each tick, the feature names and metadata (box size,
+    strategy, success, duration). Deterministic: the same box and config give identical data.
+    :func:`record_demonstrations` with one box (the same loop).
+    """
+    return record_demonstrations([box], cfg, names=[name])[0]
+
+
+def record_demonstrations(
+    boxes: Sequence[Box],
+    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    names: Sequence[str | None] | None = None,
+    on_result: Callable[[int, Demonstration], None] | None = None,
+) -> list[Demonstration]:
+    """Run the scripted demonstrator on every box, all together, and record each at the
+    control rate; each result equals :func:`record_demonstration` of its box alone, to the
+    last bit.
+
+    Every control tick: one batched pose/Jacobian and IK call over the robots still running
+    (:func:`~cpmp.sim.simulation.prepare_steps`), MuJoCo stepping each box's own model and each
+    demonstrator reading its own simulation. A recording that ends (demonstrator done, time-out
+    or diverged physics) is left out of the following ticks.
+
+    names: per box, the demonstration's name (``None``: unnamed). on_result: called with
+    ``(index, demonstration)`` as each recording ends (e.g. a progress bar).
+    """
+    cfg = as_task_config(cfg)
+    boxes = list(boxes)
+    names = per_episode(names, len(boxes), "names")
+    runs = [_Recording(box, cfg) for box in boxes]
+    out: list[Demonstration | None] = [None] * len(runs)
+
+    def finish(index: int) -> None:
+        out[index] = runs[index].demonstration(names[index])
+        if on_result is not None:
+            on_result(index, out[index])
+
+    running = list(range(len(runs)))
+    n_max = round(cfg.max_time / cfg.control_dt)
+    for k in range(n_max + 1):
+        for i in running:
+            runs[i].append()
+        ended = [i for i in running if runs[i].policy.done or k == n_max]
+        for i in ended:
+            finish(i)
+        running = [i for i in running if i not in ended]
+        if not running:
+            break
+        for i in running:
+            runs[i].sim.set_active(runs[i].active)
+        prepare_steps([runs[i].sim for i in running])
+        diverged = [i for i in running if not runs[i].sim.step()]
+        for i in diverged:
+            runs[i].diverged = True
+            finish(i)
+        running = [i for i in running if i not in diverged]
+        t = (k + 1) * cfg.control_dt
+        for i in running:
+            runs[i].observe(t)
+    return [demo for demo in out if demo is not None]
+
+
+class _Recording:
+    """One box of :func:`record_demonstrations`: its simulation, the scripted demonstrator and
+    the samples so far (the loop of :func:`record_demonstration`, one tick at a time)."""
+
+    def __init__(self, box: Box, cfg: TaskConfig) -> None:
+        self.box = box
+        self.cfg = cfg
+        self.sim = Simulation(cfg, box)
+        self.policy = ScriptedDemonstrator(self.sim)
+        self.x = self.sim.features()
+        self.active = self.policy.reset(0.0, self.x)
+        self.features: list[np.ndarray] = []
+        self.labels: dict[str, list[str]] = {v: [] for v in self.sim.variables}
+        self.diverged = False
+
+    def append(self) -> None:
+        """Keep the current sample: features and the active MP per variable."""
+        self.features.append(self.x)
+        for variable, labels in self.labels.items():
+            labels.append(self.active[variable])
+
+    def observe(self, t: float) -> None:
+        """After a tick of physics at time ``t`` [s]: the new features and the
+        demonstrator's MPs for them."""
+        self.x = self.sim.features()
+        self.active = self.policy.step(t, self.x)
+
+    def demonstration(self, name: str | None) -> Demonstration:
+        """The recording so far as a :class:`~cpmp.data.Demonstration`."""
+        sim, policy, box, cfg = self.sim, self.policy, self.box, self.cfg
+        n = len(self.features)
+        success = bool(
+            policy.done and sim.box_in_container() and sim.hands_home() and not self.diverged
+        )
+        return Demonstration(
+            time=np.arange(n) * cfg.control_dt,
+            features=np.asarray(self.features),
+            labels={v: np.asarray(self.labels[v]) for v in sim.variables},
+            feature_names=list(sim.feature_names),
+            name=name,
+            metadata={
+                "box_width": box.width,
+                "box_depth": box.depth,
+                "box_height": box.height,
+                "strategy": policy.strategy,
+                "success": success,
+                "diverged": self.diverged,
+                "duration": float((n - 1) * cfg.control_dt),
+                "control_dt": cfg.control_dt,
+            },
+        )
+
 
 MAX_DRAWS_PER_BOX = 10_000
 """Rejection-sampling budget per box when balancing strategies."""
@@ -44,7 +172,7 @@ def collect_demonstrations(
     """Record ``n_demos`` scripted demonstrations with boxes drawn from ``seed`` and save them.
 
     Demos are named ``demo_<i>_<strategy>``; all boxes run together
-    (:func:`~cpmp.sim.runner.record_demonstrations`). Returns the written path and the
+    (:func:`record_demonstrations`). Returns the written path and the
     demonstrations.
     """
     rng = np.random.default_rng(seed)

@@ -25,8 +25,8 @@ from collections.abc import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from cpmp.config.task import TaskConfig
 from cpmp.errors import ConfigError
-from cpmp.sim.config import TaskConfig
 from cpmp.sim.kinematics import ArmKinematics
 from cpmp.sim.mps import HELD_MPS, MP
 from cpmp.sim.scene import HANDS
@@ -64,12 +64,11 @@ inverse would leak the posture term into the task space and leave a steady-state
 class MPController:
     """Turns the active MPs of the six control variables into joint position targets.
 
-    Parameters
-    ----------
-    cfg : TaskConfig
-    kin : ArmKinematics
-    limits : (2, 7, 2) arm joint ranges [rad], rows (left, right).
-    q_home : (2, 7) home arm posture [rad] (also the null-space posture).
+    Args:
+        cfg: the task's gains, limits and control period.
+        kin: the arms' kinematics.
+        limits: (2, 7, 2) arm joint ranges [rad], rows (left, right).
+        q_home: (2, 7) home arm posture [rad] (also the null-space posture).
     """
 
     def __init__(

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cpmp.sim.config import TaskConfig
+from cpmp.config.task import TaskConfig
 from cpmp.sim.mps import IDLE, MP
 from cpmp.sim.scene import HANDS, Box
 
@@ -85,12 +85,9 @@ class GoalDistances:
     The goals of orientation MPs (world rotations) and finger MPs (joint angles) are fixed for
     an episode, so they are stacked once here, in :func:`feature_names` order.
 
-    Parameters
-    ----------
-    library : dict[str, dict[str, MP]]
-        ``library[variable][name]``, as from :func:`cpmp.sim.mps.build_library`.
-    cfg : TaskConfig
-        Supplies ``rot_sigma`` and ``finger_sigma``.
+    Args:
+        library: ``library[variable][name]``, as from :func:`cpmp.sim.mps.build_library`.
+        cfg: supplies ``rot_sigma`` and ``finger_sigma``.
     """
 
     def __init__(self, library: dict[str, dict[str, MP]], cfg: TaskConfig) -> None:

@@ -9,12 +9,10 @@ does not depend on the batch it is in, to the last bit (tested), so batched roll
 one-at-a-time rollouts exactly.
 
 That call runs every control tick. pytorch-kinematics' ``jacobian_tensor`` is written to be
-``torch.compile``-able (fullgraph); compiled (inductor with its C++ wrapper), the same
-pytorch-kinematics Jacobian costs about 0.17 ms per tick inside the simulation loop instead of
-0.43 ms eager (about 70 small tensor calls whose dispatch code MuJoCo's stepping evicts from the
-CPU caches every tick). It is compiled once for every batch size (a dynamic batch dimension).
-Compiling takes ~15 s on a cold inductor cache (~4 s warm) and needs a C++ compiler; without one,
-or with ``compile=False``, the eager call is used.
+``torch.compile``-able (fullgraph); compiled (inductor with its C++ wrapper), the eager call's
+many small tensor operations run as one compiled call. It is compiled once for every batch size
+(a dynamic batch dimension). Compiling needs a C++ compiler; without one, or with
+``compile=False``, the eager call is used. Timings: see docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -46,16 +44,13 @@ def _patch_pk_joint_type_map() -> None:
 class ArmKinematics:
     """Forward kinematics and Jacobians of both arms, float64, world frame.
 
-    Parameters
-    ----------
-    xml : str
-        Scene MJCF text (the torso subtree is used; the free box is skipped).
-    mount_pos : dict[str, np.ndarray]
-        World position [m] of each arm's mount body, shape (3,). Mount frames are world-aligned.
-    compile : bool
-        ``torch.compile`` the batched Jacobian (checked against the eager call on construction;
-        falls back to eager with a warning if compilation fails). :attr:`compiled` says which
-        one runs.
+    Args:
+        xml: scene MJCF text (the torso subtree is used; the free box is skipped).
+        mount_pos: world position [m] of each arm's mount body, shape (3,). Mount frames are
+            world-aligned.
+        compile: ``torch.compile`` the batched Jacobian (checked against the eager call on
+            construction; falls back to eager with a warning if compilation fails).
+            :attr:`compiled` says which one runs.
     """
 
     def __init__(self, xml: str, mount_pos: dict[str, np.ndarray], compile: bool = False) -> None:

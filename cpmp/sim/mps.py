@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cpmp.sim.config import TaskConfig
+from cpmp.config.task import TaskConfig
 from cpmp.sim.scene import CONTAINER_FLOOR_Z, FINGER_JOINTS, HANDS, PLATE_TOP_Z, Box
 
 VARIABLES: tuple[str, ...] = (

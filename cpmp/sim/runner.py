@@ -1,6 +1,6 @@
-"""Recording scripted demonstrations and running policies closed-loop: one episode
-(:func:`run_episode`) or many boxes together (:func:`run_episodes`, one batched IK and one
-batched policy call per tick, the same results as one box at a time)."""
+"""Running policies closed-loop on the simulator: one episode (:func:`run_episode`) or many
+boxes together (:func:`run_episodes`, one batched IK and one batched policy call per tick, the
+same results as one box at a time), and the checks that decide each episode's outcome."""
 
 from __future__ import annotations
 
@@ -11,46 +11,18 @@ from typing import Any
 
 import numpy as np
 
+from cpmp.config.task import TaskConfig, as_task_config
 from cpmp.data import Demonstration, mp_sequences
-from cpmp.errors import ConfigError, UnknownMPError
+from cpmp.errors import UnknownMPError
 from cpmp.records import BatchedPolicy, Policy, TickInfo, TransitionEvent
-from cpmp.sim.config import TaskConfig
-from cpmp.sim.demonstrator import ScriptedDemonstrator
+from cpmp.sim.collect import record_demonstrations
+from cpmp.sim.policies import PolicyList, as_batched, per_episode
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import Simulation, prepare_steps
 
 OUTCOMES: tuple[str, ...] = ("complete", "wrong_start", "incomplete", "diverged")
 STILL_SPEED = 0.02
 """Joint speed [rad/s] below which the robot counts as standing still (deadlock detection)."""
-
-
-class PolicyList:
-    """N single :class:`Policy` objects as one :class:`BatchedPolicy`: each live episode's
-    policy is called in turn with its own row of ``x``."""
-
-    def __init__(self, policies: Sequence[Policy]) -> None:
-        self.policies = list(policies)
-
-    def __len__(self) -> int:
-        return len(self.policies)
-
-    def reset(
-        self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> list[Mapping[str, str]]:
-        return self._call("reset", t, x, live)
-
-    def step(
-        self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> list[Mapping[str, str]]:
-        return self._call("step", t, x, live)
-
-    def _call(
-        self, name: str, t: float, x: np.ndarray, live: np.ndarray | None
-    ) -> list[Mapping[str, str]]:
-        return [
-            getattr(policy, name)(t, row) if live is None or live[i] else {}
-            for i, (policy, row) in enumerate(zip(self.policies, x, strict=True))
-        ]
 
 
 @dataclass
@@ -77,10 +49,6 @@ class EpisodeResult:
     timing: dict[str, float] = field(default_factory=dict)
 
 
-def _as_config(cfg: TaskConfig | Mapping[str, Any] | None) -> TaskConfig:
-    return cfg if isinstance(cfg, TaskConfig) else TaskConfig.from_dict(cfg)
-
-
 def _normalise(active: Mapping[str, str], variables: list[str]) -> dict[str, str]:
     """Accept short (``lift``) or qualified (``right_pos.lift``) MP names."""
     out = {}
@@ -91,145 +59,6 @@ def _normalise(active: Mapping[str, str], variables: list[str]) -> dict[str, str
         prefix = f"{variable}."
         out[variable] = name[len(prefix) :] if name.startswith(prefix) else name
     return out
-
-
-class ReplayPolicy:
-    """Replays a demonstration's labels by time (open-loop); a reference policy for tests and
-    benchmarks. ``reset``/``step`` return the labels of the sample at or before ``t``."""
-
-    def __init__(self, demo: Demonstration) -> None:
-        self.time = np.asarray(demo.time)
-        self.labels = {v: np.asarray(lab) for v, lab in demo.labels.items()}
-
-    def _at(self, t: float) -> dict[str, str]:
-        i = int(np.clip(np.searchsorted(self.time, t + 1e-9) - 1, 0, len(self.time) - 1))
-        return {v: str(lab[i]) for v, lab in self.labels.items()}
-
-    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        return self._at(t)
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        return self._at(t)
-
-
-def record_demonstration(
-    box: Box, cfg: TaskConfig | Mapping[str, Any] | None = None, name: str | None = None
-) -> Demonstration:
-    """Run the scripted demonstrator on ``box`` and record it at the control rate.
-
-    Returns a :class:`~cpmp.data.Demonstration` with ``time`` (n,) [s], ``features`` (n, 33),
-    the active MP per variable at each tick, the feature names and metadata (box size,
-    strategy, success, duration). Deterministic: the same box and config give identical data.
-    :func:`record_demonstrations` with one box (the same loop).
-    """
-    return record_demonstrations([box], cfg, names=[name])[0]
-
-
-def record_demonstrations(
-    boxes: Sequence[Box],
-    cfg: TaskConfig | Mapping[str, Any] | None = None,
-    names: Sequence[str | None] | None = None,
-    on_result: Callable[[int, Demonstration], None] | None = None,
-) -> list[Demonstration]:
-    """Run the scripted demonstrator on every box, all together, and record each at the
-    control rate; each result equals :func:`record_demonstration` of its box alone, to the
-    last bit.
-
-    Every control tick: one batched pose/Jacobian and IK call over the robots still running
-    (:func:`~cpmp.sim.simulation.prepare_steps`), MuJoCo stepping each box's own model and each
-    demonstrator reading its own simulation. A recording that ends (demonstrator done, time-out
-    or diverged physics) is left out of the following ticks.
-
-    names: per box, the demonstration's name (``None``: unnamed). on_result: called with
-    ``(index, demonstration)`` as each recording ends (e.g. a progress bar).
-    """
-    cfg = _as_config(cfg)
-    boxes = list(boxes)
-    names = _per_episode(names, len(boxes), "names")
-    runs = [_Recording(box, cfg) for box in boxes]
-    out: list[Demonstration | None] = [None] * len(runs)
-
-    def finish(index: int) -> None:
-        out[index] = runs[index].demonstration(names[index])
-        if on_result is not None:
-            on_result(index, out[index])
-
-    running = list(range(len(runs)))
-    n_max = round(cfg.max_time / cfg.control_dt)
-    for k in range(n_max + 1):
-        for i in running:
-            runs[i].append()
-        ended = [i for i in running if runs[i].policy.done or k == n_max]
-        for i in ended:
-            finish(i)
-        running = [i for i in running if i not in ended]
-        if not running:
-            break
-        for i in running:
-            runs[i].sim.set_active(runs[i].active)
-        prepare_steps([runs[i].sim for i in running])
-        diverged = [i for i in running if not runs[i].sim.step()]
-        for i in diverged:
-            runs[i].diverged = True
-            finish(i)
-        running = [i for i in running if i not in diverged]
-        t = (k + 1) * cfg.control_dt
-        for i in running:
-            runs[i].observe(t)
-    return [demo for demo in out if demo is not None]
-
-
-class _Recording:
-    """One box of :func:`record_demonstrations`: its simulation, the scripted demonstrator and
-    the samples so far (the loop of :func:`record_demonstration`, one tick at a time)."""
-
-    def __init__(self, box: Box, cfg: TaskConfig) -> None:
-        self.box = box
-        self.cfg = cfg
-        self.sim = Simulation(cfg, box)
-        self.policy = ScriptedDemonstrator(self.sim)
-        self.x = self.sim.features()
-        self.active = self.policy.reset(0.0, self.x)
-        self.features: list[np.ndarray] = []
-        self.labels: dict[str, list[str]] = {v: [] for v in self.sim.variables}
-        self.diverged = False
-
-    def append(self) -> None:
-        """Keep the current sample: features and the active MP per variable."""
-        self.features.append(self.x)
-        for variable, labels in self.labels.items():
-            labels.append(self.active[variable])
-
-    def observe(self, t: float) -> None:
-        """After a tick of physics at time ``t`` [s]: the new features and the
-        demonstrator's MPs for them."""
-        self.x = self.sim.features()
-        self.active = self.policy.step(t, self.x)
-
-    def demonstration(self, name: str | None) -> Demonstration:
-        """The recording so far as a :class:`~cpmp.data.Demonstration`."""
-        sim, policy, box, cfg = self.sim, self.policy, self.box, self.cfg
-        n = len(self.features)
-        success = bool(
-            policy.done and sim.box_in_container() and sim.hands_home() and not self.diverged
-        )
-        return Demonstration(
-            time=np.arange(n) * cfg.control_dt,
-            features=np.asarray(self.features),
-            labels={v: np.asarray(self.labels[v]) for v in sim.variables},
-            feature_names=list(sim.feature_names),
-            name=name,
-            metadata={
-                "box_width": box.width,
-                "box_depth": box.depth,
-                "box_height": box.height,
-                "strategy": policy.strategy,
-                "success": success,
-                "diverged": self.diverged,
-                "duration": float((n - 1) * cfg.control_dt),
-                "control_dt": cfg.control_dt,
-            },
-        )
 
 
 def run_episode(
@@ -284,15 +113,15 @@ def run_episodes(
     on_tick: per box, a callback as in :func:`run_episode` (or ``None``).
     on_result: called with ``(index, result)`` as each episode ends (e.g. a progress bar).
     """
-    cfg = _as_config(cfg)
+    cfg = as_task_config(cfg)
     boxes = list(boxes)
     n = len(boxes)
     if n == 0:
         return []
     max_time = cfg.max_time if max_time is None else float(max_time)
-    batch = _as_batched(policy, n)
-    expected = _per_episode(expected, n, "expected")
-    callbacks = _per_episode(on_tick, n, "on_tick")
+    batch = as_batched(policy, n)
+    expected = per_episode(expected, n, "expected")
+    callbacks = per_episode(on_tick, n, "on_tick")
     missing = [i for i, demo in enumerate(expected) if demo is None]
     recorded = record_demonstrations([boxes[i] for i in missing], cfg)
     for i, demo in zip(missing, recorded, strict=True):
@@ -335,36 +164,6 @@ def run_episodes(
         if run.result is None:
             run.finish("incomplete", f"time-out after {max_time:.1f} s")
     return [run.result for run in runs]
-
-
-def _per_episode(values: Sequence[Any] | None, n: int, name: str) -> list[Any]:
-    """``values`` as a list of ``n`` (``None``: ``n`` times ``None``)."""
-    if values is None:
-        return [None] * n
-    values = list(values)
-    if len(values) != n:
-        raise ConfigError(f"{name} must hold one entry per box ({n}), got {len(values)}")
-    return values
-
-
-def _as_batched(policy: Policy | BatchedPolicy | Sequence[Policy], n: int) -> BatchedPolicy:
-    """The batched policy :func:`run_episodes` drives for ``n`` boxes."""
-    if isinstance(policy, Sequence):
-        batch: BatchedPolicy = PolicyList(policy)
-    elif hasattr(policy, "batched"):
-        batch = policy.batched(n)
-    elif hasattr(policy, "n_episodes") or isinstance(policy, PolicyList):
-        batch = policy
-    elif n == 1:
-        batch = PolicyList([policy])
-    else:
-        raise ConfigError(
-            f"run_episodes needs one policy per box ({n}), a batched policy of {n} episodes or "
-            "a policy with batched(n) (a ConcurrentSequencer); got one single-episode policy"
-        )
-    if len(batch) != n:
-        raise ConfigError(f"the batched policy runs {len(batch)} episodes, there are {n} boxes")
-    return batch
 
 
 class _Rollout:

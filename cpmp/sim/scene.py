@@ -14,8 +14,8 @@ from importlib import resources
 import mujoco
 import numpy as np
 
+from cpmp.config.task import TaskConfig
 from cpmp.errors import ConfigError
-from cpmp.sim.config import TaskConfig
 
 STRATEGIES: tuple[str, ...] = ("both", "right", "left")
 """Grasp strategies: both hands, the right hand alone, the left hand alone."""

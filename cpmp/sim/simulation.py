@@ -9,8 +9,8 @@ from collections.abc import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from cpmp.config.task import TaskConfig
 from cpmp.errors import CpmpError, UnknownMPError
-from cpmp.sim.config import TaskConfig
 from cpmp.sim.control import MPController, update_controllers
 from cpmp.sim.features import GoalDistances, box_size_features, compute_features, feature_names
 from cpmp.sim.kinematics import ArmKinematics
@@ -59,18 +59,13 @@ def shared_kinematics(compile: bool = True) -> ArmKinematics:
 class Simulation:
     """One episode's world: the robot, the scene with ``box``, the MPs and the features.
 
-    Attributes
-    ----------
-    variables : list[str]
-        The six control variables.
-    mp_names : dict[str, list[str]]
-        MP names per variable.
-    feature_names : list[str]
-        Names of :meth:`features`, length d = 33.
-    t : float
-        Simulated time [s] since :meth:`reset`.
-    timing : dict[str, float]
-        Wall time [s] spent in ``physics`` and ``kinematics`` (IK + features) since reset.
+    Attributes:
+        variables: the six control variables.
+        mp_names: MP names per variable.
+        feature_names: names of :meth:`features`, length d = 33.
+        t: simulated time [s] since :meth:`reset`.
+        timing: wall time [s] spent in ``physics`` and ``kinematics`` (IK + features) since
+            reset.
     """
 
     def __init__(self, cfg: TaskConfig, box: Box) -> None:

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from fake_reports import table_one_entry
 
 from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.experiment.aggregate import (
@@ -24,7 +23,6 @@ from cpmp.experiment.aggregate import (
 )
 from cpmp.experiment.report import write_json
 
-ROOT = Path(__file__).resolve().parents[2]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -32,17 +30,7 @@ def fake_report(c3: float, c6: float, distance: float | None = 0.1) -> dict:
     """A report of one job with D = 3 and 6 over two seeds of 4 boxes; the map at D = 6."""
 
     def rep(c: float) -> dict:
-        return {
-            "W": 1.0,
-            "W_std": 0.0,
-            "I": 3.0 - c,
-            "I_std": 0.5,
-            "C": c,
-            "C_std": 0.5,
-            "distance_mean": distance,
-            "distance_std": None if distance is None else 0.02,
-            "n_boxes": 4,
-        }
+        return table_one_entry((1.0, 3.0 - c, c), (0.0, 0.5, 0.5), distance, 0.02, n_boxes=4)
 
     return {
         "experiment": {"name": "fake", "seeds": [0, 1], "n_boxes": 4},
@@ -211,19 +199,8 @@ def test_broken_report_is_named(sweep):
         collect_sweep(sweep)
 
 
-def test_script_writes_into_sweep_dir_and_prints_json_path_last(sweep, tmp_path):
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "scripts/aggregate.py",
-            f"sweep_dir={sweep}",
-            f"hydra.run.dir={tmp_path / 'run'}",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+def test_script_writes_into_sweep_dir_and_prints_json_path_last(sweep, tmp_path, run_script):
+    proc = run_script("aggregate.py", f"sweep_dir={sweep}", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == str(sweep / "aggregate.json")
     assert (sweep / "aggregate.md").is_file()
@@ -231,23 +208,11 @@ def test_script_writes_into_sweep_dir_and_prints_json_path_last(sweep, tmp_path)
 
 
 @pytest.mark.slow
-def test_real_multirun_then_aggregate(tmp_path):
+def test_real_multirun_then_aggregate(tmp_path, run_script):
     """Two tiny jobs through Hydra's multirun (~40 s), then the aggregate of their sweep dir."""
     sweep = tmp_path / "multirun"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "scripts/experiment.py",
-            "-m",
-            "experiment=tiny",
-            "predictor.gamma=2.0,4.0",
-            f"hydra.sweep.dir={sweep}",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    argv = ["-m", "experiment=tiny", "predictor.gamma=2.0,4.0", f"hydra.sweep.dir={sweep}"]
+    proc = run_script("experiment.py", *argv, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     table = collect_sweep(sweep)
     assert table.swept == ["predictor.gamma"]

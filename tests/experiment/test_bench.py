@@ -1,37 +1,33 @@
-"""The benchmarks: ``scripts/bench_sequencer.py`` and ``scripts/bench.py`` (report structure
-and the behaviour behind the numbers, never a speed)."""
+"""The benchmarks (``cpmp.experiment.bench*``) and their command lines (``scripts/bench*.py``):
+report structure and the behaviour behind the numbers, never a speed."""
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cpmp.errors import ConfigError
-from cpmp.experiment.bench import (
-    SECTIONS,
-    BenchSettings,
-    bench_sequencer,
-    bench_ticks,
+from cpmp.experiment.bench_cli import (
+    bench_main,
+    bench_sequencer_main,
+    bench_sim_main,
+    bench_synthetic_main,
+)
+from cpmp.experiment.bench_fit import (
     newton_solve_all,
     node_kernels,
     pad_features,
     problem_loss,
     sklearn_peer,
 )
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "scripts"))
-
-import bench  # noqa: E402
-import bench_sequencer as bench_sequencer_script  # noqa: E402
+from cpmp.experiment.bench_sequencer import bench_sequencer, bench_ticks
+from cpmp.experiment.bench_settings import SECTIONS, BenchSettings
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def test_bench_sequencer_prints_json(capsys):
-    assert bench_sequencer_script.main(["--predictors", "klr", "--ticks", "20"]) == 0
+    assert bench_sequencer_main(["--predictors", "klr", "--ticks", "20"]) == 0
     out = json.loads(capsys.readouterr().out)
     row = out["predictors"]["klr"]
     assert out["n_features"] == 3 and row["n_nodes"] == 6
@@ -42,14 +38,52 @@ def test_bench_sequencer_prints_json(capsys):
 
 
 def test_bench_sequencer_bad_file_is_a_clear_error(tmp_path, capsys):
-    assert bench_sequencer_script.main(["--data", str(tmp_path / "missing.h5")]) == 2
+    assert bench_sequencer_main(["--data", str(tmp_path / "missing.h5")]) == 2
     assert "error:" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("bad", ["svm"])
 def test_bench_sequencer_unknown_predictor(bad, capsys):
-    assert bench_sequencer_script.main(["--predictors", bad, "--ticks", "5"]) == 2
+    assert bench_sequencer_main(["--predictors", bad, "--ticks", "5"]) == 2
     assert "unknown predictor" in capsys.readouterr().err
+
+
+def test_bench_sim_prints_json(capsys):
+    assert bench_sim_main(["--width", "0.15", "--depth", "0.12", "--demos", "0"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["replay"]["outcome"] == "complete"
+
+
+def test_bench_sim_rejects_a_bad_box(capsys):
+    assert bench_sim_main(["--width", "-0.1", "--demos", "0"]) == 2
+    assert "bench_sim: error: Box.width must be a positive length" in capsys.readouterr().err
+
+
+def test_bench_synthetic_counts_the_episodes_of_each_task(capsys):
+    """Each (task, D, seed, config) row counts the outcomes of ``klr`` fitted on D demos of that
+    task and run on held-out episodes seeded ``1000 + seed``: the same counts as the task's
+    own ``evaluate`` on a fit made here."""
+    from cpmp.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+    from cpmp.synthetic import evaluate, make_demonstrations
+
+    args = ["--seeds", "1", "--sizes", "3", "--episodes", "4", "--configs", "defaults", "paper"]
+    assert bench_synthetic_main(args) == 0
+    captured = capsys.readouterr()
+    rows = json.loads(captured.out)["rows"]
+    assert [(r["task"], r["config"]) for r in rows] == [
+        ("two_point", "defaults"),
+        ("two_point", "paper"),
+        ("relay", "defaults"),
+        ("relay", "paper"),
+    ]
+    assert [json.loads(line) for line in captured.err.splitlines()] == rows  # one line per row
+    for row in rows:
+        assert (row["D"], row["seed"]) == (3, 1)
+        assert row["complete"] + row["wrong_start"] + row["incomplete"] == 4
+    demos = make_demonstrations(3, 1)
+    seq = ConcurrentSequencer.fit(demos, "klr", seed=1, logger=None, **PAPER_OPTIONS)
+    counts = evaluate(seq, None, 4, 1001)
+    assert {k: rows[1][k] for k in counts} == counts
 
 
 # ------------------------------------------------------------------------ scripts/bench.py
@@ -80,7 +114,7 @@ def test_node_kernels_needs_a_kernel_predictor(train_demos):
 
 
 def test_padding_features_keeps_the_supports():
-    from cpmp.synthetic_relay import make_demonstrations
+    from cpmp.synthetic_relay_demonstrator import make_demonstrations
 
     demos = make_demonstrations(3, seed=0)
     padded = pad_features(demos, 10)
@@ -134,7 +168,7 @@ def test_bench_settings_reject_bad_values(options, message):
 
 
 def test_bench_script_bad_option_is_a_clear_error(tmp_path, capsys):
-    assert bench.main(["--sections", "fit,gpu", "--out", str(tmp_path / "b")]) == 2
+    assert bench_main(["--sections", "fit,gpu", "--out", str(tmp_path / "b")]) == 2
     assert "error: unknown or no bench sections" in capsys.readouterr().err
     assert not (tmp_path / "b" / "bench.json").exists()
 
@@ -147,7 +181,7 @@ def test_bench_smallest_form_writes_every_section(tmp_path, capsys):
     args += ["--gradient-epochs", "3", "--experiment", "tiny"]
     args += ["--experiment-override", "experiment.n_boxes=1"]
     args += ["--experiment-override", "experiment.max_time=3"]
-    assert bench.main(args) == 0
+    assert bench_main(args) == 0
     assert capsys.readouterr().out.strip().splitlines()[-1] == str(out / "bench.json")
     result = json.loads((out / "bench.json").read_text())
     assert list(result["sections"]) == list(SECTIONS)

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from cpmp.data import Demonstration, save_demonstrations
+from cpmp.data import Demonstration
+from cpmp.datafile import save_demonstrations
 from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint
 from cpmp.experiment.cli import COMMANDS, CONF_DIR, _Task, check_command
-from cpmp.experiment.jobs import evaluate_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
@@ -274,6 +275,26 @@ def test_task_pickles_with_its_job_name():
     assert (task.name, task.__module__) == ("collect", "collect")
 
 
+def test_console_scripts_run_their_command(monkeypatch):
+    """``cpmp-<name>`` of pyproject's [project.scripts] is ``cli.<name>_main``, which runs
+    Hydra command ``name`` (and says so in its docstring)."""
+    import tomllib
+
+    from cpmp.experiment import cli
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    ran: list[str] = []
+    monkeypatch.setattr(cli, "run_command", ran.append)
+    for name in sorted(COMMANDS):
+        script = f"cpmp-{name.replace('_', '-')}"
+        assert scripts[script] == f"cpmp.experiment.cli:{name}_main"
+        main = getattr(cli, f"{name}_main")
+        assert main.__name__ == f"{name}_main"
+        assert main.__doc__ == f"``{script}``: {COMMANDS[name].summary}."
+        main()
+    assert ran == sorted(COMMANDS)
+
+
 def test_conf_dir_is_the_repository_conf():
     assert CONF_DIR == ROOT / "conf"
     assert sorted(COMMANDS) == sorted(p.stem for p in CONF_DIR.glob("*.yaml"))
@@ -314,7 +335,7 @@ def test_evaluate_reports_mps_the_model_does_not_know(tmp_path, fitted_klr, test
     victim = next(i for i, d in enumerate(demos) if "b_wait" in set(d.labels["b"]))
     demos[victim] = renamed(demos[victim], "b_wait", "b_pause")
     n_renamed = sum(s.mp == "b_pause" for s in demos[victim].segments("b"))
-    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.jobs"):
+    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.checkpoint_jobs"):
         out = evaluate(tmp_path, fitted_klr, demos)
     assert out["unknown_mps"] == [
         {
@@ -335,7 +356,7 @@ def test_evaluate_reports_mps_the_model_does_not_know(tmp_path, fitted_klr, test
 
 
 def test_evaluate_of_known_mps_reports_none(tmp_path, fitted_klr, test_demos, caplog):
-    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.jobs"):
+    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.checkpoint_jobs"):
         out = evaluate(tmp_path, fitted_klr, list(test_demos))
     assert out["unknown_mps"] == []
     assert not [r for r in caplog.records if r.levelno == logging.WARNING]

@@ -1,12 +1,10 @@
 """``experiment=compare``: its tiny form end to end through ``scripts/experiment.py`` (every
 field in every row, the figures, the table), the same numbers from a serial in-process run,
-the choice of rows, the option errors, and ``sequencer=goal_nearest`` in the pipeline."""
+the choice of rows, the option errors, and ``sequencer=goal_nearest`` in the training stage."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -15,16 +13,13 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from cpmp.errors import ConfigError
-from cpmp.experiment.compare import (
-    NO_PREDICTOR,
-    OUTPUT_FILES,
-    ROW_FIELDS,
-    CompareSettings,
-    group_options,
-    row_specs,
-)
-from cpmp.experiment.jobs import run_experiment, validate_common
-from cpmp.experiment.pipeline import ExperimentSettings, fit_sequencer
+from cpmp.experiment.compare import NO_PREDICTOR, OUTPUT_FILES, group_options, row_specs
+from cpmp.experiment.compare_report import ROW_FIELDS
+from cpmp.experiment.compare_settings import CompareSettings
+from cpmp.experiment.config import to_dict, validate_common
+from cpmp.experiment.fitting import fit_sequencer
+from cpmp.experiment.jobs import run_experiment
+from cpmp.experiment.settings import ExperimentSettings
 from cpmp.goal_nearest import GoalNearestSequencer
 from cpmp.predictors import PREDICTORS
 from cpmp.sim import OUTCOMES
@@ -45,42 +40,25 @@ def compose_cfg(overrides: list[str]) -> Any:
 
 
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory):
+def tiny(tmp_path_factory, script_in_background):
     """``experiment=compare_tiny`` as ``scripts/experiment.py`` (two worker processes) and, at
     the same time, a serial in-process run of three of its rows (two fits: klr's default is
-    the sweep's 2.0). Yields both run dirs and
-    the script's stdout."""
+    the sweep's 2.0). Yields both run dirs and the script's stdout."""
     base = tmp_path_factory.mktemp("compare")
     script, serial = base / "script", base / "serial"
     serial.mkdir()
-    with open(base / "stdout.txt", "w") as out, open(base / "stderr.txt", "w") as err:
-        proc = subprocess.Popen(
+    argv = ["experiment=compare_tiny", f"hydra.run.dir={script}"]
+    with script_in_background(base, "experiment.py", *argv, timeout=600) as run:
+        cfg = compose_cfg(
             [
-                sys.executable,
-                "scripts/experiment.py",
                 "experiment=compare_tiny",
-                f"hydra.run.dir={script}",
-            ],
-            cwd=ROOT,
-            stdout=out,
-            stderr=err,
-            text=True,
+                "experiment.workers=1",
+                "compare.predictors=[klr]",
+                "compare.sweep.support_scale=[2.0]",
+            ]
         )
-        try:
-            cfg = compose_cfg(
-                [
-                    "experiment=compare_tiny",
-                    "experiment.workers=1",
-                    "compare.predictors=[klr]",
-                    "compare.sweep.support_scale=[2.0]",
-                ]
-            )
-            run_experiment(cfg, serial)
-        finally:
-            proc.wait(timeout=600)
-    stderr = (base / "stderr.txt").read_text()
-    assert proc.returncode == 0, stderr[-3000:]
-    return script, serial, (base / "stdout.txt").read_text()
+        run_experiment(cfg, serial)
+    return script, serial, run.stdout.read_text()
 
 
 def test_tiny_compare_writes_every_field_of_every_row(tiny):
@@ -107,7 +85,7 @@ def test_tiny_compare_writes_every_field_of_every_row(tiny):
         assert not missing, (row["predictor"], missing)
         assert row["errors"] == []
         assert row["W"] + row["I"] + row["C"] == row["n_boxes"] == 1
-        assert 0.0 <= row["mae"] <= 1.0
+        assert row["mae"] == row["per_seed"]["mae"][0]  # one seed: its value is the mean
         assert row["fit_s"] > 0 and row["tick_ms"] > 0
         if row["sequencer"] == "goal_nearest":
             assert row["supports"] is None
@@ -144,6 +122,31 @@ def test_numbers_do_not_depend_on_the_worker_count(tiny):
         assert {k: row[k] for k in SAME_IN_EVERY_RUN} == {
             k: both[key(row)][k] for k in SAME_IN_EVERY_RUN
         }
+
+
+def test_row_mae_is_the_fitted_models_error_on_the_held_out_demos(tiny):
+    """The ``klr`` row's MAE is that of ``klr`` fitted here on the balanced D = 3 subset of the
+    run's own training split and scored on its test split (both read back from
+    ``seed_0/demos.h5``): the row fits on the right demos and scores on the held-out ones."""
+    from cpmp.datafile import load_demonstrations
+    from cpmp.evaluation import activation_progress, progress_errors
+    from cpmp.experiment.strategies import balanced_subset
+
+    script, _, _ = tiny
+    rows = json.loads((script / "compare.json").read_text())
+    (row,) = [r for r in rows if r["group"] == "predictors" and r["predictor"] == "klr"]
+    path = script / "seed_0" / "demos.h5"
+    train, test = (load_demonstrations(path, split=s) for s in ("train", "test"))
+    cfg = compose_cfg(["experiment=compare_tiny"])
+    trainer = {**to_dict(cfg.trainer), "logger": None, "progress_bar": False}
+    klr = group_options("predictor")["klr"]
+    seq = fit_sequencer(balanced_subset(train, 3), klr, cfg.sequencer, trainer, seed=0)
+    expected = progress_errors(activation_progress(seq, test))["mae"]
+    # the file keeps the features as collected; rel 1e-9 leaves room for summation order only
+    assert row["mae"] == pytest.approx(expected, rel=1e-9)
+    assert row["mae"] != pytest.approx(
+        progress_errors(activation_progress(seq, train))["mae"], rel=1e-3
+    )  # the training demos give another number: the comparison can fail
 
 
 def test_all_compares_every_predictor_option_and_registered_kind():
@@ -183,7 +186,7 @@ def test_bad_compare_options_fail_before_any_work(overrides, message):
         row_specs(cfg, settings, CompareSettings.from_cfg(cfg.compare, settings.train_sizes))
 
 
-def test_sequencer_goal_nearest_is_fitted_by_the_pipeline():
+def test_sequencer_goal_nearest_is_fitted_by_the_training_stage():
     cfg = compose_cfg(["sequencer=goal_nearest", "sequencer.hold_time=0.2"])
     validate_common(cfg)
     demos = make_demonstrations(3, seed=0)

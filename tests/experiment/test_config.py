@@ -18,6 +18,7 @@ from cpmp.config import (
     ACTIVATIONS,
     PREDICTOR_CONFIGS,
     FitConfig,
+    GoalNearestConfig,
     KLRConfig,
     MLPConfig,
     SequencerConfig,
@@ -25,20 +26,18 @@ from cpmp.config import (
     TrainerConfig,
 )
 from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
+from cpmp.experiment.compare_settings import CompareSettings, SweepSettings
 from cpmp.experiment.config import (
-    ExperimentSettings,
     experiment_job,
     fit_settings,
     job_fit_settings,
     predictor_options,
     to_dict,
-)
-from cpmp.experiment.jobs import (
-    evaluate_checkpoint,
-    run_experiment,
-    train_from_file,
     validate_common,
 )
+from cpmp.experiment.jobs import run_experiment
+from cpmp.experiment.settings import ExperimentSettings
 from cpmp.predictors import PREDICTORS
 
 # One thread: with a second busy process on a 2-core machine, torch's default two threads
@@ -103,8 +102,6 @@ def test_other_groups_compose_and_validate(group):
 
 
 def test_sequencer_configs_mean_what_they_say():
-    from cpmp.sequencer import SequencerConfig
-
     paper = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=paper"]).sequencer))
     assert (paper.threshold, paper.patience, paper.start_rule) == (0.65, 0.05, "independent")
     coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
@@ -117,7 +114,7 @@ def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
     """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
     ``fit(demos)`` with no options is the main job's default configuration."""
     from cpmp.predictors import make_config
-    from cpmp.sequencer import PAPER_OPTIONS, SequencerConfig
+    from cpmp.sequencer import PAPER_OPTIONS
 
     seq_keys = set(SequencerConfig.__dataclass_fields__)
 
@@ -243,9 +240,12 @@ def test_group_options_compose_to_every_option_of_their_dataclass(group):
     for name in options(group):
         node = to_dict(compose_cfg("experiment", [f"{group}={name}"])[group])
         kind = node.pop("kind", None)
-        if group == "sequencer" and kind is not None:
-            continue  # goal_nearest: its own options (cpmp.goal_nearest.GoalNearestConfig)
-        cls = PREDICTOR_CONFIGS[kind] if group == "predictor" else SCHEMAS[group]
+        if group == "predictor":
+            cls = PREDICTOR_CONFIGS[kind]
+        elif kind == "goal_nearest":
+            cls = GoalNearestConfig
+        else:
+            cls = SCHEMAS[group]
         assert list(node) == [f.name for f in dataclasses.fields(cls)], name
 
 
@@ -258,23 +258,29 @@ def test_experiment_node_composes_to_every_setting():
 def written_values(group: str, path: Path) -> list[tuple[str, object, dict]]:
     """``(key, value, the schema's defaults)`` of every value ``path`` writes itself, for the
     options that start from a schema; ``[]`` for an option extending another option of its
-    group (``klr_full``) and for ``goal_nearest``, whose options are not registered."""
+    group (``klr_full``)."""
     values = yaml_values(path)
     if group == "experiment":
         schemas = {"experiment": ExperimentSettings, "task": TaskConfig}
-        return [
+        out = [
             (key, value, defaults_of(schemas[node]))
             for node in schemas
             for key, value in values.get(node, {}).items()
         ]
+        compare = dict(values.get("compare", {}))
+        sweep = compare.pop("sweep", {})
+        out += [(key, value, defaults_of(CompareSettings)) for key, value in compare.items()]
+        out += [(key, value, defaults_of(SweepSettings)) for key, value in sweep.items()]
+        return out
     first = yaml.safe_load(path.read_text()).get("defaults", [""])[0]
     if group == "predictor":
         if not first.startswith("/schema_predictor_"):
             return []
         cls = PREDICTOR_CONFIGS[first.removeprefix("/schema_predictor_")]
         assert "kind" not in values, f"{path.name}: the schema carries the kind"
-    elif values.get("kind") == "goal_nearest":
-        return []
+    elif first == "/schema_sequencer_goal_nearest":
+        cls = GoalNearestConfig
+        assert "kind" not in values, f"{path.name}: the schema carries the kind"
     else:
         cls = SCHEMAS[group]
     return [(key, value, defaults_of(cls)) for key, value in values.items()]
@@ -499,7 +505,7 @@ def test_evaluate_without_checkpoint_or_with_missing_one(tmp_path):
 
 
 def test_evaluate_with_missing_demo_file(tmp_path):
-    from cpmp.experiment.pipeline import fit_sequencer
+    from cpmp.experiment.fitting import fit_sequencer
     from cpmp.synthetic import make_demonstrations
 
     cfg = compose_cfg("train", ["trainer.logger=null"])
@@ -517,21 +523,10 @@ def test_to_dict_rejects_non_mappings():
         to_dict([1, 2])
 
 
-def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path):
+def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path, run_script):
     run_dir = tmp_path / "run"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "scripts/experiment.py",
-            "experiment=tiny",
-            "experiment.n_boxes=-1",
-            f"hydra.run.dir={run_dir}",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    argv = ["experiment=tiny", "experiment.n_boxes=-1", f"hydra.run.dir={run_dir}"]
+    proc = run_script("experiment.py", *argv)
     assert proc.returncode == 2, proc.stderr
     errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1, proc.stderr
@@ -546,7 +541,7 @@ def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path):
 def test_fit_sequencer_with_the_default_trainer_config(predictor):
     """The trainer's ``lr`` (null by default) and an Adam predictor's own ``lr`` must not clash;
     a trainer ``lr`` that is set overrides the predictor's."""
-    from cpmp.experiment.pipeline import fit_sequencer
+    from cpmp.experiment.fitting import fit_sequencer
     from cpmp.synthetic import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)

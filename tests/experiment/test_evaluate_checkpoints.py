@@ -1,23 +1,23 @@
 """``cpmp-evaluate`` reads every checkpoint kind ``cpmp-train`` and the main job write (every
 predictor option with the learned sequencer, and the ``goal_nearest`` baseline) through one
-loader, :func:`cpmp.goal_nearest.load_sequencer`."""
+loader, :func:`cpmp.checkpoints.load_sequencer`."""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from cpmp.data import save_demonstrations
+from cpmp.checkpoints import load_sequencer
+from cpmp.datafile import load_demonstrations
 from cpmp.errors import CpmpFileError
+from cpmp.evaluation import activation_progress, progress_errors, replay_demonstrations
+from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
 from cpmp.experiment.cli import CONF_DIR
-from cpmp.experiment.jobs import evaluate_checkpoint, train_from_file
-from cpmp.goal_nearest import GoalNearestSequencer, load_sequencer
+from cpmp.goal_nearest import GoalNearestSequencer
 from cpmp.sequencer import ConcurrentSequencer
-from cpmp.synthetic import make_demonstrations
 
 PREDICTORS = sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml"))
 FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.epochs=20"]}
@@ -30,16 +30,6 @@ KINDS = [(name, [f"predictor={name}", *FAST.get(name, [])]) for name in PREDICTO
 def compose_cfg(name: str, overrides: list[str]):
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         return compose(name, overrides=overrides)
-
-
-@pytest.fixture(scope="module")
-def demo_file(tmp_path_factory) -> Path:
-    """Four synthetic training and two test demonstrations in one file with masks."""
-    demos = make_demonstrations(6, seed=0)
-    path = tmp_path_factory.mktemp("data") / "demos.h5"
-    names = [d.name for d in demos]
-    save_demonstrations(path, demos, splits={"train": names[:4], "test": names[4:]})
-    return path
 
 
 @pytest.mark.parametrize(("name", "overrides"), KINDS, ids=[k for k, _ in KINDS])
@@ -62,12 +52,18 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
         assert out["model"]["used_to_switch"] is False
     else:
         assert out["model"] == {"sequencer": "learned", "predictor": seq.predictor.kind}
+    # the loaded checkpoint, evaluated again on the file's test split, gives the same numbers
+    test = load_demonstrations(demo_file, split="test")
     progress = out["progress"]
-    assert 0.0 <= progress["mae"] <= 1.0
+    assert progress == progress_errors(activation_progress(seq, test))
     assert set(progress["per_node"]) == {f"{v}/{mp}" for v, mp in seq.node_keys}
     replay = out["replay"]
+    again = replay_demonstrations(seq, test)
+    assert replay["sequence_match"] == again["sequence_match"]
+    assert replay["all_match"] == again["all_match"]
     assert set(replay["sequence_match"]) == set(seq.graphs)
-    assert 0.0 <= replay["all_match"] <= 1.0
+    # every variable matches in a demo counted in all_match
+    assert replay["all_match"] <= min(replay["sequence_match"].values())
     markdown = (eval_dir / "evaluation.md").read_text()
     if goal_nearest:
         assert "nearest-training-sample lookup" in markdown and "never uses to switch" in markdown

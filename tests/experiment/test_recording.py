@@ -237,20 +237,14 @@ def test_invalid_arguments(tmp_path: Path) -> None:
     with pytest.raises(DataError, match="non-decreasing"):
         recorder.log_tick(0.5, [0, 0], {}, {})
     recorder.abort()
-    with pytest.raises(ConfigError, match="type must be one of"):
-        EpisodeRecorder(
-            tmp_path / "g.rrd",
-            feature_names=FEATURES,
-            mp_names=MP_NAMES,
-            geoms=[{"body": "b", "type": "mesh", "size": [1]}],
-        )
-    with pytest.raises(ConfigError, match="needs at least 2"):
-        EpisodeRecorder(
-            tmp_path / "g.rrd",
-            feature_names=FEATURES,
-            mp_names=MP_NAMES,
-            geoms=[{"body": "b", "type": "capsule", "size": [0.1]}],
-        )
+    for geom, message in (
+        ({"body": "b", "type": "mesh", "size": [1]}, "type must be one of"),
+        ({"body": "b", "type": "capsule", "size": [0.1]}, "needs at least 2"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            EpisodeRecorder(
+                tmp_path / "g.rrd", feature_names=FEATURES, mp_names=MP_NAMES, geoms=[geom]
+            )
     assert list(tmp_path.iterdir()) == []
 
 
@@ -468,7 +462,7 @@ def _blueprint_column(path: Path, column: str) -> list:
 
 def test_text_logs_show_the_text_first(robot_file: Path) -> None:
     """The events and active-MP logs show the message body as their first column and hide the
-    entity path (which used to fill the visible width)."""
+    entity path (so that it does not fill the visible width)."""
     columns = _blueprint_column(robot_file, "TextLogColumns:text_log_columns")
     assert len(columns) == 2  # events and the active-MP log
     for cells in columns:
@@ -477,11 +471,13 @@ def test_text_logs_show_the_text_first(robot_file: Path) -> None:
 
 
 def test_public_names_importable_from_recording() -> None:
-    from cpmp.experiment import recording, recording_reader, recording_writer
+    from cpmp.experiment import recording, recording_layout, recording_reader, recording_writer
 
     assert recording.EpisodeRecorder is recording_writer.EpisodeRecorder
     assert recording.read_recording is recording_reader.read_recording
-    assert set(recording.__all__) == set(recording_writer.__all__) | set(recording_reader.__all__)
+    assert recording.group_features is recording_layout.group_features
+    modules = (recording_layout, recording_reader, recording_writer)
+    assert set(recording.__all__) == set().union(*(m.__all__ for m in modules))
 
 
 def test_read_views_of_bad_files(tmp_path: Path) -> None:

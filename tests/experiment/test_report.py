@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from fake_reports import table_one_entry
 
 from cpmp.experiment.report import (
     PAPER_TABLE_I,
@@ -23,18 +24,7 @@ def make_report() -> dict:
     """A report shaped like run_experiment's, with D = 3 (in the paper) and D = 12 (not)."""
 
     def rep(w, i, c, dist):
-        return {
-            "W": w,
-            "W_std": 0.5,
-            "I": i,
-            "I_std": 0.0,
-            "C": c,
-            "C_std": 1.25,
-            "diverged": 0.0,
-            "distance_mean": dist,
-            "distance_std": None if dist is None else 0.01,
-            "n_boxes": 20,
-        }
+        return table_one_entry((w, i, c), (0.5, 0.0, 1.25), dist, 0.01, n_boxes=20, diverged=0.0)
 
     return {
         "experiment": {"name": "handmade", "seeds": [0, 1], "n_boxes": 20},

@@ -29,5 +29,5 @@ def boxes() -> dict[str, Box]:
 
 @pytest.fixture(scope="session")
 def demos(cfg: TaskConfig) -> dict:
-    """One scripted demonstration per strategy (about 1 s of wall time each)."""
+    """One scripted demonstration per strategy."""
     return {s: record_demonstration(box, cfg, name=f"demo_{s}") for s, box in BOXES.items()}

@@ -1,16 +1,93 @@
-"""Batched rollouts: many boxes stepped together give exactly the one-at-a-time results."""
+"""The closed-loop runner (cpmp.sim.runner): outcomes of one episode, and many boxes together
+giving exactly the one-at-a-time results."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
-from cpmp.errors import ConfigError, CpmpError
+from cpmp.errors import ConfigError, UnknownMPError
 from cpmp.sequencer import ConcurrentSequencer
-from cpmp.sim import Box, Simulation, record_demonstration, run_episode
-from cpmp.sim.runner import ReplayPolicy, run_episodes
-from cpmp.sim.simulation import prepare_steps, shared_kinematics
+from cpmp.sim import (
+    Box,
+    Simulation,
+    mp_sequences,
+    record_demonstration,
+    run_episode,
+)
+from cpmp.sim.policies import ReplayPolicy
+from cpmp.sim.runner import run_episodes
+
+
+def test_replayed_demo_completes(demos, boxes, cfg):
+    demo, ticks = demos["left"], []
+    policy = ReplayPolicy(demo)
+    result = run_episode(boxes["left"], policy, cfg, expected=demo, on_tick=ticks.append)
+    assert result.outcome == "complete", result.reason
+    assert result.box_in_container and result.hands_home
+    assert result.sequences == mp_sequences(demo)
+    # the replay switches when the labels do: the runner's records are the demonstration's
+    ran = sorted((e.t, e.variable, e.source, e.target) for e in result.transitions)
+    assert ran == [(e.t, e.variable, e.source, e.target) for e in demo.transitions()]
+    assert result.transitions[0].state.shape == (33,)
+    assert all(np.isnan(e.probability) for e in result.transitions)
+    # one tick record per control tick, with what the runner observed
+    dt = cfg.control_dt
+    assert [tick.t for tick in ticks[:3]] == pytest.approx([0.0, dt, 2 * dt])
+    np.testing.assert_array_equal(ticks[0].features, demo.features[0])
+    assert ticks[0].active == {v: str(labels[0]) for v, labels in demo.labels.items()}
+    assert "box" in ticks[0].body_poses and ticks[0].progress == {}
+
+
+def test_wrong_start_and_wrong_transition(demos, boxes, cfg):
+    result = run_episode(boxes["right"], ReplayPolicy(demos["left"]), cfg, expected=demos["right"])
+    assert result.outcome == "wrong_start"
+    assert result.initial["left_pos"] == "reach_top"
+
+    class SkipLift(ReplayPolicy):
+        def step(self, t, x):
+            active = super().step(t, x)
+            if active["right_pos"] == "lift":
+                active["right_pos"] = "carry"
+            return active
+
+    result = run_episode(boxes["right"], SkipLift(demos["right"]), cfg, expected=demos["right"])
+    assert result.outcome == "incomplete"
+    assert "right_pos: reach_top -> carry" in result.reason
+
+
+def test_time_out_and_unknown_mp(demos, boxes, cfg):
+    class Frozen(ReplayPolicy):
+        def step(self, t, x):
+            return self.reset(0.0, x)
+
+    result = run_episode(
+        boxes["right"], Frozen(demos["right"]), cfg, max_time=1.0, expected=demos["right"]
+    )
+    assert result.outcome == "incomplete" and "time-out" in result.reason
+    assert result.duration == pytest.approx(1.0)
+
+    class Bogus(ReplayPolicy):
+        def reset(self, t, x):
+            return dict(super().reset(t, x), right_pos="fly")
+
+    with pytest.raises(UnknownMPError):
+        run_episode(boxes["right"], Bogus(demos["right"]), cfg, expected=demos["right"])
+
+
+def test_divergence_is_reported_not_raised(demos, boxes, cfg, monkeypatch):
+    original = Simulation.step
+
+    def blow_up(self):
+        if self.t > 0.5:
+            self.data.qvel[:] = np.nan  # what an unstable integration leaves behind
+        return original(self)
+
+    monkeypatch.setattr(Simulation, "step", blow_up)
+    result = run_episode(boxes["both"], ReplayPolicy(demos["both"]), cfg, expected=demos["both"])
+    assert result.outcome == "diverged"
+    assert "diverged" in result.reason
+    assert not result.box_in_container
 
 
 def _same_result(one, together):
@@ -37,46 +114,6 @@ class Ticks:
 
     def __call__(self, info) -> None:
         self.seen.append((info.t, info.active))
-
-
-def test_batched_jacobians_and_controls_equal_single_ones_bit_for_bit(cfg):
-    kin = shared_kinematics(cfg.compile_kinematics)
-    rng = np.random.default_rng(0)
-    sims = [Simulation(cfg, Box(w, d, 0.1)) for w, d in ((0.25, 0.15), (0.15, 0.12), (0.15, 0.2))]
-    q = rng.uniform(sims[0].arm_limits[..., 0], sims[0].arm_limits[..., 1], size=(5, 2, 7))
-    together = kin.fk_jacobian(q)
-    for i in range(len(q)):
-        for got, want in zip(together, kin.fk_jacobian(q[i]), strict=True):
-            np.testing.assert_array_equal(got[i], want)
-    # one tick of three different boxes' controllers together, then alone from the same state
-    active = {v: names[0] for v, names in sims[0].mp_names.items()}
-    active.update(right_pos="reach_top", right_rot="down", left_pos="reach_edge")
-    alone = [Simulation(cfg, sim.box) for sim in sims]
-    for group in (sims, alone):
-        for sim in group:
-            sim.set_active(active)
-    prepare_steps(sims)
-    for sim, single in zip(sims, alone, strict=True):
-        assert sim.step() and single.step()
-        np.testing.assert_array_equal(sim.data.ctrl, single.data.ctrl)
-        np.testing.assert_array_equal(sim.data.qpos, single.data.qpos)
-    # a prepared control belongs to the MPs it was computed for
-    prepare_steps(sims[:1])
-    with pytest.raises(CpmpError, match="after prepare_steps"):
-        sims[0].set_active(dict(active, right_fingers="grasp"))
-
-
-def test_compiled_jacobian_is_not_recompiled_by_the_rollouts():
-    kin = shared_kinematics.__wrapped__(True)  # a fresh build, not the session's cached one
-    if not kin.compiled:
-        pytest.skip("torch.compile is unavailable here; the eager Jacobian runs")
-    # the start-up check compiled it for the inputs fk_jacobian makes: any robot count runs
-    # that code (a recompile would cost seconds per process)
-    eager = shared_kinematics(False)
-    with torch.compiler.set_stance("fail_on_recompile"):
-        for q in (np.zeros((2, 7)), np.zeros((1, 2, 7)), np.full((6, 2, 7), 0.3)):
-            for got, want in zip(kin.fk_jacobian(q), eager.fk_jacobian(q), strict=True):
-                np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -1,180 +1,28 @@
-"""The paper's evaluation as composable functions: collect → split → train → evaluate.
-
-``run_experiment`` ties them together with the simulator in front; ``train_from_file`` and
-``evaluate_checkpoint`` serve users who bring their own demonstrations (no simulator).
-"""
+"""Reproduction (Table I): a fitted sequencer closed-loop on the reproduction boxes, each
+episode classified (wrong start, incomplete, complete) with its switch-state distances, rerun
+recordings of the episodes worth looking at, and the counts of one set of episodes."""
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import time
-from collections import defaultdict
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cpmp.errors import DataError
-from cpmp.evaluation import (
-    activation_progress,
-    continuous_features,
-    progress_errors,
-    replay_demonstrations,
-    switch_distances,
-)
-from cpmp.experiment.config import (
-    ExperimentSettings,  # noqa: F401 (re-exported)
-    FitSettings,
-    fit_settings,
-)
+from cpmp.evaluation import continuous_features, switch_distances
+from cpmp.experiment.console import progress_bar
+from cpmp.experiment.strategies import classify_start
 
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
+    from cpmp.experiment.collection import SeedData
     from cpmp.sequencer import ConcurrentSequencer
     from cpmp.sim import Box, TaskConfig
 
 log = logging.getLogger(__name__)
-
-OTHER = "other"
-"""Strategy label of an initial MP set that matches no demonstrated strategy."""
-
-
-def progress_bar(items: list, desc: str) -> Any:
-    """A tqdm progress bar over ``items`` on stderr (cleared when done)."""
-    from tqdm import tqdm
-
-    return tqdm(items, desc=desc, leave=False, dynamic_ncols=True)
-
-
-@contextmanager
-def stage(name: str) -> Iterator[None]:
-    """Log the start and the duration of a pipeline stage."""
-    log.info("stage %s: start", name)
-    start = time.perf_counter()
-    yield
-    log.info("stage %s: done in %.1f s", name, time.perf_counter() - start)
-
-
-# ------------------------------------------------------------------------------------ data
-def strategy_of(demo: Demonstration) -> str:
-    """The strategy a demonstration used (``metadata["strategy"]``)."""
-    strategy = (demo.metadata or {}).get("strategy")
-    if not strategy:
-        raise DataError(f"{demo.name}: metadata has no 'strategy'; cannot balance by strategy")
-    return str(strategy)
-
-
-def by_strategy(demos: Sequence[Demonstration]) -> dict[str, list[Demonstration]]:
-    """Demonstrations grouped by strategy, each group in the given order."""
-    groups: dict[str, list[Demonstration]] = defaultdict(list)
-    for demo in demos:
-        groups[strategy_of(demo)].append(demo)
-    return dict(sorted(groups.items()))
-
-
-def split_by_strategy(
-    demos: Sequence[Demonstration], train_per_strategy: int
-) -> tuple[list[Demonstration], list[Demonstration]]:
-    """First ``train_per_strategy`` demos of each strategy train, the rest test."""
-    train, test = [], []
-    for strategy, group in by_strategy(demos).items():
-        if len(group) <= train_per_strategy:
-            raise DataError(
-                f"strategy {strategy!r} has {len(group)} demos; need more than "
-                f"{train_per_strategy} to keep some for testing"
-            )
-        train += group[:train_per_strategy]
-        test += group[train_per_strategy:]
-    return train, test
-
-
-def balanced_subset(demos: Sequence[Demonstration], size: int) -> list[Demonstration]:
-    """``size`` demos taken round-robin over strategies (so 3 = one per strategy)."""
-    groups = list(by_strategy(demos).values())
-    out: list[Demonstration] = []
-    k = 0
-    while len(out) < size:
-        if all(k >= len(g) for g in groups):
-            raise DataError(f"asked for {size} training demos, only {len(out)} available")
-        out += [g[k] for g in groups if k < len(g)][: size - len(out)]
-        k += 1
-    return out
-
-
-def strategy_signatures(demos: Sequence[Demonstration]) -> dict[str, dict[str, str]]:
-    """Initial MP per variable of each demonstrated strategy."""
-    out: dict[str, dict[str, str]] = {}
-    for demo in demos:
-        out.setdefault(strategy_of(demo), {v: str(demo.labels[v][0]) for v in demo.variables})
-    return out
-
-
-def classify_start(initial: Mapping[str, str], signatures: Mapping[str, Mapping[str, str]]) -> str:
-    """The strategy whose initial MPs equal ``initial``, else :data:`OTHER`."""
-    for strategy, sig in signatures.items():
-        if all(initial.get(v) == mp for v, mp in sig.items()):
-            return strategy
-    return OTHER
-
-
-# ------------------------------------------------------------------------------- training
-def train_sequencer(
-    demos: Sequence[Demonstration],
-    settings: FitSettings,
-    seed: int = 0,
-    log_dir: str | Path | None = None,
-) -> Any:
-    """Fit the sequencer ``settings`` describe on ``demos`` with ``seed`` (Lightning logs into
-    ``log_dir`` when set): a :class:`~cpmp.sequencer.ConcurrentSequencer`, or the
-    :class:`~cpmp.goal_nearest.GoalNearestSequencer` baseline (no predictor, no trainer)."""
-    if settings.goal_nearest is not None:
-        from cpmp.goal_nearest import GoalNearestSequencer
-
-        options = dataclasses.asdict(settings.goal_nearest)
-        return GoalNearestSequencer.fit(list(demos), seed=seed, **options)
-    from cpmp.sequencer import ConcurrentSequencer
-
-    fit = settings.fit
-    trainer = fit.trainer
-    if log_dir is not None:
-        trainer = dataclasses.replace(trainer, log_dir=str(log_dir))
-    config = dataclasses.replace(fit, trainer=trainer, seed=seed)
-    return ConcurrentSequencer.fit_config(list(demos), config)
-
-
-def fit_sequencer(
-    demos: Sequence[Demonstration],
-    predictor_cfg: Any,
-    sequencer_cfg: Any = None,
-    trainer_cfg: Any = None,
-    seed: int = 0,
-    log_dir: str | Path | None = None,
-) -> Any:
-    """:func:`train_sequencer` from config groups (``predictor``, ``sequencer``, ``trainer``:
-    nodes or mappings), converted by :func:`~cpmp.experiment.config.fit_settings`."""
-    settings = fit_settings(predictor_cfg, sequencer_cfg, trainer_cfg)
-    return train_sequencer(demos, settings, seed, log_dir)
-
-
-# ----------------------------------------------------------------------------- evaluation
-def evaluate_offline(
-    seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
-) -> dict[str, Any]:
-    """Progress MAE (overall, first/last 10 %, per node), Fig. 6 curves (and the raw
-    ``(expected, predicted)`` pairs per activation) and a replay of the recorded feature streams
-    (per-variable sequence match, switch-state distance)."""
-    from cpmp.experiment.plots import progress_curves
-
-    records = activation_progress(seq, demos)
-    errors = progress_errors(records)
-    curves = progress_curves([(r.expected, r.predicted) for r in records], n_bins=n_bins)
-    replay = replay_demonstrations(seq, demos)
-    pairs = [(r.expected, r.predicted) for r in records]
-    return {"progress": errors, "curves": curves, "replay": replay, "pairs": pairs}
 
 
 @dataclass
@@ -330,6 +178,15 @@ def reproduce(
     return out
 
 
+def reproduce_seed(
+    seq: ConcurrentSequencer, data: SeedData, task: TaskConfig, **options: Any
+) -> list[EpisodeRecord]:
+    """:func:`reproduce` on one seed's reproduction boxes: ``data.boxes`` against the
+    demonstrator's runs ``data.expected``, the chosen strategies told apart by
+    ``data.signatures``. ``options``: the keywords of :func:`reproduce`."""
+    return reproduce(seq, data.boxes, data.expected, task, data.signatures, **options)
+
+
 def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """Table I for one set of episodes: counts W/I/C (diverged counted apart, also in I) and
     the mean/std switch-state distance over all complete episodes."""
@@ -356,32 +213,4 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
         "recovered_episodes": sum(e.recoveries > 0 for e in episodes),
         "recovered_complete": sum(e.recoveries > 0 and e.outcome == "complete" for e in episodes),
         "holds": sum(e.holds for e in episodes),
-    }
-
-
-def strategy_map(
-    seq: ConcurrentSequencer,
-    task: TaskConfig,
-    signatures: Mapping[str, Mapping[str, str]],
-    grid: Sequence[int],
-) -> dict[str, Any]:
-    """Fig. 7: the initial strategy chosen over a width x depth grid against the correct one."""
-    from cpmp.sim import Box, Simulation, correct_strategy
-
-    widths = np.linspace(*task.width_range, grid[0])
-    depths = np.linspace(*task.depth_range, grid[1])
-    chosen = np.empty((len(depths), len(widths)), dtype=object)
-    correct = np.empty_like(chosen)
-    for j, depth in enumerate(progress_bar(list(depths), "strategy map rows")):
-        for i, width in enumerate(widths):
-            box = Box(float(width), float(depth), task.box_height)
-            x0 = Simulation(task, box).features()
-            chosen[j, i] = classify_start(seq.reset(0.0, x0), signatures)
-            correct[j, i] = correct_strategy(box, task)
-    return {
-        "widths": widths,
-        "depths": depths,
-        "chosen": chosen.astype(str),
-        "correct": correct.astype(str),
-        "accuracy": float(np.mean(chosen == correct)),
     }

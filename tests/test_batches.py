@@ -1,5 +1,6 @@
-"""The batched sequencer: N episodes in one predictor call per tick decide exactly as N single
-sequencers (events, notes, tick information), with a live mask and per-episode state."""
+"""Batches of episodes (cpmp.batches): the batched sequencer's N episodes in one predictor call
+per tick decide exactly as N single sequencers (events, notes, tick information), with a live
+mask and per-episode state."""
 
 import math
 from typing import ClassVar
@@ -8,11 +9,13 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp.batches import BatchedSequencer
+from cpmp.config import SequencerConfig
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import build_graphs
 from cpmp.predictors import PredictorConfig, ProgressPredictor
-from cpmp.sequencer import BatchedSequencer, ConcurrentSequencer, SequencerConfig
+from cpmp.sequencer import ConcurrentSequencer
 from cpmp.switching import Coupling
 
 DT = 0.01

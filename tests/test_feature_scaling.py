@@ -1,13 +1,51 @@
-"""Units never matter: the same demonstrations in other units give the same model."""
+"""Feature scaling (:class:`cpmp.predictors.FeatureScaler`, option ``feature_scaling``): the
+fitted offsets and scales, and units that never matter: the same demonstrations in other units
+give the same model."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
+from cpmp.predictors import FeatureScaler
 from cpmp.sequencer import ConcurrentSequencer
+
+# three features in different units and a constant one (scale 1 in the per-feature modes)
+SAMPLES = np.array([[0.0, 10.0, -2.0, 7.0], [1.0, 30.0, -1.0, 7.0], [3.0, 20.0, 2.0, 7.0]])
+
+
+@pytest.mark.parametrize(
+    ("mode", "offset", "scale"),
+    [
+        ("global", [0.0, 10.0, -2.0, 7.0], [20.0, 20.0, 20.0, 20.0]),
+        ("minmax", [0.0, 10.0, -2.0, 7.0], [3.0, 20.0, 4.0, 1.0]),
+        (
+            "standard",
+            [4 / 3, 20.0, -1 / 3, 7.0],
+            [np.sqrt(14 / 9), np.sqrt(200 / 3), np.sqrt(26 / 9), 1.0],
+        ),
+        ("none", [0.0] * 4, [1.0] * 4),
+    ],
+)
+def test_fitted_offset_and_scale(mode: str, offset: list[float], scale: list[float]) -> None:
+    scaler = FeatureScaler(4)
+    scaler.fit(SAMPLES, mode)
+    np.testing.assert_allclose(scaler.offset.numpy(), offset, rtol=1e-12)
+    np.testing.assert_allclose(scaler.scale.numpy(), scale, rtol=1e-12)
+    scaled = scaler(torch.as_tensor(SAMPLES)).numpy()
+    np.testing.assert_allclose(scaled, scaler.transform(SAMPLES), rtol=0, atol=0)
+    np.testing.assert_allclose(scaled, (SAMPLES - offset) / scale, rtol=1e-12)
+
+
+def test_global_scaling_does_not_see_units() -> None:
+    a, b = FeatureScaler(4), FeatureScaler(4)
+    a.fit(SAMPLES, "global")
+    b.fit(SAMPLES * 1e3, "global")
+    # the same numbers up to the rounding of the unit change
+    np.testing.assert_allclose(b.transform(SAMPLES * 1e3), a.transform(SAMPLES), atol=1e-12)
 
 
 def _in_units(demos: list[Demonstration], factor: float) -> list[Demonstration]:

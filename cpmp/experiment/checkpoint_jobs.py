@@ -1,0 +1,193 @@
+"""The jobs for your own demonstrations (no simulator): ``cpmp-train`` trains a sequencer from
+an HDF5 file of demonstrations, ``cpmp-evaluate`` evaluates a checkpoint offline on one and
+writes ``evaluation.json`` and ``evaluation.md``."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.evaluation import evaluate_offline
+from cpmp.experiment.config import job_fit_settings
+from cpmp.experiment.console import stage
+from cpmp.experiment.fitting import train_sequencer
+from cpmp.experiment.report import predictor_entry, write_json
+
+log = logging.getLogger(__name__)
+
+
+def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
+    """The ``data`` group's file (checked to exist) and split; ``split: auto`` means
+    ``auto_split`` when the file has that mask, else every demonstration."""
+    from cpmp.datafile import list_splits
+
+    if not cfg.data.get("path"):
+        raise ConfigError("data.path is required: give an HDF5 file of demonstrations")
+    path = Path(str(cfg.data.path))
+    if not path.is_file():
+        raise CpmpFileError(f"demonstration file {path} does not exist (set data.path)")
+    split = cfg.data.get("split", "auto")
+    if split == "auto":
+        split = auto_split if auto_split in list_splits(path) else None
+    return path, split
+
+
+def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
+    """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
+    save ``model.pt`` into ``run_dir``; returns the checkpoint path."""
+    settings = job_fit_settings(cfg)
+    from cpmp.datafile import load_demonstrations
+
+    path, split = _demo_file(cfg, "train")
+    demos = load_demonstrations(path, split=split)
+    run_dir = Path(run_dir)
+    with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'})"):
+        seq = train_sequencer(demos, settings, int(cfg.seed), log_dir=run_dir / "lightning")
+    out = seq.save(run_dir / "model.pt")
+    write_json(
+        run_dir / "train_summary.json",
+        {"data": str(path), "split": split, "n_demos": len(demos), **seq.fit_summary},
+    )
+    log.info("graphs:\n%s", seq.describe())
+    return out
+
+
+def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
+    """Evaluate a checkpoint offline on a file's test split: progress MAE per node, replay of the
+    recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON."""
+    from cpmp.checkpoints import load_sequencer
+    from cpmp.datafile import load_demonstrations
+    from cpmp.experiment.plots import plot_progress_curves
+
+    if not cfg.get("checkpoint"):
+        raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
+    checkpoint = Path(str(cfg.checkpoint))
+    if not checkpoint.is_file():
+        raise CpmpFileError(f"checkpoint {checkpoint} does not exist; train one with train.py")
+    path, split = _demo_file(cfg, "test")
+    seq = load_sequencer(checkpoint)  # any kind the main job or train.py writes
+    demos = load_demonstrations(path, split=split)
+    run_dir = Path(run_dir)
+    unknown = _unknown_mps(seq, demos)
+    if unknown:
+        log.warning(
+            "%s has MPs the model does not know, left out of the progress MAE (renamed? "
+            "rename them back or retrain): %s",
+            path,
+            ", ".join(f"{u['variable']}/{u['mp']} ({u['activations']}x)" for u in unknown),
+        )
+    with stage(f"evaluate on {len(demos)} demos"):
+        result = evaluate_offline(seq, demos)
+    plot_progress_curves(
+        {"held-out": result["curves"]},
+        run_dir / "fig6_progress.png",
+        title="Predicted vs expected progress",
+    )
+    out = {
+        "checkpoint": str(cfg.checkpoint),
+        "data": str(path),
+        "split": split,
+        "n_demos": len(demos),
+        "model": _model_entry(seq),
+        "unknown_mps": unknown,
+        "progress": result["progress"],
+        "replay": result["replay"],
+    }
+    json_path = write_json(run_dir / "evaluation.json", out)
+    from cpmp.io import atomic_write_text
+
+    atomic_write_text(run_dir / "evaluation.md", _evaluation_markdown(out))
+    return json_path
+
+
+def _model_entry(seq: Any) -> dict[str, Any]:
+    """What an evaluated checkpoint is: ``sequencer`` (``learned`` or ``goal_nearest``) and
+    ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is)."""
+    from cpmp.config.goal_nearest import KIND
+    from cpmp.goal_nearest import GoalNearestSequencer
+
+    if isinstance(seq, GoalNearestSequencer):
+        entry = predictor_entry("none", {}, {"kind": KIND})
+        return {"sequencer": KIND, "predictor": entry.pop("kind"), **entry}
+    return {"sequencer": "learned", "predictor": seq.predictor.kind}
+
+
+def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
+    """MPs labelled in ``demos`` (demonstrations) that ``seq`` (a sequencer) has no node for:
+    a renamed MP, or every MP of a variable the model was not trained on. Returns
+    ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by variable, MP."""
+    found: dict[tuple[str, str], dict[str, Any]] = {}
+    for m, demo in enumerate(demos):
+        for v in demo.variables:
+            graph = seq.graphs.get(v)
+            for seg in demo.segments(v):
+                if graph is not None and seg.mp in graph.nodes:
+                    continue
+                row = found.setdefault(
+                    (v, seg.mp),
+                    {
+                        "variable": v,
+                        "mp": seg.mp,
+                        "known_variable": graph is not None,
+                        "activations": 0,
+                        "demos": [],
+                    },
+                )
+                row["activations"] += 1
+                name = demo.name or f"demo_{m}"
+                if name not in row["demos"]:
+                    row["demos"].append(name)
+    return [found[k] for k in sorted(found)]
+
+
+def _evaluation_markdown(out: dict[str, Any]) -> str:
+    p, r = out["progress"], out["replay"]
+    lines = [
+        f"# Offline evaluation of `{out['checkpoint']}`",
+        "",
+        f"{out['n_demos']} demos from `{out['data']}` (split {out['split'] or 'all'}).",
+        "",
+    ]
+    model = out["model"]
+    if model["sequencer"] == "learned":
+        lines += [f"Learned sequencer, predictor `{model['predictor']}`.", ""]
+    else:
+        lines += [f"Sequencer `{model['sequencer']}`: {model['note']}.", ""]
+    if out.get("unknown_mps"):
+        lines += [
+            "**MPs the model does not know** (renamed, or of a variable the model was not "
+            "trained on): left out of the progress MAE; a variable with one cannot match in "
+            "the replay, a variable the model lacks is not replayed.",
+            "",
+            "| variable | MP | activations | demos |",
+            "| --- | --- | --- | --- |",
+        ]
+        lines += [
+            f"| {u['variable']}{'' if u['known_variable'] else ' (unknown)'} | {u['mp']} | "
+            f"{u['activations']} | {', '.join(u['demos'])} |"
+            for u in out["unknown_mps"]
+        ]
+        lines.append("")
+    lines += [
+        f"Progress MAE {p['mae']:.3f} (first 10 %: {p['mae_first']:.3f}, last 10 %: "
+        f"{p['mae_last']:.3f}).",
+        "",
+        "| node | MAE |",
+        "| --- | --- |",
+    ]
+    lines += [f"| {k} | {v:.3f} |" for k, v in p["per_node"].items()]
+    dist = (
+        "–" if r["distance_mean"] is None else f"{r['distance_mean']:.3f} ± {r['distance_std']:.3f}"
+    )
+    lines += [
+        "",
+        f"Replay: all variables reproduced in {100 * r['all_match']:.0f} % of the demos; "
+        f"switch-state distance {dist}.",
+        "",
+        "| variable | sequence match |",
+        "| --- | --- |",
+    ]
+    lines += [f"| {v} | {100 * m:.0f} % |" for v, m in r["sequence_match"].items()]
+    return "\n".join(lines) + "\n"

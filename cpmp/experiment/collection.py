@@ -1,0 +1,103 @@
+"""Stage 1 of the main job, per seed: the scripted demonstrations (train/test split, saved with
+the split) and the demonstrator's run on every reproduction box."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cpmp.experiment.config import experiment_job
+from cpmp.experiment.console import progress_bar, timed
+from cpmp.experiment.settings import ExperimentJob
+from cpmp.experiment.strategies import split_by_strategy, strategy_signatures
+
+
+@dataclass
+class SeedData:
+    """One seed's collected data, handed to each of its training sizes.
+
+    Attributes:
+        seed: the seed.
+        train: training demonstrations (with feature noise when ``feature_noise > 0``).
+        test: held-out demonstrations.
+        boxes: the reproduction boxes.
+        expected: the demonstrator's recording of each reproduction box.
+        signatures: initial MP per variable of each demonstrated strategy.
+        seconds: wall time [s] per stage (``kinematics``: building the arm kinematics, once
+            per process; ``collect``; ``expected``).
+    """
+
+    seed: int
+    train: list[Any]
+    test: list[Any]
+    boxes: list[Any]
+    expected: list[Any]
+    signatures: dict[str, dict[str, str]]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> SeedData:
+    """Stage 1 of one seed: record its demonstrations (saved as ``seed_<s>/demos.h5`` with the
+    train/test split) and the demonstrator's run on every reproduction box. ``job``: the
+    typed job (or its composed config, converted here)."""
+    from cpmp.datafile import save_demonstrations
+    from cpmp.sim import sample_box
+    from cpmp.sim.collect import sample_boxes
+    from cpmp.sim.simulation import shared_kinematics
+
+    job = experiment_job(job)
+    settings, task = job.settings, job.task
+    seed_dir = Path(run_dir) / f"seed_{seed}"
+    seed_dir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    shared_kinematics(task.compile_kinematics)  # built (compiled) once per process
+    seconds: dict[str, float] = {"kinematics": time.perf_counter() - start}
+    n_demos = 3 * settings.demos_per_strategy
+    with timed(seconds, "collect", f"seed {seed}: collect {n_demos} demonstrations"):
+        rng = np.random.default_rng(seed)
+        boxes = sample_boxes(rng, task, n_demos, balanced=True)
+        names = [f"demo_{i:03d}" for i in range(n_demos)]
+        demos = _record_together(boxes, task, names, f"seed {seed} demos")
+        failed = [d.name for d in demos if not d.metadata.get("success")]
+        if failed:
+            raise RuntimeError(f"the scripted demonstrator failed on {failed}")
+        if settings.record_demos:
+            from cpmp.experiment.demo_recording import record_demo_rrd
+
+            (seed_dir / "recordings").mkdir(exist_ok=True)
+            for demo, box in zip(demos, boxes, strict=True):
+                record_demo_rrd(demo, box, task, seed_dir / "recordings" / f"{demo.name}.rrd")
+        train, test = split_by_strategy(demos, settings.train_per_strategy)
+        save_demonstrations(
+            seed_dir / "demos.h5",
+            demos,
+            splits={"train": [d.name for d in train], "test": [d.name for d in test]},
+        )
+    name = f"seed {seed}: demonstrator on {settings.n_boxes} reproduction boxes"
+    with timed(seconds, "expected", name):
+        box_rng = np.random.default_rng(seed + settings.box_seed_offset)
+        repro_boxes = [sample_box(box_rng, task) for _ in range(settings.n_boxes)]
+        expected = _record_together(repro_boxes, task, None, "expected")
+    signatures = strategy_signatures(train)
+    if settings.feature_noise > 0:
+        from cpmp.augment import add_feature_noise
+
+        train = add_feature_noise(train, settings.feature_noise, seed=seed)
+    return SeedData(seed, train, test, repro_boxes, expected, signatures, seconds)
+
+
+def _record_together(boxes: list[Any], task: Any, names: list[str] | None, desc: str) -> list[Any]:
+    """The scripted demonstrations of ``boxes``, all boxes run together
+    (:func:`cpmp.sim.record_demonstrations`, the same data as one at a time), with a progress
+    bar."""
+    from cpmp.sim import record_demonstrations
+
+    bar = progress_bar(boxes, desc)
+    try:
+        return record_demonstrations(boxes, task, names, on_result=lambda i, demo: bar.update(1))
+    finally:
+        bar.close()

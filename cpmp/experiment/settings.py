@@ -1,0 +1,166 @@
+"""What a job of the main experiment is, typed: :class:`ExperimentSettings` (the ``experiment``
+group), :class:`FitSettings` (the ``predictor``, ``sequencer`` and ``trainer`` groups) and
+:class:`ExperimentJob` (all of them with the ``task``). Each validates itself on construction;
+:mod:`cpmp.experiment.config` registers them with Hydra and converts a composed ``cfg`` into
+them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from cpmp.config import FitConfig, TaskConfig
+from cpmp.errors import ConfigError
+
+RECORD_CHOICES = ("failures", "all", "first", "none")
+"""Values of ``experiment.record``."""
+
+
+@dataclass
+class ExperimentSettings:
+    """Sizes of the evaluation (``experiment`` config group). The defaults are
+    ``experiment=quick``, a small run (its time: see docs/benchmarks.md).
+
+    Attributes:
+        name: label of the settings (``quick``, ``full``, ...).
+        seeds: each seed repeats collection, training and reproduction.
+        demos_per_strategy: demonstrations collected per strategy (paper: 5, so 15 in all).
+        train_per_strategy: of those, used for training (paper: 3, so 9 train / 6 test).
+        train_sizes: training-set sizes D to compare (paper: 3, 6, 9), balanced over strategies.
+        n_boxes: random boxes reproduced per D and seed (paper: 20).
+        box_seed_offset: boxes for reproduction are drawn from ``seed + box_seed_offset``.
+        strategy_grid: (widths, depths) cells of the strategy map (Fig. 7).
+        record: which reproduction episodes keep an ``.rrd``: ``failures`` (every episode that
+            did not complete, plus the first one per training size), ``all``, ``first`` or
+            ``none``.
+        record_demos: also write the collected demonstrations as ``.rrd``.
+        max_time: episode time limit [s] (``None``: the task's ``max_time``).
+        feature_noise: std of Gaussian noise added to the training demonstrations' features,
+            as a fraction of each feature's range over the training set (0: none); the test
+            demonstrations and the closed loop stay noise-free.
+        workers: worker processes running the seeds' collection and training sizes in
+            parallel (``None``: min(cores, seeds); 1: everything in this process). The report's
+            numbers do not depend on it.
+    """
+
+    name: str = "quick"
+    seeds: list[int] = field(default_factory=lambda: [0])
+    demos_per_strategy: int = 3
+    train_per_strategy: int = 2
+    train_sizes: list[int] = field(default_factory=lambda: [3, 6])
+    n_boxes: int = 6
+    box_seed_offset: int = 1000
+    strategy_grid: list[int] = field(default_factory=lambda: [8, 6])
+    record: str = "failures"
+    record_demos: bool = False
+    max_time: float | None = None
+    feature_noise: float = 0.0
+    workers: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"experiment.{name} must be an integer, got {value!r}")
+        for name in ("seeds", "train_sizes", "strategy_grid"):
+            values = list(getattr(self, name))
+            if any(isinstance(v, bool) or not isinstance(v, int) for v in values):
+                raise ConfigError(f"experiment.{name} must be integers, got {values}")
+            setattr(self, name, values)
+        for name in ("seeds", "train_sizes"):
+            values = getattr(self, name)
+            if len(set(values)) != len(values):
+                raise ConfigError(f"experiment.{name} has duplicates: {values}")
+        if not self.seeds or any(s < 0 for s in self.seeds):
+            raise ConfigError(f"experiment.seeds must be non-negative integers, got {self.seeds}")
+        for name in ("demos_per_strategy", "train_per_strategy", "n_boxes"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"experiment.{name} must be >= 1, got {getattr(self, name)}")
+        if self.train_per_strategy >= self.demos_per_strategy:
+            raise ConfigError(
+                f"experiment.train_per_strategy ({self.train_per_strategy}) must be smaller than "
+                f"demos_per_strategy ({self.demos_per_strategy}) to leave test demos"
+            )
+        n_train = 3 * self.train_per_strategy
+        if not self.train_sizes or any(d < 1 or d > n_train for d in self.train_sizes):
+            raise ConfigError(
+                f"experiment.train_sizes must lie in 1..{n_train} (3 strategies x "
+                f"train_per_strategy), got {self.train_sizes}"
+            )
+        if len(self.strategy_grid) != 2 or min(self.strategy_grid) < 2:
+            raise ConfigError(
+                f"experiment.strategy_grid must be [n_widths, n_depths] >= 2, "
+                f"got {self.strategy_grid}"
+            )
+        if self.record not in RECORD_CHOICES:
+            raise ConfigError(
+                f"experiment.record must be one of {', '.join(RECORD_CHOICES)}, got {self.record!r}"
+            )
+        noise = self.feature_noise
+        if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not noise >= 0:
+            raise ConfigError(f"experiment.feature_noise must be a number >= 0, got {noise!r}")
+        if not math.isfinite(noise):
+            raise ConfigError(f"experiment.feature_noise must be finite, got {noise}")
+        if self.max_time is not None and self.max_time <= 0:
+            raise ConfigError(f"experiment.max_time must be > 0, got {self.max_time}")
+        workers = self.workers
+        if workers is not None and (
+            isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+        ):
+            raise ConfigError(
+                f"experiment.workers must be an integer >= 1 or null (auto), got {workers!r}"
+            )
+
+    @classmethod
+    def from_cfg(cls, cfg: Any) -> ExperimentSettings:
+        """From the ``experiment`` node (or a mapping); unknown keys raise :class:`ConfigError`."""
+        from cpmp.experiment.config import to_dict  # config imports this module
+
+        options = to_dict(cfg)
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown experiment option(s) {', '.join(unknown)}; "
+                f"valid: {', '.join(sorted(known))}"
+            )
+        return cls(**options)
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The typed ``predictor``, ``sequencer`` and ``trainer`` groups of a job.
+
+    Attributes:
+        fit: the learned sequencer's :class:`~cpmp.config.FitConfig` (seed 0; the jobs set
+            the seed and the trainer's ``log_dir`` per fit).
+        goal_nearest: the options of the ``goal_nearest`` baseline when the ``sequencer``
+            group selects it (``kind: goal_nearest``; the predictor and trainer are then not
+            used), else ``None``.
+    """
+
+    fit: FitConfig
+    goal_nearest: Any | None = None
+
+    @property
+    def predictor(self) -> str:
+        """The predictor kind."""
+        return self.fit.predictor
+
+
+@dataclass(frozen=True)
+class ExperimentJob:
+    """The main job's config, typed: what ``run_experiment`` and its workers take.
+
+    Attributes:
+        settings: the ``experiment`` group.
+        task: the ``task`` group.
+        fit: the ``predictor``, ``sequencer`` and ``trainer`` groups.
+    """
+
+    settings: ExperimentSettings
+    task: TaskConfig
+    fit: FitSettings

@@ -1,0 +1,131 @@
+"""The main job's worker processes: a spawned process pool running each seed's collection and
+then each of its training sizes, one torch thread per worker, every worker's log records sent to
+the main process (prefixed with their job) and handed to its handlers."""
+
+from __future__ import annotations
+
+import logging
+import logging.handlers
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from cpmp.experiment.settings import ExperimentJob
+
+
+def default_workers(n_seeds: int) -> int:
+    """``min(cores, n_seeds)``: the worker count of ``experiment.workers: null``."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, n_seeds))
+
+
+_JOB_LABEL = ""
+"""In a worker process: the prefix of its log lines (the job's seed and D)."""
+
+
+class _JobPrefix(logging.Filter):
+    """Prefix every record a worker sends to the main process with its job's label."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if _JOB_LABEL:
+            record.msg = f"[{_JOB_LABEL}] {record.getMessage()}"
+            record.args = None
+        return True
+
+
+class _Dispatch(logging.Handler):
+    """Hands a worker's record to the main process's logger of the same name (and so to the
+    handlers Hydra configured: console and job log)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logger = logging.getLogger(record.name)
+        if logger.isEnabledFor(record.levelno):
+            logger.handle(record)
+
+
+def _init_worker(queue: Any, level: int) -> None:
+    """Worker start-up: one torch thread, every log record sent to the main process."""
+    import torch
+
+    torch.set_num_threads(1)
+    handler = logging.handlers.QueueHandler(queue)
+    handler.addFilter(_JobPrefix())
+    root = logging.getLogger()
+    root.handlers = [handler]
+    root.setLevel(level)
+
+
+def _labelled(label: str, function: Callable[..., Any], *args: Any) -> Any:
+    """In a worker: ``function(*args)`` with every log line prefixed with ``label``."""
+    global _JOB_LABEL
+    _JOB_LABEL = label
+    return function(*args)
+
+
+def run_parallel(
+    job: ExperimentJob,
+    run_dir: Path,
+    workers: int,
+    collect: Callable[[ExperimentJob, Path, int], Any],
+    train_size: Callable[[ExperimentJob, Path, Any, int], dict[str, Any]],
+) -> tuple[dict[int, Any], dict[tuple[int, int], dict[str, Any]]]:
+    """Every seed's collection, then each of its training sizes (largest first), as jobs on
+    ``workers`` spawned processes.
+
+    Args:
+        job: the typed job.
+        run_dir: the run directory.
+        workers: the number of worker processes.
+        collect: a seed's collection, ``collect(job, run_dir, seed)``.
+        train_size: one training size, ``train_size(job, run_dir, collected, d)``, given
+            what ``collect`` returned for its seed. Both are module-level functions (they are
+            pickled to the workers).
+
+    Returns:
+        The collections by seed and the results by (seed, D).
+    """
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+
+    settings = job.settings
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    listener = logging.handlers.QueueListener(queue, _Dispatch())
+    level = logging.getLogger("cpmp").getEffectiveLevel()
+    collected: dict[int, Any] = {}
+    results: dict[tuple[int, int], dict[str, Any]] = {}
+    listener.start()
+    pool = ProcessPoolExecutor(workers, context, initializer=_init_worker, initargs=(queue, level))
+    # Workers show no progress bars (two would overwrite each other; their prefixed log lines
+    # show the progress): tqdm reads TQDM_DISABLE when imported, so a worker must inherit it.
+    bars = os.environ.get("TQDM_DISABLE")
+    os.environ["TQDM_DISABLE"] = "1"
+    try:
+        pending: dict[Future, tuple[int, int | None]] = {
+            pool.submit(_labelled, f"seed {seed}", collect, job, run_dir, seed): (seed, None)
+            for seed in settings.seeds
+        }
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                seed, d = pending.pop(future)
+                if d is not None:
+                    results[seed, d] = future.result()
+                    continue
+                collected[seed] = data = future.result()
+                for size in sorted(settings.train_sizes, reverse=True):
+                    label = f"seed {seed} D={size}"
+                    training = pool.submit(_labelled, label, train_size, job, run_dir, data, size)
+                    pending[training] = (seed, size)
+    finally:
+        if bars is None:
+            del os.environ["TQDM_DISABLE"]
+        else:
+            os.environ["TQDM_DISABLE"] = bars
+        pool.shutdown(wait=True, cancel_futures=True)
+        listener.stop()
+    return collected, results

@@ -1,0 +1,30 @@
+"""The shared records (cpmp.records): what a producer leaves out keeps its documented default,
+and a transition's feature vector takes no part in equality or hashing."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cpmp.records import TickInfo, TransitionEvent
+
+
+def test_transitions_compare_and_hash_without_their_state() -> None:
+    seen = TransitionEvent(0.5, "v", "a", "b", 0.7, np.zeros(3))
+    read_back = TransitionEvent(0.5, "v", "a", "b", 0.7)  # a recording keeps no state
+    assert seen == read_back
+    assert hash(seen) == hash(read_back)
+    assert len({seen, read_back, TransitionEvent(0.5, "v", "a", "b", 0.7, np.ones(3))}) == 1
+    assert seen != TransitionEvent(0.5, "v", "a", "b", 0.7, kind="recovery")
+    assert seen != TransitionEvent(0.5, "v", "a", "c", 0.7)
+
+
+def test_fields_a_producer_does_not_know_keep_their_defaults() -> None:
+    event = TransitionEvent(1.0, "v", "a", "b")
+    assert math.isnan(event.probability)
+    assert event.state is None and event.kind == "switch"
+    first, second = TickInfo(0.1), TickInfo(0.2)
+    assert (first.progress, first.active, first.features, first.body_poses) == ({}, {}, None, {})
+    first.active["v"] = "a"
+    assert second.active == {}  # every tick has its own mappings
