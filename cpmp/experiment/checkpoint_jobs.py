@@ -28,7 +28,7 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
     path = Path(str(cfg.data.path))
     if not path.is_file():
         raise CpmpFileError(f"demonstration file {path} does not exist (set data.path)")
-    split = cfg.data.get("split", "auto")
+    split = cfg.data.split
     if split == "auto":
         split = auto_split if auto_split in list_splits(path) else None
     return path, split

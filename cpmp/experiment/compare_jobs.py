@@ -71,7 +71,7 @@ def run_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -> di
     from cpmp.config import TaskConfig
     from cpmp.evaluation import activation_progress, progress_errors
     from cpmp.experiment.fitting import fit_sequencer
-    from cpmp.experiment.reproduction import reproduce, summarize_episodes
+    from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
     from cpmp.experiment.strategies import balanced_subset
 
     torch.manual_seed(data.seed)  # fits draw from their own generators; this is a safety net
@@ -103,13 +103,10 @@ def run_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -> di
     out["tick_ms"] = tick_ms(seq, data.test[0])
     timed("evaluate", start, start_cpu)
     start, start_cpu = time.perf_counter(), time.process_time()
-    episodes = reproduce(
+    episodes = reproduce_seed(
         seq,
-        data.boxes,
-        data.expected,
+        data,
         task,
-        data.signatures,
-        record_dir=None,
         record="none",
         max_time=settings.max_time,
         label=f"seed {data.seed} D{d} {spec.label()}: ",

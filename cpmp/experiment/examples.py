@@ -14,16 +14,17 @@ from cpmp.io import atomic_write_text
 def progress_field_example(
     out_dir: str | Path,
     *,
-    n_trajectories: int = 4,
-    seed: int = 0,
-    predictor: str = "klr",
+    n_trajectories: int,
+    seed: int,
+    predictor: str,
     predictor_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The paper's Fig. 3: fit a progress predictor on curved 2-D trajectories and plot the
     predicted progress over the plane with the support points marked.
 
     Writes ``progress_field.png`` and ``progress_field.json`` (support count, training MAE) into
-    ``out_dir``; returns the JSON content plus the PNG path.
+    ``out_dir``; returns the JSON content plus the PNG path. The defaults of the command
+    (``cpmp-progress-field``) are in ``conf/progress_field.yaml``.
     """
     from cpmp.evaluation import activation_progress, progress_errors
     from cpmp.experiment.plots import plot_progress_field

@@ -81,8 +81,8 @@ def reproduce(
     task: TaskConfig,
     signatures: Mapping[str, Mapping[str, str]],
     *,
+    record: str,
     record_dir: Path | None = None,
-    record: str = "failures",
     max_time: float | None = None,
     label: str = "",
 ) -> list[EpisodeRecord]:
@@ -90,7 +90,9 @@ def reproduce(
 
     ``expected[i]`` is the demonstrator's recording of ``boxes[i]``: its switch states are the
     "desired states" of Table Ib. All boxes run together (:func:`cpmp.sim.runner.run_episodes`
-    with ``seq.batched``); every number equals a run of one box at a time.
+    with ``seq.batched``); every number equals a run of one box at a time. ``record``: which
+    episodes are written into ``record_dir`` as ``.rrd`` (the choices of
+    :attr:`~cpmp.experiment.settings.ExperimentSettings.record`; nothing without ``record_dir``).
     """
     from cpmp.experiment.recording import EpisodeRecorder
     from cpmp.sim import Simulation, correct_strategy

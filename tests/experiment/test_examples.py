@@ -4,7 +4,7 @@ from cpmp.experiment.examples import progress_field_example
 
 
 def test_progress_field_example_writes_png_and_numbers(tmp_path):
-    result = progress_field_example(tmp_path, n_trajectories=4, seed=0)
+    result = progress_field_example(tmp_path, n_trajectories=4, seed=0, predictor="klr")
     png = tmp_path / "progress_field.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     saved = json.loads((tmp_path / "progress_field.json").read_text())
