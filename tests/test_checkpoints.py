@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp.config import predictor_config
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.predictors import make_config
 from cpmp.sequencer import ConcurrentSequencer
 
 
@@ -84,8 +84,8 @@ def test_intact_checkpoint_still_loads(payload, tmp_path, fitted_klr, test_demos
 )
 def test_non_finite_or_fractional_predictor_options_are_config_errors(kind, option, value):
     with pytest.raises(ConfigError, match=option):
-        make_config(kind, **{option: value})
+        predictor_config(kind, **{option: value})
 
 
 def test_whole_number_floats_are_accepted_as_counts():
-    assert make_config("klr", min_support=4.0).min_support == 4
+    assert predictor_config("klr", min_support=4.0).min_support == 4

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from cpmp.config.predictors import predictor_config, predictor_option_names
+from cpmp.config.predictors import predictor_config
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
     START_PREFIX,
@@ -53,34 +53,23 @@ PREDICTORS: dict[str, type[ProgressPredictor]] = {
 }
 
 
-def predictor_options(kind: str) -> list[str]:
-    """The option names accepted by predictor ``kind``."""
-    return predictor_option_names(kind)
-
-
 def _predictor_class(kind: str) -> type[ProgressPredictor]:
     if kind not in PREDICTORS:
         raise ConfigError(f"unknown predictor {kind!r}; choose one of {', '.join(PREDICTORS)}")
     return PREDICTORS[kind]
 
 
-def make_config(kind: str, **options: Any) -> PredictorConfig:
-    """Validated config of predictor ``kind`` (:func:`cpmp.config.predictor_config`); unknown
-    options raise :class:`ConfigError`."""
-    return predictor_config(kind, **options)
-
-
 def make_predictor(
     kind: str, node_keys: list[NodeKey], n_features: int, **options: Any
 ) -> ProgressPredictor:
     """An untrained predictor bank of type ``kind`` for ``node_keys``."""
-    return _predictor_class(kind)(node_keys, n_features, make_config(kind, **options))
+    return _predictor_class(kind)(node_keys, n_features, predictor_config(kind, **options))
 
 
 def predictor_from_spec(spec: dict[str, Any]) -> ProgressPredictor:
     """Rebuild a predictor (untrained weights, right shapes) from :meth:`ProgressPredictor.spec`."""
     kind = spec["kind"]
-    config = make_config(kind, **spec["config"])
+    config = predictor_config(kind, **spec["config"])
     node_keys = [tuple(k) for k in spec["node_keys"]]
     return _predictor_class(kind)(node_keys, int(spec["n_features"]), config, **spec["shapes"])
 
@@ -108,9 +97,7 @@ __all__ = [
     "SparseKLRPredictor",
     "TimePhaseConfig",
     "TimePhasePredictor",
-    "make_config",
     "make_predictor",
     "predictor_from_spec",
-    "predictor_options",
     "soft_bce",
 ]

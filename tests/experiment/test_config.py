@@ -113,7 +113,7 @@ def test_sequencer_configs_mean_what_they_say():
 def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
     """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
     ``fit(demos)`` with no options is the main job's default configuration."""
-    from cpmp.predictors import make_config
+    from cpmp.config import predictor_config
     from cpmp.sequencer import PAPER_OPTIONS
 
     seq_keys = set(SequencerConfig.__dataclass_fields__)
@@ -123,12 +123,12 @@ def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
         seq = to_dict(cfg.sequencer)
         return (
             kind,
-            dataclasses.asdict(make_config(kind, **pred)),
+            dataclasses.asdict(predictor_config(kind, **pred)),
             dataclasses.asdict(SequencerConfig(**seq)),
         ), (
             "klr",
             dataclasses.asdict(
-                make_config("klr", **{k: v for k, v in options.items() if k not in seq_keys})
+                predictor_config("klr", **{k: v for k, v in options.items() if k not in seq_keys})
             ),
             dataclasses.asdict(
                 SequencerConfig(**{k: v for k, v in options.items() if k in seq_keys})
