@@ -1,5 +1,6 @@
-"""Checkpoints are validated against their own spec; non-finite options are reported where
-they enter."""
+"""Checkpoints: a sequencer's are validated against their own spec on load, and
+:func:`cpmp.checkpoints.load_sequencer` reads either kind, telling a file of another format from a
+damaged one."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from cpmp.config import predictor_config
-from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.checkpoints import load_sequencer
+from cpmp.errors import CpmpFileError
+from cpmp.goal_nearest import GoalNearestSequencer
 from cpmp.sequencer import ConcurrentSequencer
 
 
@@ -68,24 +70,27 @@ def test_intact_checkpoint_still_loads(payload, tmp_path, fitted_klr, test_demos
     assert np.array_equal(ConcurrentSequencer.load(path).progress(x), fitted_klr.progress(x))
 
 
-@pytest.mark.parametrize(
-    ("kind", "option", "value"),
-    [
-        ("klr", "gamma", float("inf")),
-        ("klr", "l2", float("nan")),
-        ("klr", "support_scale", float("nan")),
-        ("klr", "max_support", 4.5),
-        ("klr", "min_support", "3"),
-        ("klr", "weight_floor", float("-inf")),
-        ("mlp", "lr", float("nan")),
-        ("mlp", "epochs", 10.5),
-        ("klr_sparse", "l1", float("inf")),
-    ],
-)
-def test_non_finite_or_fractional_predictor_options_are_config_errors(kind, option, value):
-    with pytest.raises(ConfigError, match=option):
-        predictor_config(kind, **{option: value})
+def test_load_sequencer_refuses_other_files_by_name(tmp_path, train_demos):
+    import torch
 
-
-def test_whole_number_floats_are_accepted_as_counts():
-    assert predictor_config("klr", min_support=4.0).min_support == 4
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else", "weights": torch.zeros(2)}, other)
+    with pytest.raises(CpmpFileError, match="neither a cpmp sequencer nor a goal_nearest"):
+        load_sequencer(other)
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(CpmpFileError, match="not a readable") as err:
+        load_sequencer(junk)
+    assert "neither" not in str(err.value)  # a damaged file is not called a format mismatch
+    with pytest.raises(CpmpFileError, match="does not exist"):
+        load_sequencer(tmp_path / "missing.pt")
+    # a damaged checkpoint of a known format keeps its loader's own message
+    seq = GoalNearestSequencer.fit(train_demos)
+    payload = torch.load(seq.save(tmp_path / "gn.pt"), weights_only=True)
+    del payload["entries"]
+    torch.save(payload, tmp_path / "gn_damaged.pt")
+    with pytest.raises(CpmpFileError, match="damaged goal_nearest checkpoint"):
+        load_sequencer(tmp_path / "gn_damaged.pt")
+    loaded = load_sequencer(tmp_path / "gn.pt")
+    x = train_demos[0].features[:5]
+    assert np.array_equal(loaded.progress(x), seq.progress(x))
