@@ -162,24 +162,6 @@ def test_float32_predictor_uses_newton(train_demos, klr_fits):
     assert seq.fit_summary["loss"] == pytest.approx(klr_fits["newton"].fit_summary["loss"], 1e-5)
 
 
-@pytest.mark.parametrize(
-    ("options", "match"),
-    [
-        ({"solver": "adam"}, "solver must be 'newton' or 'lbfgs'"),
-        ({"newton_tol": 0.0}, "newton_tol must be a finite number > 0"),
-        ({"newton_tol": -1e-8}, "newton_tol"),
-        ({"newton_tol": float("nan")}, "newton_tol"),
-        ({"newton_tol": "1e-8"}, "newton_tol"),
-        ({"newton_tol": True}, "newton_tol"),
-        ({"newton_max_iter": 0}, "newton_max_iter must be a whole number >= 1"),
-        ({"newton_max_iter": 2.5}, "newton_max_iter"),
-    ],
-)
-def test_bad_solver_options(options, match):
-    with pytest.raises(ConfigError, match=match):
-        TrainerConfig(**options)
-
-
 def test_bad_solver_option_stops_a_fit(train_demos):
     with pytest.raises(ConfigError, match="solver"):
         ConcurrentSequencer.fit(train_demos, "klr", logger=None, solver="bfgs")

@@ -162,44 +162,9 @@ def test_convex_fits_ignore_early_stopping(train_demos):
 
 
 # ------------------------------------------------------------------------- configuration
-@pytest.mark.parametrize(
-    ("options", "match"),
-    [
-        ({"early_stopping_tol": -1e-3}, "early_stopping_tol must be a finite number >= 0"),
-        ({"early_stopping_tol": math.inf}, "early_stopping_tol"),
-        ({"early_stopping_tol": math.nan}, "early_stopping_tol"),
-        ({"early_stopping_tol": "1e-3"}, "early_stopping_tol"),
-        ({"early_stopping_patience": 0}, "early_stopping_patience must be a whole number >= 1"),
-        ({"early_stopping_patience": 2.5}, "early_stopping_patience"),
-        ({"early_stopping_patience": True}, "early_stopping_patience"),
-        ({"early_stopping": "yes"}, "early_stopping must be true or false"),
-        ({"progress_bar": 1}, "progress_bar must be true or false"),
-        ({"early_stopping_decays": -1}, "early_stopping_decays must be a whole number >= 0"),
-        ({"early_stopping_decays": 1.5}, "early_stopping_decays"),
-        ({"early_stopping_lr_factor": 1.0}, "early_stopping_lr_factor must be < 1"),
-        ({"early_stopping_lr_factor": 0.0}, "early_stopping_lr_factor must be a finite number > 0"),
-        ({"early_stopping_lr_factor": math.nan}, "early_stopping_lr_factor"),
-        ({"lbfgs_epochs": 0}, "lbfgs_epochs must be a whole number >= 1"),
-        ({"max_epochs": 1.5}, "max_epochs must be a whole number >= 1"),
-        ({"max_epochs": 0}, "max_epochs"),
-        ({"lr": 0.0}, "lr must be a finite number > 0"),
-        ({"lr": math.nan}, "lr"),
-    ],
-)
-def test_bad_trainer_options(options, match):
-    with pytest.raises(ConfigError, match=match):
-        TrainerConfig(**options)
-
-
 def test_bad_early_stopping_option_stops_a_fit_before_training(train_demos):
     with pytest.raises(ConfigError, match="early_stopping_patience"):
         ConcurrentSequencer.fit(train_demos, "mlp", logger=None, early_stopping_patience=-1)
-
-
-def test_whole_number_options_accept_integral_floats():
-    cfg = TrainerConfig(max_epochs=7.0, lbfgs_epochs=2.0, early_stopping_patience=4.0)
-    assert (cfg.max_epochs, cfg.lbfgs_epochs, cfg.early_stopping_patience) == (7, 2, 4)
-    assert all(type(v) is int for v in (cfg.max_epochs, cfg.lbfgs_epochs))
 
 
 # ------------------------------------------------------------------------- random state
