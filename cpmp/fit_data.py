@@ -19,7 +19,7 @@ import torch
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
-from cpmp.progress import path_length, progress_labels
+from cpmp.progress import path_length, path_trajectory, progress_labels
 
 if TYPE_CHECKING:
     from cpmp.data import Demonstration
@@ -50,16 +50,26 @@ def node_training_data(
 ) -> list[NodeData]:
     """Per-node training samples (scaled features) and progress targets (eq. 1, or normalised
     time for a predictor with ``labels = "time"``), in the predictor's node order;
-    ``subsample`` keeps every k-th sample (and the last) for the loss."""
+    ``subsample`` keeps every k-th sample (and the last) for the loss.
+
+    Each activation is scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for
+    ``path_denoised`` labels) and labelled once; a start head shares its node's.
+    """
+    denoised = predictor.labels == "path_denoised"  # then eq. 1 ("path") along denoised paths
+    noise, kind = ("auto", "path") if denoised else ("none", predictor.labels)
+    measured: dict[tuple[str, str], tuple[list[np.ndarray], ...]] = {}
     out = []
     for v, key_mp in predictor.node_keys:
         mp = key_mp.removeprefix(START_PREFIX)
-        acts = graphs[v].activations[mp]
-        if not acts:
-            raise DataError(f"node {v}/{mp} has no activation data to train on")
-        scaled = [predictor.scaler.transform(a.features) for a in acts]
-        labels = predictor.labels
-        targets = [progress_labels(f, a.time, labels) for f, a in zip(scaled, acts, strict=True)]
+        if (v, mp) not in measured:
+            acts = graphs[v].activations[mp]
+            if not acts:
+                raise DataError(f"node {v}/{mp} has no activation data to train on")
+            scaled = [predictor.scaler.transform(a.features) for a in acts]
+            paths = [path_trajectory(f, noise) for f in scaled]
+            targets = [progress_labels(p, a.time, kind) for p, a in zip(paths, acts, strict=True)]
+            measured[(v, mp)] = (scaled, paths, targets)
+        scaled, paths, targets = measured[(v, mp)]
         keep = [_stride(len(f), subsample) for f in scaled]
         x = np.concatenate([f[k] for f, k in zip(scaled, keep, strict=True)])
         y = np.concatenate([y[k] for y, k in zip(targets, keep, strict=True)])
@@ -70,8 +80,27 @@ def node_training_data(
                 x=torch.as_tensor(x, dtype=dt),
                 target=torch.as_tensor(y, dtype=dt),
                 activations=scaled,
+                paths=paths,
+                labels=targets,
             )
         )
+    return out
+
+
+def demo_progress(
+    graphs: Mapping[str, SequenceGraph], data: Sequence[NodeData], n_samples: Sequence[int]
+) -> list[dict[str, np.ndarray]]:
+    """The fit's progress labels laid out along the demonstrations the ``graphs`` were built
+    from: per demonstration (``n_samples`` each), per variable, ``(n,)``, every activation
+    labelled as its node trained on it (what :meth:`cpmp.switching.Coupling.learn` measures
+    the demonstrated switches with, so that it need not label them again)."""
+    out = [{v: np.zeros(n) for v in graphs} for n in n_samples]
+    for node in data:
+        v, mp = node.key
+        if mp.startswith(START_PREFIX):
+            continue  # a start head shares its node's labels
+        for a, labels in zip(graphs[v].activations[mp], node.labels, strict=True):
+            out[a.demo][v][a.start : a.stop] = labels
     return out
 
 

@@ -15,13 +15,16 @@ denoising, whose penalty is the very per-feature L1 length that eq. 1 sums, remo
 
 from __future__ import annotations
 
-import hashlib
 import math
-from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cpmp.errors import ConfigError, DataError
+
+if TYPE_CHECKING:
+    from cpmp.data import Demonstration
 
 
 def _as_trajectory(features: np.ndarray) -> np.ndarray:
@@ -131,12 +134,6 @@ def tv_denoise(signal: np.ndarray, lam: float) -> np.ndarray:
     return np.array(out)
 
 
-_DENOISED: OrderedDict[tuple[tuple[int, ...], bytes], np.ndarray] = OrderedDict()
-"""Recent results of :func:`denoise_trajectory` by content: a fit asks for the same
-activations several times (labels, support points, feature weights, start heads)."""
-_DENOISED_KEEP = 256
-
-
 def denoise_trajectory(features: np.ndarray) -> np.ndarray:
     """Estimate ``(n, d)`` of the noise-free trajectory of one activation ``(n, d)``.
 
@@ -147,36 +144,39 @@ def denoise_trajectory(features: np.ndarray) -> np.ndarray:
     of the noise. Features without detected noise are returned exactly as recorded.
     """
     x = _as_trajectory(features)
-    key = (x.shape, hashlib.blake2b(x.tobytes(), digest_size=16).digest())
-    if key in _DENOISED:
-        _DENOISED.move_to_end(key)
-        return _DENOISED[key].copy()
     sigma = white_noise_std(x)
     out = x.copy()
     lam = sigma * x.shape[0] ** (1.0 / 3.0)
     for j in np.flatnonzero(lam > 0.0):
         out[:, j] = tv_denoise(x[:, j], float(lam[j]))
-    _DENOISED[key] = out.copy()
-    if len(_DENOISED) > _DENOISED_KEEP:
-        _DENOISED.popitem(last=False)
     return out
+
+
+def path_trajectory(features: np.ndarray, noise: str) -> np.ndarray:
+    """The trajectory ``(n, d)`` along which eq. 1 measures an activation ``features (n, d)``:
+    :func:`denoise_trajectory` of it for ``noise="auto"``, the features as recorded for
+    ``"none"`` (see :data:`PATH_NOISE`).
+
+    Every function below that takes ``noise`` starts with this step; on its result they
+    measure with ``noise="none"``. Denoising being the costly part, a fit takes this step
+    once per activation (:func:`cpmp.fit_data.node_training_data`) and hands the result on
+    in :attr:`~cpmp.predictors.NodeData.paths`.
+    """
+    x = _as_trajectory(features)
+    return denoise_trajectory(x) if _check_noise(noise) == "auto" else x
 
 
 def feature_path_lengths(features: np.ndarray, noise: str = "none") -> np.ndarray:
     """L1 path length of each feature ``(d,)`` of a trajectory ``(n, d)``: the terms eq. 1's
     integral splits into (they sum to :func:`path_length`)."""
-    x = _as_trajectory(features)
-    if _check_noise(noise) == "auto":
-        x = denoise_trajectory(x)
+    x = path_trajectory(features, noise)
     return np.abs(np.diff(x, axis=0)).sum(axis=0)
 
 
 def cumulative_path_length(features: np.ndarray, noise: str = "none") -> np.ndarray:
     """Unnormalised eq. 1: ``(n,)`` running L1 path length, starting at 0; with
     ``noise="auto"`` along :func:`denoise_trajectory` (see :data:`PATH_NOISE`)."""
-    x = _as_trajectory(features)
-    if _check_noise(noise) == "auto":
-        x = denoise_trajectory(x)
+    x = path_trajectory(features, noise)
     steps = np.abs(np.diff(x, axis=0)).sum(axis=1)
     return np.concatenate([[0.0], np.cumsum(steps)])
 
@@ -262,9 +262,7 @@ def support_points(
     (:class:`~cpmp.config.KLRConfig` ``support_scale``, ``min_support``, ``max_support``,
     ``path_noise``).
     """
-    x = _as_trajectory(features)
-    if _check_noise(noise) == "auto":
-        x = denoise_trajectory(x)
+    x = path_trajectory(features, noise)
     cum = cumulative_path_length(x)
     total = cum[-1]
     count = _count_for_length(total, scale, min_support, max_support)
@@ -322,3 +320,21 @@ def progress_labels(features: np.ndarray, time: np.ndarray, kind: str = "path") 
             )
         return labels
     raise ConfigError(f"progress labels must be one of {', '.join(LABELS)}, got {kind!r}")
+
+
+def demo_labels(
+    demo: Demonstration,
+    variables: Sequence[str],
+    transform: Callable[[np.ndarray], np.ndarray] | None,
+    labels: str,
+) -> dict[str, np.ndarray]:
+    """Progress labels ``(n,)`` of each variable along ``demo``: each activation labelled on
+    its own (:func:`progress_labels` of ``labels`` kind on ``transform`` of its features)."""
+    x = demo.features if transform is None else transform(demo.features)
+    done = {}
+    for u in variables:
+        done[u] = np.zeros(demo.n_samples)
+        for seg in demo.segments(u):
+            sl = slice(seg.start, seg.stop)
+            done[u][sl] = progress_labels(x[sl], demo.time[sl], labels)
+    return done

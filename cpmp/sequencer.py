@@ -32,6 +32,7 @@ from cpmp.config import FitConfig, SequencerConfig
 from cpmp.episodes import SequencerEpisode
 from cpmp.errors import ConfigError, DataError
 from cpmp.fit_data import (
+    demo_progress,
     fit_warnings,
     glitch_warnings,
     initial_combinations,
@@ -197,9 +198,8 @@ class ConcurrentSequencer:
         for text in summary["warnings"]:
             log.warning("%s", text)
         combos = initial_combinations(demos, sorted(graphs))
-        coupling = Coupling.learn(
-            demos, sorted(graphs), model.scaler.transform, getattr(model, "labels", "path")
-        )
+        progress = demo_progress(graphs, data, [d.n_samples for d in demos])
+        coupling = Coupling.learn(demos, sorted(graphs), progress=progress)
         feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
         return cls(
             graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range

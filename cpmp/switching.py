@@ -159,33 +159,31 @@ class Coupling:
         variables: Sequence[str],
         transform: Callable[[np.ndarray], np.ndarray] | None = None,
         labels: str = "path",
+        progress: Sequence[Mapping[str, np.ndarray]] | None = None,
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``; ``transform``
         maps features ``(n, d)`` to the space progress is measured in (the predictor's
         scaling) and ``labels`` is the predictor's kind of progress label
         (:func:`cpmp.progress.progress_labels`), so that the learned progress thresholds are
         in the units of the φ they are compared with (e.g. eq. 1 on the denoised trajectory of
-        noisy demonstrations)."""
-        from cpmp.progress import progress_labels
-
+        noisy demonstrations). ``progress``: each demonstration's labels per variable ``(n,)``
+        when the caller has them already (a fit: :func:`cpmp.fit_data.demo_progress`);
+        ``transform`` and ``labels`` are then not used."""
         contexts: dict[Edge, dict[str, set[str]]] = {}
-        progress: dict[Edge, dict[str, dict[str, float]]] = {}
+        progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
         variables = list(variables)
-        for demo in demos:
+        if progress is None:
+            from cpmp.progress import demo_labels
+
+            progress = [demo_labels(demo, variables, transform, labels) for demo in demos]
+        for demo, done in zip(demos, progress, strict=True):
             mps = {v: np.asarray(demo.labels[v]) for v in variables}
-            x = demo.features if transform is None else transform(demo.features)
-            done = {}
-            for u in variables:
-                done[u] = np.zeros(demo.n_samples)
-                for seg in demo.segments(u):
-                    sl = slice(seg.start, seg.stop)
-                    done[u][sl] = progress_labels(x[sl], demo.time[sl], labels)
             for v in variables:
                 lab = mps[v]
                 for i in np.flatnonzero(lab[1:] != lab[:-1]) + 1:
                     edge = (v, str(lab[i - 1]), str(lab[i]))
                     ctx = contexts.setdefault(edge, {})
-                    prog = progress.setdefault(edge, {})
+                    prog = progress_seen.setdefault(edge, {})
                     for u in variables:
                         if u == v:
                             continue
@@ -196,7 +194,7 @@ class Coupling:
                             seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
         return cls(
             {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
-            {e: c for e, c in progress.items() if c},
+            {e: c for e, c in progress_seen.items() if c},
         )
 
     def inconsistent(

@@ -7,11 +7,15 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp import progress
+from cpmp.augment import add_feature_noise
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.fit_data import _stride, initial_combinations, node_training_data
+from cpmp.fit_data import _stride, demo_progress, initial_combinations, node_training_data
 from cpmp.predictors import START_PREFIX
+from cpmp.progress import demo_labels, denoise_trajectory, tv_denoise
 from cpmp.sequencer import ConcurrentSequencer
+from cpmp.switching import Coupling
 
 
 def test_subsample_keeps_every_kth_and_last(train_demos, test_demos):
@@ -88,6 +92,63 @@ def test_node_training_data_follows_the_predictor_node_order(fitted_klr, train_d
         np.testing.assert_allclose(node.target.numpy()[ends - 1], 1.0, atol=1e-12)
 
 
+@pytest.fixture(scope="module")
+def noisy_demos(train_demos):
+    """:func:`train_demos` with 1 % white noise on every feature: a fit denoises them."""
+    return add_feature_noise(train_demos, 0.01, seed=0)
+
+
+def test_each_activation_is_denoised_once_per_fit(noisy_demos, monkeypatch):
+    """node_training_data denoises every activation once (a start head shares its node's)
+    and hands the result on as ``paths``; with path_noise none the paths are the scaled
+    activations themselves."""
+    seq = ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None, start_kernel="isotropic")
+    graphs, predictor = seq.graphs, seq.predictor
+    assert any(mp.startswith(START_PREFIX) for _, mp in predictor.node_keys)
+    denoised = []
+
+    def counting_denoise(x: np.ndarray) -> np.ndarray:
+        denoised.append(x)
+        return denoise_trajectory(x)
+
+    monkeypatch.setattr(progress, "denoise_trajectory", counting_denoise)
+    data = node_training_data(graphs, predictor)
+    monkeypatch.undo()
+    n_activations = sum(len(acts) for g in graphs.values() for acts in g.activations.values())
+    assert len(denoised) == n_activations
+    for node in data:
+        assert len(node.paths) == len(node.activations)
+        for scaled, path in zip(node.activations, node.paths, strict=True):
+            np.testing.assert_array_equal(path, denoise_trajectory(scaled))
+            assert np.abs(path - scaled).max() > 0.0  # the noise was there and was removed
+    raw = ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None, path_noise="none")
+    for node in node_training_data(raw.graphs, raw.predictor):
+        assert all(p is a for p, a in zip(node.paths, node.activations, strict=True))
+
+
+def test_fitting_twice_repeats_the_work_and_the_result(noisy_demos, monkeypatch):
+    """No denoised trajectory is kept from one fit to the next: the second fit denoises as
+    much as the first, and comes out identical."""
+    calls = []
+
+    def counting_tv_denoise(signal: np.ndarray, lam: float) -> np.ndarray:
+        calls.append(lam)
+        return tv_denoise(signal, lam)
+
+    monkeypatch.setattr(progress, "tv_denoise", counting_tv_denoise)
+    fits, counts = [], []
+    for _ in range(2):
+        fits.append(ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None))
+        counts.append(len(calls))
+    first, second = fits
+    n = counts[0]
+    assert n > 0 and counts[1] == 2 * n
+    assert calls[:n] == calls[n:]
+    a, b = first.predictor.state_dict(), second.predictor.state_dict()
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    assert first.fit_summary["support_counts"] == second.fit_summary["support_counts"]
+
+
 def test_initial_combinations_are_distinct_and_in_order(train_demos):
     combos = initial_combinations(train_demos, ["a", "b"])
     expected = []
@@ -96,3 +157,24 @@ def test_initial_combinations_are_distinct_and_in_order(train_demos):
         if combo not in expected:
             expected.append(combo)
     assert combos == expected and len(combos) == 2
+
+
+def test_fit_hands_its_labels_to_the_coupling(noisy_demos):
+    """demo_progress lays the fit's own labels out along the demonstrations: the coupling a
+    fit learns from them equals one that labels every activation again."""
+    seq = ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None)
+    graphs, predictor = seq.graphs, seq.predictor
+    data = node_training_data(graphs, predictor)
+    laid_out = demo_progress(graphs, data, [d.n_samples for d in noisy_demos])
+    for demo, per_variable in zip(noisy_demos, laid_out, strict=True):
+        again = demo_labels(demo, sorted(graphs), predictor.scaler.transform, predictor.labels)
+        assert per_variable.keys() == again.keys()
+        for v, labels in per_variable.items():
+            np.testing.assert_array_equal(labels, again[v])
+            for seg in demo.segments(v):  # each activation runs 0 -> 1 (eq. 1 normalised)
+                assert (labels[seg.start], labels[seg.stop - 1]) == (0.0, 1.0)
+    relearned = Coupling.learn(
+        noisy_demos, sorted(graphs), predictor.scaler.transform, predictor.labels
+    )
+    assert seq.coupling == relearned
+    assert seq.coupling.progress  # progress thresholds were learned at all

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from cpmp import progress
 from cpmp.config import KLRConfig
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors import make_predictor
@@ -11,6 +12,7 @@ from cpmp.progress import (
     expected_progress,
     feature_path_lengths,
     path_length,
+    path_trajectory,
     progress_labels,
     support_count,
     support_point_count,
@@ -51,7 +53,7 @@ def test_zero_length_falls_back_to_time_then_index():
         expected_progress(x, time=np.array([0.0, 0.1, 0.3, 1.0])), [0, 0.1, 0.3, 1.0]
     )
     np.testing.assert_allclose(expected_progress(np.ones((1, 3))), [1.0])
-    assert np.all(np.isfinite(expected_progress(np.zeros((5, 2)))))
+    np.testing.assert_array_equal(expected_progress(np.zeros((5, 2))), np.linspace(0.0, 1.0, 5))
 
 
 def test_bad_input():
@@ -215,6 +217,47 @@ def test_feature_path_lengths_split_the_path_length():
     lengths = feature_path_lengths(x, "auto")
     assert lengths[2] < 0.05 * lengths[0]
     assert lengths[0] / lengths[1] == pytest.approx(2.0, rel=0.1)
+
+
+def test_path_trajectory_is_what_the_noise_option_measures_along():
+    """Measuring on ``path_trajectory(x, noise)`` with ``noise="none"`` is measuring ``x``
+    with ``noise``: how a fit reuses one denoising for labels, supports and weights."""
+    x = _moving_then_resting() + 0.01 * np.random.default_rng(5).standard_normal((300, 3))
+    path = path_trajectory(x, "auto")
+    np.testing.assert_array_equal(path, denoise_trajectory(x))
+    assert np.abs(path - x).max() > 0.005  # noise was detected and removed
+    assert path_trajectory(x, "none") is x  # float64 features as recorded, not copied
+    np.testing.assert_array_equal(expected_progress(path), expected_progress(x, noise="auto"))
+    np.testing.assert_array_equal(feature_path_lengths(path), feature_path_lengths(x, "auto"))
+    np.testing.assert_array_equal(
+        support_points(path, *RULE, "none"), support_points(x, *RULE, "auto")
+    )
+    with pytest.raises(ConfigError, match="path noise must be one of auto, none"):
+        path_trajectory(x, "median")
+
+
+def test_progress_module_keeps_no_state_between_calls():
+    """No cache or other container at module level (the fit hands denoised trajectories on
+    instead); and denoising the same trajectory twice does the work twice."""
+    containers = [
+        name
+        for name, value in vars(progress).items()
+        if isinstance(value, (dict, list, set)) and not name.startswith("__")
+    ]
+    assert containers == []
+    x = _moving_then_resting() + 0.01 * np.random.default_rng(6).standard_normal((300, 3))
+    calls = []
+
+    def counting_tv_denoise(signal: np.ndarray, lam: float) -> np.ndarray:
+        calls.append(lam)
+        return tv_denoise(signal, lam)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(progress, "tv_denoise", counting_tv_denoise)
+        first = denoise_trajectory(x)
+        second = denoise_trajectory(x)
+    np.testing.assert_array_equal(first, second)
+    assert len(calls) == 6 and calls[:3] == calls[3:]  # 3 noisy features, denoised each time
 
 
 def test_path_noise_option():

@@ -39,12 +39,20 @@ class NodeData:
         x: (P, d) feature samples of all activations of the node.
         target: (P,) expected progress (eq. 1) of each sample.
         activations: the node's activations as separate (n_j, d) trajectories.
+        paths: the same activations as eq. 1 measures them (n_j, d): denoised once per fit
+            (:func:`cpmp.progress.path_trajectory`) for a bank with ``path_denoised``
+            labels, the ``activations`` themselves otherwise; support points and feature
+            weights are placed along these.
+        labels: each activation's progress labels (n_j,), of which ``target`` keeps a
+            subsample.
     """
 
     key: NodeKey
     x: torch.Tensor
     target: torch.Tensor
     activations: list[np.ndarray] = field(default_factory=list)
+    paths: list[np.ndarray] = field(default_factory=list)
+    labels: list[np.ndarray] = field(default_factory=list)
 
 
 class FeatureScaler(nn.Module):

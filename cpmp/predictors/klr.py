@@ -125,12 +125,8 @@ class KLRPredictor(ProgressPredictor):
         return a[:heads].T.contiguous(), node[:n], weighted[:n], s_term[:n], w[:n]
 
     def _supports_for(self, node: NodeData) -> np.ndarray:
-        c = self.config
-        pts = [
-            support_points(a, c.support_scale, c.min_support, c.max_support, c.path_noise)
-            for a in node.activations
-        ]
-        return np.concatenate(pts, axis=0)
+        rule = (*self._support_rule(), "none")  # node.paths: denoised already where asked
+        return np.concatenate([support_points(p, *rule) for p in node.paths], axis=0)
 
     def _support_rule(self) -> tuple[float, int, int | None]:
         """``(per unit path length, minimum, maximum)`` support points per activation."""
@@ -139,8 +135,8 @@ class KLRPredictor(ProgressPredictor):
 
     def _support_total(self, data: list[NodeData]) -> int:
         """Support points :meth:`_supports_for` would place, counted without placing them."""
-        rule = (*self._support_rule(), self.config.path_noise)
-        return sum(support_point_count(a, *rule) for node in data for a in node.activations)
+        rule = (*self._support_rule(), "none")
+        return sum(support_point_count(p, *rule) for node in data for p in node.paths)
 
     def _check_support_budget(self, data: list[NodeData]) -> None:
         total = self._support_total(data)
@@ -168,8 +164,7 @@ class KLRPredictor(ProgressPredictor):
 
     def _path_weights(self, node: NodeData) -> torch.Tensor:
         """``(d,)`` kernel weights from each feature's share of the node's L1 path length."""
-        noise = self.config.path_noise
-        per_feature = sum(feature_path_lengths(a, noise) for a in node.activations)
+        per_feature = sum(feature_path_lengths(p) for p in node.paths)
         total = float(np.sum(per_feature))
         d = self.n_features
         share = per_feature / total if total > 0 else np.full(d, 1.0 / d)
@@ -306,14 +301,6 @@ class SparseKLRPredictor(KLRPredictor):
 
     def feature_weights(self) -> torch.Tensor:
         return self.gamma * torch.exp(self.log_feature_scale)
-
-    def _supports_for(self, node: NodeData) -> np.ndarray:
-        c = self.config
-        pts = [
-            support_points(a, c.candidate_scale, c.min_candidates, None, c.path_noise)
-            for a in node.activations
-        ]
-        return np.concatenate(pts, axis=0)
 
     def _support_rule(self) -> tuple[float, int, int | None]:
         return self.config.candidate_scale, self.config.min_candidates, None
