@@ -98,7 +98,7 @@ class BatchedSequencer(EpisodeBatch):
         if stateful:
             seq.predictor.reset_state(len(self.episodes))
         if rows:
-            phi = seq._heads(xn if stateful else xn[rows])
+            phi = seq.heads(xn if stateful else xn[rows])
             for j, i in enumerate(rows):
                 self.episodes[i].start(ts[i], xn[i], phi[i if stateful else j])
         return self.active

@@ -11,21 +11,79 @@ one, :class:`~cpmp.batches.BatchedSequencer` many (:mod:`cpmp.batches`).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cpmp.errors import DataError, NotFittedError
+from cpmp.errors import ConfigError, DataError, NotFittedError
+from cpmp.fit_data import start_keys
+from cpmp.graph import SequenceGraph
 from cpmp.inputs import checked_time
+from cpmp.predictors import START_PREFIX
 from cpmp.records import SequencerNote, TickInfo, TransitionEvent
-from cpmp.switching import StallDetector, recovery_choice
+from cpmp.switching import StallDetector, make_rule, recovery_choice
 
 if TYPE_CHECKING:
     from cpmp.sequencer import ConcurrentSequencer
 
 PlanRow = tuple[str, str, list[str], list[int], int, list[int], list[tuple[int, int, float]]]
 """One variable's row of :meth:`SequencerEpisode._transition_plan`."""
+
+
+@dataclass(frozen=True)
+class NodeIndex:
+    """Where each node's φ sits in the predictor's output, and the successor tables the
+    transition rule reads every tick; built once per sequencer (:meth:`build`).
+
+    Attributes:
+        keys: (variable, MP) of every graph node, in the order of the φ columns.
+        index: (variable, MP) -> its φ column.
+        start_index: (variable, MP) -> the column whose ``1 - φ`` is the MP's entry
+            probability at the start (its start head, or its node's column without heads).
+        successors: (variable, MP) -> (successor MPs, their φ columns).
+    """
+
+    keys: list[tuple[str, str]]
+    index: dict[tuple[str, str], int]
+    start_index: dict[tuple[str, str], int]
+    successors: dict[tuple[str, str], tuple[list[str], list[int]]]
+
+    @classmethod
+    def build(
+        cls, graphs: Mapping[str, SequenceGraph], predictor_keys: Sequence[tuple[str, str]]
+    ) -> NodeIndex:
+        """The index of ``graphs``' nodes in a predictor with heads ``predictor_keys``: the
+        graph nodes in order, then optionally one start head per initial node.
+
+        Raises:
+            ConfigError: the predictor's heads are not the graphs' nodes.
+        """
+        keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
+        extra = list(predictor_keys[len(keys) :])
+        if list(predictor_keys[: len(keys)]) != keys or extra not in ([], start_keys(graphs)):
+            raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
+        index = {key: i for i, key in enumerate(keys)}
+        start_index = {
+            (v, mp[len(START_PREFIX) :]): len(keys) + i for i, (v, mp) in enumerate(extra)
+        } or index
+        successors = {
+            (v, mp): (
+                graphs[v].successors(mp),
+                [index[(v, s)] for s in graphs[v].successors(mp)],
+            )
+            for v, mp in keys
+        }
+        return cls(keys, index, start_index, successors)
+
+    def phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
+        """Per-node φ ``(K,)`` (start heads after them ignored) as variable -> MP -> φ."""
+        out: dict[str, dict[str, float]] = {v: {} for v, _ in self.keys}
+        values = phi.tolist() if isinstance(phi, np.ndarray) else phi
+        for (v, mp), value in zip(self.keys, values[: len(self.keys)], strict=True):
+            out[v][mp] = value
+        return out
 
 
 class SequencerEpisode:
@@ -43,8 +101,12 @@ class SequencerEpisode:
         """Variable -> active MP (empty before :meth:`start`)."""
         self.events: list[TransitionEvent] = []
         self.notes: list[SequencerNote] = []
-        self._rules = {v: seq._new_rule() for v in seq.graphs}
         c = seq.config
+        self._rules = {
+            v: make_rule(c.switch_rule, c.threshold, c.patience, c.min_improvement)
+            for v in seq.graphs
+        }
+        self._coupled = c.coupling == "context"
         self._stall = StallDetector(seq.feature_range, c.stall_time, c.rest_speed)
         self._holding: dict[str, str | None] = {}
         self._last_t: float | None = None
@@ -61,7 +123,7 @@ class SequencerEpisode:
             probs: dict[str, dict[str, float]] = {v: {} for v in sorted(seq.graphs)}
             for v, _, names, p, _ in rows:
                 probs[v] = dict(zip(names, p, strict=True))
-            self._tick = TickInfo(t, seq._phi_dict(phi), probs, active, held)
+            self._tick = TickInfo(t, seq.nodes.phi_dict(phi), probs, active, held)
             self._pending = None
         return self._tick
 
@@ -84,7 +146,9 @@ class SequencerEpisode:
         self._last_t = t
         self._plan = None
         self._pending = None
-        self._tick = TickInfo(t, seq._phi_dict(phi), {v: {} for v in seq.graphs}, dict(self.active))
+        self._tick = TickInfo(
+            t, seq.nodes.phi_dict(phi), {v: {} for v in seq.graphs}, dict(self.active)
+        )
         return dict(self.active)
 
     def check_time(self, t: float) -> float:
@@ -108,7 +172,7 @@ class SequencerEpisode:
         if not finite:
             bad = [
                 f"{v}/{mp}"
-                for (v, mp), f in zip(seq._keys, phi, strict=True)
+                for (v, mp), f in zip(seq.nodes.keys, phi, strict=True)
                 if not math.isfinite(f)
             ]
             text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
@@ -116,7 +180,7 @@ class SequencerEpisode:
                 raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
             if not self.notes or self.notes[-1].kind != "nonfinite":
                 self.notes.append(SequencerNote(t, "nonfinite", "", text))
-            self._tick = TickInfo(t, seq._phi_dict(phi), {}, dict(self.active))
+            self._tick = TickInfo(t, seq.nodes.phi_dict(phi), {}, dict(self.active))
             self._pending = None
             return dict(self.active)
         self._stall.observe(t, state)
@@ -124,7 +188,7 @@ class SequencerEpisode:
             context = dict(self.active)
             self._plan = (context, self._transition_plan(context))
         context, plan = self._plan
-        coupled = seq._coupled
+        coupled = self._coupled
         held: dict[str, str] = {}
         rows = []
         fired = False
@@ -181,14 +245,14 @@ class SequencerEpisode:
         if seq.config.start_rule == "joint" and seq.initial_combinations:
             entry = np.clip(1.0 - phi, 1e-12, 1.0)
             scores = [
-                sum(np.log(entry[seq._start_index[(v, mp)]]) for v, mp in combo.items())
+                sum(np.log(entry[seq.nodes.start_index[(v, mp)]]) for v, mp in combo.items())
                 for combo in seq.initial_combinations
             ]
             return dict(seq.initial_combinations[int(np.argmax(scores))])
         active = {}
         for v in sorted(seq.graphs):
             initial = sorted(seq.graphs[v].initial_nodes)
-            entry_v = [1.0 - phi[seq._start_index[(v, mp)]] for mp in initial]
+            entry_v = [1.0 - phi[seq.nodes.start_index[(v, mp)]] for mp in initial]
             active[v] = initial[int(np.argmax(entry_v))]
         return active
 
@@ -204,7 +268,7 @@ class SequencerEpisode:
         plan = []
         for v in sorted(seq.graphs):
             current = context[v]
-            names, idx = seq._successor_idx[(v, current)]
+            names, idx = seq.nodes.successors[(v, current)]
             if not names:
                 continue
             unseen_counts, checks = [], []
@@ -212,11 +276,13 @@ class SequencerEpisode:
                 unseen, bounds = seq.coupling.gates((v, current, s), context, margin)
                 unseen_counts.append(len(unseen))
                 checks += [
-                    (k, seq._index[(u, context[u])], bound)
+                    (k, seq.nodes.index[(u, context[u])], bound)
                     for u, _, bound in bounds
                     if u in context
                 ]
-            plan.append((v, current, names, idx, seq._index[(v, current)], unseen_counts, checks))
+            plan.append(
+                (v, current, names, idx, seq.nodes.index[(v, current)], unseen_counts, checks)
+            )
         return plan
 
     def _note_hold(
@@ -231,7 +297,7 @@ class SequencerEpisode:
     ) -> None:
         """Note a transition the coupling holds back, with the reasons."""
         seq = self.seq
-        done = {u: phi[seq._index[(u, mp)]] for u, mp in context.items()}
+        done = {u: phi[seq.nodes.index[(u, mp)]] for u, mp in context.items()}
         why = seq.coupling.inconsistent(
             (v, current, target), context, done, seq.config.progress_margin
         )

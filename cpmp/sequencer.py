@@ -29,7 +29,7 @@ import torch
 
 from cpmp.batches import BatchedSequencer
 from cpmp.config import FitConfig, SequencerConfig
-from cpmp.episodes import SequencerEpisode
+from cpmp.episodes import NodeIndex, SequencerEpisode
 from cpmp.errors import ConfigError, DataError
 from cpmp.fit_data import (
     demo_progress,
@@ -43,9 +43,9 @@ from cpmp.fit_data import (
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.inputs import checked_demonstrations, checked_features, checked_time
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
-from cpmp.predictors import PREDICTORS, START_PREFIX, ProgressPredictor, predictor_from_spec
+from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
 from cpmp.records import SequencerNote, TickInfo, TransitionEvent
-from cpmp.switching import Coupling, SwitchRule, indicator_features, make_rule
+from cpmp.switching import Coupling, indicator_features
 from cpmp.training import fit_predictor
 
 if TYPE_CHECKING:
@@ -108,22 +108,8 @@ class ConcurrentSequencer:
                 f"{len(self.feature_names)} feature names for a predictor of "
                 f"{predictor.n_features} features"
             )
-        keys = [(v, mp) for v in sorted(self.graphs) for mp in self.graphs[v].ordered_nodes()]
-        extra = predictor.node_keys[len(keys) :]
-        if predictor.node_keys[: len(keys)] != keys or extra not in ([], start_keys(self.graphs)):
-            raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
-        self._keys = keys
-        self._index = {key: i for i, key in enumerate(keys)}
-        self._start_index = {
-            (v, mp[len(START_PREFIX) :]): len(keys) + i for i, (v, mp) in enumerate(extra)
-        } or self._index
-        self._successor_idx = {
-            (v, mp): (
-                self.graphs[v].successors(mp),
-                [self._index[(v, s)] for s in self.graphs[v].successors(mp)],
-            )
-            for v, mp in keys
-        }
+        self.nodes = NodeIndex.build(self.graphs, predictor.node_keys)
+        """Where each node's φ sits among the predictor's heads, and the successor tables."""
         self.coupling = coupling or Coupling()
         """Learned contexts of the demonstrated switches (used with ``coupling="context"``)."""
         self.feature_range = (
@@ -137,12 +123,7 @@ class ConcurrentSequencer:
                 f"feature_range has {self.feature_range.size} entries for "
                 f"{len(self.feature_names)} features"
             )
-        self._coupled = self.config.coupling == "context"
         self._episode = SequencerEpisode(self)
-
-    def _new_rule(self) -> SwitchRule:
-        c = self.config
-        return make_rule(c.switch_rule, c.threshold, c.patience, c.min_improvement)
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -208,9 +189,9 @@ class ConcurrentSequencer:
     # ----------------------------------------------------------------------------- inference
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
         """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
-        return self._heads(x, len(self._keys))
+        return self.heads(x, len(self.nodes.keys))
 
-    def _heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
+    def heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
         """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
         ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others)."""
         xn = checked_features(x, self.feature_names)
@@ -220,12 +201,12 @@ class ConcurrentSequencer:
     @property
     def node_keys(self) -> list[tuple[str, str]]:
         """(variable, MP) of every node, in the order of :meth:`progress`'s columns."""
-        return list(self._keys)
+        return list(self.nodes.keys)
 
     def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
         """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        return self._phi_dict(self.progress(state))
+        return self.nodes.phi_dict(self.progress(state))
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
@@ -233,7 +214,7 @@ class ConcurrentSequencer:
         when ``start_rule="joint"``)."""
         t = checked_time(t)
         self.predictor.reset_state(1)
-        phi = self._heads(np.asarray(x, dtype=np.float64).reshape(-1))
+        phi = self.heads(np.asarray(x, dtype=np.float64).reshape(-1))
         return self._episode.start(t, x, phi)
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
@@ -267,14 +248,6 @@ class ConcurrentSequencer:
     def last_tick(self) -> TickInfo | None:
         """What the last :meth:`reset` or :meth:`step` computed (``None`` before a reset)."""
         return self._episode.last_tick
-
-    def _phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
-        """Per-node φ ``(K,)`` as variable -> MP -> φ (start heads left out)."""
-        out: dict[str, dict[str, float]] = {v: {} for v in sorted(self.graphs)}
-        values = phi.tolist() if isinstance(phi, np.ndarray) else phi
-        for (v, mp), value in zip(self._keys, values[: len(self._keys)], strict=True):
-            out[v][mp] = value
-        return out
 
     def replay(
         self, time: np.ndarray, features: np.ndarray
