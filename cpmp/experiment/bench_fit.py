@@ -39,7 +39,7 @@ def node_kernels(seq: ConcurrentSequencer, demos: Sequence[Demonstration]) -> di
     data = node_training_data(seq.graphs, predictor)
     with torch.no_grad():
         kernels = [
-            predictor._node_kernel(i, node.x)[:, predictor.support_mask[i]]
+            predictor.node_kernel(i, node.x)[:, predictor.support_mask[i]]
             for i, node in enumerate(data)
         ]
     return {

@@ -117,7 +117,7 @@ class RegressionClipPredictor(KLRPredictor):
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
         """Sum over nodes of ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (unclipped output)."""
         total = torch.zeros((), dtype=self.dtype_)
-        for i, (node, kern) in enumerate(zip(data, self._node_kernels(data), strict=True)):
+        for i, (node, kern) in enumerate(zip(data, self.node_kernels(data), strict=True)):
             w = self.weight[i] * self.support_mask[i]
             residual = kern @ w + self.bias[i] - node.target
             total = total + 0.5 * (residual * residual).mean()
@@ -166,7 +166,7 @@ def _solve_nodes(
     """Fit every node of a kernel bank by ``solve(i, K_i (P, S_i), target (P,))`` -> (weights
     ``(S_i,)``, bias, outcome) on its real supports (default kernels: the cached ones), then
     write all weights and biases into the bank; returns the outcomes."""
-    kernels = bank._node_kernels(data) if kernels is None else kernels
+    kernels = bank.node_kernels(data) if kernels is None else kernels
     weight = torch.zeros_like(bank.weight, requires_grad=False)
     bias = bank.bias.detach().clone()
     infos = []

@@ -186,14 +186,14 @@ class KLRPredictor(ProgressPredictor):
     def _assign_support(self, support: torch.Tensor) -> None:
         self.support = support
 
-    def _node_kernels(self, data: list[NodeData]) -> list[torch.Tensor]:
+    def node_kernels(self, data: list[NodeData]) -> list[torch.Tensor]:
         """Kernel matrix ``(P_i, S)`` of each node's samples against its own supports."""
         if self._cache is None:
             with torch.no_grad():
-                self._cache = [self._node_kernel(i, node.x) for i, node in enumerate(data)]
+                self._cache = [self.node_kernel(i, node.x) for i, node in enumerate(data)]
         return self._cache
 
-    def _node_kernel(self, i: int, x: torch.Tensor) -> torch.Tensor:
+    def node_kernel(self, i: int, x: torch.Tensor) -> torch.Tensor:
         """Kernel ``(P, S)`` of samples ``x (P, d)`` against node ``i``'s supports (padded slots
         0), with ``Σ_j a_j (x_j - s_j)² = a · x² - 2 x · (a s) + a · s²``: one matrix product
         instead of a ``(P, S, d)`` difference tensor."""
@@ -204,10 +204,10 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq.clamp_min(0.0)) * self.support_mask[i]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
-        return self._node_kernel(i, z) @ self.weight[i] + self.bias[i]
+        return self.node_kernel(i, z) @ self.weight[i] + self.bias[i]
 
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        return self._penalised_loss(data, self._node_kernels(data))
+        return self._penalised_loss(data, self.node_kernels(data))
 
     def _penalised_loss(
         self, data: list[NodeData], kernels: list[torch.Tensor], l1: float = 0.0
@@ -228,7 +228,7 @@ class KLRPredictor(ProgressPredictor):
     ) -> list[NewtonInfo]:
         """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias with the kernel
         fixed; ``kernels``: each node's ``(P_i, S)`` kernel (default: the cached ones)."""
-        kernels = self._node_kernels(data) if kernels is None else kernels
+        kernels = self.node_kernels(data) if kernels is None else kernels
         masks = list(self.support_mask)
         with torch.no_grad():
             solutions, infos = newton_fit(
@@ -315,9 +315,9 @@ class SparseKLRPredictor(KLRPredictor):
     def training_loss(self, data: list[NodeData]) -> torch.Tensor:
         if self._learned_kernel():
             self._cache = None
-            kernels = [self._node_kernel(i, node.x) for i, node in enumerate(data)]
+            kernels = [self.node_kernel(i, node.x) for i, node in enumerate(data)]
         else:
-            kernels = self._node_kernels(data)
+            kernels = self.node_kernels(data)
         return self._penalised_loss(data, kernels, self.config.l1)
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
@@ -351,7 +351,7 @@ class SparseKLRPredictor(KLRPredictor):
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
         """Convex re-fit of weights and bias on the surviving (fixed) supports, without the L1
         shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``."""
-        kernels = self._node_kernels(data)
+        kernels = self.node_kernels(data)
         if solver.method == "newton":
             self.refit_info = self.solve_convex(data, solver, kernels)
             return
