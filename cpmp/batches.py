@@ -37,6 +37,43 @@ class EpisodeBatch:
 
     episodes: list[Any]
 
+    @staticmethod
+    def checked_count(n: int) -> int:
+        """``n`` as the number of episodes of a batch; :class:`ConfigError` unless ``n >= 1``."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
+        return int(n)
+
+    def _inputs(
+        self, t: Times, x: Features, live: LiveMask, d: int
+    ) -> tuple[list[float], np.ndarray, list[int]]:
+        """Checked times ``(N,)`` as floats, features ``(N, d)`` float64 and the live rows."""
+        n = len(self.episodes)
+        if isinstance(x, torch.Tensor):
+            x = x.detach().cpu().numpy()
+        xn = np.asarray(x, dtype=np.float64)
+        if xn.shape != (n, d):
+            raise DataError(
+                f"a batch of {n} episodes needs features of shape ({n}, {d}), got {tuple(xn.shape)}"
+            )
+        try:
+            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
+        except ValueError as err:
+            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
+        if not np.isfinite(times).all():
+            raise DataError(f"time must be finite, got t={t}")
+        if live is None:
+            rows = list(range(n))
+        else:
+            mask = np.asarray(live)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise DataError(
+                    f"live must be a boolean mask of shape ({n},), got {mask.dtype} of shape "
+                    f"{mask.shape}"
+                )
+            rows = np.flatnonzero(mask).tolist()
+        return times.tolist(), xn, rows
+
     @property
     def n_episodes(self) -> int:
         """N, the number of episodes."""
@@ -82,10 +119,8 @@ class BatchedSequencer(EpisodeBatch):
     """
 
     def __init__(self, seq: ConcurrentSequencer, n: int) -> None:
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
         self.sequencer = seq
-        self.episodes = [SequencerEpisode(seq) for _ in range(int(n))]
+        self.episodes = [SequencerEpisode(seq) for _ in range(self.checked_count(n))]
         """One :class:`SequencerEpisode` per episode (``active``, ``events``, ``notes``,
         ``last_tick``)."""
 
@@ -93,7 +128,7 @@ class BatchedSequencer(EpisodeBatch):
         """Start the ``live`` episodes (default: all) at time ``t`` [s] (scalar or ``(N,)``)
         with features ``x (N, d)``; returns every episode's active MPs."""
         seq = self.sequencer
-        ts, xn, rows = self._inputs(t, x, live)
+        ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
         stateful = getattr(seq.predictor, "stateful", False)
         if stateful:
             seq.predictor.reset_state(len(self.episodes))
@@ -107,7 +142,7 @@ class BatchedSequencer(EpisodeBatch):
         """Advance the ``live`` episodes (default: all) one tick at time ``t`` [s] (scalar or
         ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs."""
         seq = self.sequencer
-        ts, xn, rows = self._inputs(t, x, live)
+        ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
         for i in rows:
             try:
                 self.episodes[i].check_time(ts[i])
@@ -127,36 +162,6 @@ class BatchedSequencer(EpisodeBatch):
                 raise type(err)(f"episode {i}: {err}") from err
         return self.active
 
-    def _inputs(
-        self, t: Times, x: Features, live: LiveMask
-    ) -> tuple[list[float], np.ndarray, list[int]]:
-        """Checked times ``(N,)`` as floats, features ``(N, d)`` float64 and live rows."""
-        n, d = len(self.episodes), len(self.sequencer.feature_names)
-        if isinstance(x, torch.Tensor):
-            x = x.detach().cpu().numpy()
-        xn = np.asarray(x, dtype=np.float64)
-        if xn.shape != (n, d):
-            raise DataError(
-                f"a batch of {n} episodes needs features of shape ({n}, {d}), got {tuple(xn.shape)}"
-            )
-        try:
-            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
-        except ValueError as err:
-            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
-        if not np.isfinite(times).all():
-            raise DataError(f"time must be finite, got t={t}")
-        if live is None:
-            rows = list(range(n))
-        else:
-            mask = np.asarray(live)
-            if mask.shape != (n,) or mask.dtype != np.bool_:
-                raise DataError(
-                    f"live must be a boolean mask of shape ({n},), got {mask.dtype} of shape "
-                    f"{mask.shape}"
-                )
-            rows = np.flatnonzero(mask).tolist()
-        return times.tolist(), xn, rows
-
 
 class GoalNearestBatch(EpisodeBatch):
     """``N`` independent episodes of one fitted
@@ -172,32 +177,17 @@ class GoalNearestBatch(EpisodeBatch):
 
     def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Start the ``live`` episodes (default: all)."""
-        for i, (ti, xi) in self._rows(t, x, live):
-            self.episodes[i].reset(ti, xi)
+        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
+        for i in rows:
+            self.episodes[i].reset(ts[i], xn[i])
         return self.active
 
     def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Advance the ``live`` episodes (default: all) one tick."""
-        for i, (ti, xi) in self._rows(t, x, live):
+        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
+        for i in rows:
             try:
-                self.episodes[i].step(ti, xi)
+                self.episodes[i].step(ts[i], xn[i])
             except CpmpError as err:
                 raise type(err)(f"episode {i}: {err}") from err
         return self.active
-
-    def _rows(
-        self, t: Times, x: Features, live: LiveMask
-    ) -> list[tuple[int, tuple[float, np.ndarray]]]:
-        """``(episode, (time, features (d,)))`` of every live episode."""
-        n = len(self.episodes)
-        xn = np.asarray(x, dtype=np.float64)
-        if xn.ndim != 2 or xn.shape[0] != n:
-            raise DataError(f"a batch of {n} episodes needs features (N={n}, d), got {xn.shape}")
-        try:
-            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
-        except ValueError as err:
-            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
-        keep = np.ones(n, dtype=bool) if live is None else np.asarray(live, dtype=bool)
-        if keep.shape != (n,):
-            raise DataError(f"live must be {n} booleans, got shape {keep.shape}")
-        return [(i, (float(times[i]), xn[i])) for i in np.flatnonzero(keep).tolist()]

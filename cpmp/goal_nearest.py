@@ -144,10 +144,8 @@ class GoalNearestSequencer:
     def batched(self, n: int) -> GoalNearestBatch:
         """``n`` independent episodes of this sequencer (:class:`GoalNearestBatch`, the
         batched policy :func:`cpmp.sim.run_episodes` drives)."""
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
         episodes = []
-        for _ in range(int(n)):
+        for _ in range(GoalNearestBatch.checked_count(n)):
             episode = copy.copy(self)
             episode._new_episode()
             episodes.append(episode)

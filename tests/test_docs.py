@@ -6,7 +6,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,9 +73,3 @@ def test_data_format_examples_run_and_load(tmp_path, monkeypatch):
     (loaded,) = ns["train"]
     np.testing.assert_array_equal(loaded.features, demo.features)
     assert loaded.metadata == demo.metadata
-
-
-@pytest.mark.parametrize("doc", ["README.md", "docs/data_format.md"])
-def test_every_python_block_compiles(doc):
-    for i, block in enumerate(python_blocks(doc)):
-        compile(block, f"{doc} python block {i + 1}", "exec")

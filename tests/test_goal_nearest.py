@@ -137,6 +137,29 @@ def test_batched_episodes_match_single_runs(two_successors):
     assert batch.active == [{"v": "b"}, {"v": "a"}]
 
 
+def test_batch_refuses_bad_inputs_as_the_learned_sequencers_batch_does(two_successors):
+    """The same input checks (and messages) as BatchedSequencer (tests/test_batches.py)."""
+    seq = GoalNearestSequencer.fit(two_successors)
+    batch = seq.batched(2)
+    x = np.array([[0.0, 0.3], [0.0, 0.7]])
+    batch.reset(0.0, x)
+    with pytest.raises(DataError, match=r"shape \(2, 2\)"):
+        batch.step(DT, x[:1])
+    with pytest.raises(DataError, match="boolean mask"):
+        batch.step(DT, x, live=[1, 0])
+    with pytest.raises(DataError, match="finite"):
+        batch.step(np.nan, x)
+    with pytest.raises(DataError, match="one time or 2 times"):
+        batch.step(np.array([DT, DT, DT]), x)
+    bad = x.copy()
+    bad[0, 0] = np.inf
+    with pytest.raises(DataError, match=r"episode 0: .*NaN or inf"):
+        batch.step(DT, bad)
+    for n in (0, -1, 2.5, True):
+        with pytest.raises(ConfigError, match="n >= 1"):
+            seq.batched(n)
+
+
 def test_save_load_gives_identical_decisions_and_progress(two_successors, tmp_path):
     seq = GoalNearestSequencer.fit(two_successors, hold_time=0.05, speed_threshold=0.01)
     path = seq.save(tmp_path / "goal_nearest.pt")
