@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -22,20 +21,13 @@ from typing import TYPE_CHECKING, Any
 from cpmp.errors import CpmpError
 from cpmp.experiment.config import to_dict
 from cpmp.experiment.settings import ExperimentSettings
+from cpmp.experiment.workers import spawned_pool
 
 if TYPE_CHECKING:
     from cpmp.experiment.collection import SeedData
     from cpmp.experiment.compare import RowSpec
 
 log = logging.getLogger(__name__)
-
-
-def _init_worker() -> None:
-    """Worker start-up: one torch thread (a second busy thread per process on a machine of
-    few cores slows every process down)."""
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def _collect(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
@@ -181,8 +173,7 @@ def run_jobs(
                 report(key, results[key])
         return collected, results
 
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, Future, wait
 
     def identity(key: str) -> tuple[Any, ...]:
         spec, _, d = jobs[key]
@@ -201,23 +192,19 @@ def run_jobs(
         ready.remove(key)
         return "row", key
 
-    context = multiprocessing.get_context("spawn")
-    saved = os.environ.get("TQDM_DISABLE")
-    os.environ["TQDM_DISABLE"] = "1"  # inherited by the workers: their progress is reported here
-    pool = ProcessPoolExecutor(workers, context, initializer=_init_worker)
     pending: dict[Future, tuple[str, Any]] = {}
+    with spawned_pool(workers) as pool:
 
-    def fill() -> None:
-        while len(pending) < workers and (job := next_job()) is not None:
-            what, key = job
-            if what == "collect":
-                future = pool.submit(_collect, plain, run_dir, key)
-            else:
-                spec, seed, d = jobs[key]
-                future = pool.submit(run_row, plain, spec, collected[seed], d)
-            pending[future] = job
+        def fill() -> None:
+            while len(pending) < workers and (job := next_job()) is not None:
+                what, key = job
+                if what == "collect":
+                    future = pool.submit(_collect, plain, run_dir, key)
+                else:
+                    spec, seed, d = jobs[key]
+                    future = pool.submit(run_row, plain, spec, collected[seed], d)
+                pending[future] = job
 
-    try:
         fill()
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -232,10 +219,4 @@ def run_jobs(
                 collected_now(key)
                 ready.extend(k for k in jobs if jobs[k][1] == key)
             fill()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        if saved is None:
-            os.environ.pop("TQDM_DISABLE", None)
-        else:
-            os.environ["TQDM_DISABLE"] = saved
     return collected, results

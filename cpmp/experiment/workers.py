@@ -1,13 +1,15 @@
 """The main job's worker processes: a spawned process pool running each seed's collection and
 then each of its training sizes, one torch thread per worker, every worker's log records sent to
-the main process (prefixed with their job) and handed to its handlers."""
+the main process (prefixed with their job) and handed to its handlers. :func:`spawned_pool`
+is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.experiment.compare_jobs`)."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import logging.handlers
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -47,11 +49,47 @@ class _Dispatch(logging.Handler):
             logger.handle(record)
 
 
-def _init_worker(queue: Any, level: int) -> None:
-    """Worker start-up: one torch thread, every log record sent to the main process."""
+@contextlib.contextmanager
+def spawned_pool(
+    workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
+) -> Iterator[Any]:
+    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, each started with
+    ``initializer(*initargs)`` (default: one torch thread), shut down on exit.
+
+    Workers show no progress bars (two would overwrite each other; the main process reports
+    their progress): tqdm reads ``TQDM_DISABLE`` when imported, so it is set while the pool
+    starts its workers and restored afterwards.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    bars = os.environ.get("TQDM_DISABLE")
+    os.environ["TQDM_DISABLE"] = "1"
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(
+        workers, context, initializer=initializer or one_thread, initargs=initargs
+    )
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        if bars is None:
+            os.environ.pop("TQDM_DISABLE", None)
+        else:
+            os.environ["TQDM_DISABLE"] = bars
+
+
+def one_thread() -> None:
+    """Worker start-up: one torch thread (a second busy thread per process on a machine of few
+    cores slows every process down)."""
     import torch
 
     torch.set_num_threads(1)
+
+
+def _init_worker(queue: Any, level: int) -> None:
+    """Worker start-up: one torch thread, every log record sent to the main process."""
+    one_thread()
     handler = logging.handlers.QueueHandler(queue)
     handler.addFilter(_JobPrefix())
     root = logging.getLogger()
@@ -89,43 +127,33 @@ def run_parallel(
         The collections by seed and the results by (seed, D).
     """
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, Future, wait
 
     settings = job.settings
-    context = multiprocessing.get_context("spawn")
-    queue = context.Queue()
+    queue = multiprocessing.get_context("spawn").Queue()
     listener = logging.handlers.QueueListener(queue, _Dispatch())
     level = logging.getLogger("cpmp").getEffectiveLevel()
     collected: dict[int, Any] = {}
     results: dict[tuple[int, int], dict[str, Any]] = {}
     listener.start()
-    pool = ProcessPoolExecutor(workers, context, initializer=_init_worker, initargs=(queue, level))
-    # Workers show no progress bars (two would overwrite each other; their prefixed log lines
-    # show the progress): tqdm reads TQDM_DISABLE when imported, so a worker must inherit it.
-    bars = os.environ.get("TQDM_DISABLE")
-    os.environ["TQDM_DISABLE"] = "1"
     try:
-        pending: dict[Future, tuple[int, int | None]] = {
-            pool.submit(_labelled, f"seed {seed}", collect, job, run_dir, seed): (seed, None)
-            for seed in settings.seeds
-        }
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in done:
-                seed, d = pending.pop(future)
-                if d is not None:
-                    results[seed, d] = future.result()
-                    continue
-                collected[seed] = data = future.result()
-                for size in sorted(settings.train_sizes, reverse=True):
-                    label = f"seed {seed} D={size}"
-                    training = pool.submit(_labelled, label, train_size, job, run_dir, data, size)
-                    pending[training] = (seed, size)
+        with spawned_pool(workers, _init_worker, (queue, level)) as pool:
+            pending: dict[Future, tuple[int, int | None]] = {
+                pool.submit(_labelled, f"seed {seed}", collect, job, run_dir, seed): (seed, None)
+                for seed in settings.seeds
+            }
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    seed, d = pending.pop(future)
+                    if d is not None:
+                        results[seed, d] = future.result()
+                        continue
+                    collected[seed] = data = future.result()
+                    for size in sorted(settings.train_sizes, reverse=True):
+                        label = f"seed {seed} D={size}"
+                        args = (label, train_size, job, run_dir, data, size)
+                        pending[pool.submit(_labelled, *args)] = (seed, size)
     finally:
-        if bars is None:
-            del os.environ["TQDM_DISABLE"]
-        else:
-            os.environ["TQDM_DISABLE"] = bars
-        pool.shutdown(wait=True, cancel_futures=True)
         listener.stop()
     return collected, results
