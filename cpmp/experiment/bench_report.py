@@ -57,13 +57,9 @@ def machine_facts(threads: int) -> dict[str, Any]:
 def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
     """Log-log plot of the ``scaling`` section: fit time (klr fit, Newton solve, scikit-learn
     peer) [s] and tick cost (single, batched) [ms] against demonstrations and features."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from cpmp.experiment.plots import new_figure, save_figure
 
-    from cpmp.io import atomic_path
-
-    figure = Figure(figsize=(10, 7), dpi=120, layout="constrained")
-    FigureCanvasAgg(figure)
+    figure = new_figure(10, 7)
     axes = figure.subplots(2, 2)
     for col, (key, label) in enumerate((("demos", "n_demos"), ("features", "n_features"))):
         rows = scaling[key]
@@ -94,10 +90,7 @@ def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
             ax.grid(alpha=0.3, which="both")
             ax.legend(fontsize="small")
     figure.suptitle("Scaling on the synthetic relay task (log-log)")
-    with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png")
-    figure.clear()
-    return Path(path)
+    return save_figure(figure, path)
 
 
 def bench_markdown(result: Mapping[str, Any]) -> str:

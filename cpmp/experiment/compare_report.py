@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 from cpmp.experiment.report import PAPER_TABLE_I, jsonable, mean_std
 from cpmp.experiment.settings import ExperimentSettings
-from cpmp.io import atomic_path
 
 if TYPE_CHECKING:
     from cpmp.experiment.collection import SeedData
@@ -213,19 +212,10 @@ def render_compare(
 
 
 def _figure(width: float, height: float, ncols: int = 1) -> tuple[Any, Any]:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from cpmp.experiment.plots import new_figure  # matplotlib only when plotting
 
-    figure = Figure(figsize=(width, height), dpi=120, layout="constrained")
-    FigureCanvasAgg(figure)
+    figure = new_figure(width, height)
     return figure, figure.subplots(1, ncols, squeeze=False)[0]
-
-
-def _save(figure: Any, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png")
-    figure.clear()
-    return path
 
 
 _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "<", ">", "*")
@@ -285,7 +275,9 @@ def plot_c_vs_d(
     ax.set_ylim(-5, 105)
     ax.set_title(f"Closed-loop reproduction, seeds {settings.seeds}, {settings.n_boxes} boxes")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    return _save(figure, path)
+    from cpmp.experiment.plots import save_figure
+
+    return save_figure(figure, path)
 
 
 def plot_supports(
@@ -332,4 +324,6 @@ def plot_supports(
     right.set_title(f"{name}: progress error (labels: support_scale)")
     if sweep:
         left.legend(fontsize=8)
-    return _save(figure, path)
+    from cpmp.experiment.plots import save_figure
+
+    return save_figure(figure, path)

@@ -39,13 +39,15 @@ _OTHER_COLOUR = "#e41a1c"  # red: a strategy that was never demonstrated
 _DPI = 120
 
 
-def _new_figure(width: float, height: float) -> Figure:
+def new_figure(width: float, height: float) -> Figure:
+    """An empty figure of ``width`` x ``height`` inches on the Agg canvas (no pyplot)."""
     figure = Figure(figsize=(width, height), dpi=_DPI, layout="constrained")
     FigureCanvasAgg(figure)
     return figure
 
 
-def _save(figure: Figure, path: str | os.PathLike[str]) -> Path:
+def save_figure(figure: Figure, path: str | os.PathLike[str]) -> Path:
+    """Write ``figure`` as a PNG to ``path`` atomically and free it; returns the path."""
     with atomic_path(path) as tmp:
         figure.savefig(tmp, format="png")
     figure.clear()
@@ -118,7 +120,7 @@ def plot_progress_field(
     if not np.all(np.isfinite(values)):
         raise DataError("predict returned NaN or inf")
 
-    figure = _new_figure(6.0, 5.0)
+    figure = new_figure(6.0, 5.0)
     ax = figure.add_subplot()
     image = ax.imshow(
         values.reshape(resolution, resolution),
@@ -145,7 +147,7 @@ def plot_progress_field(
     figure.colorbar(image, ax=ax, label="predicted progress φ")
     ax.set(xlim=(x0, x1), ylim=(y0, y1), xlabel="feature $x_1$", ylabel="feature $x_2$")
     ax.set_title(title or "predicted progress")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_progress_curves(
@@ -170,7 +172,7 @@ def plot_progress_curves(
             raise DataError(f"curves for {label!r} must be 1-D arrays of one length, got {shapes}")
 
     n_panels = len(curves_by_label)
-    figure = _new_figure(3.6 * n_panels, 3.6)
+    figure = new_figure(3.6 * n_panels, 3.6)
     axes = figure.subplots(1, n_panels, sharey=True, squeeze=False)[0]
     for ax, (label, curves) in zip(axes, curves_by_label.items(), strict=True):
         time = np.asarray(curves["time"], dtype=float)
@@ -186,7 +188,7 @@ def plot_progress_curves(
     axes[0].legend(loc="upper left", fontsize="small")
     if title:
         figure.suptitle(title)
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def _cell_edges(centres: np.ndarray) -> np.ndarray:
@@ -264,7 +266,7 @@ def plot_strategy_map(
     colours = [*_STRATEGY_COLOURS, *(f"C{k + 3}" for k in range(max(0, other - 3)))][:other]
     colours.append(_OTHER_COLOUR)
 
-    figure = _new_figure(6.8, 5.0)
+    figure = new_figure(6.8, 5.0)
     ax = figure.add_subplot()
     x_edges, y_edges = _cell_edges(widths), _cell_edges(depths)
     ax.pcolormesh(
@@ -314,7 +316,7 @@ def plot_strategy_map(
     )
     accuracy = 1.0 - mismatch.mean()
     ax.set_title(title or f"chosen initial strategy ({accuracy:.1%} correct)")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def _is_number(value: Any) -> bool:
@@ -359,7 +361,7 @@ def plot_sweep(
 
     x_values = list(dict.fromkeys(row[x] for row in table))
     numeric = all(_is_number(v) for v in x_values)
-    figure = _new_figure(6.0, 4.0)
+    figure = new_figure(6.0, 4.0)
     ax: Axes = figure.add_subplot()
     width = 0.8 / len(series)
     for k, (name, group) in enumerate(series.items()):
@@ -381,7 +383,7 @@ def plot_sweep(
     if hue is not None:
         ax.legend(fontsize="small")
     ax.set_title(title or f"{y} by {x}" + (f" and {hue}" if hue else ""))
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 __all__ = [
