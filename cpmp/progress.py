@@ -24,7 +24,7 @@ import numpy as np
 from cpmp.errors import ConfigError, DataError
 
 if TYPE_CHECKING:
-    from cpmp.data import Demonstration
+    from cpmp.data.demonstration import Demonstration
 
 
 def _as_trajectory(features: np.ndarray) -> np.ndarray:
@@ -159,7 +159,7 @@ def path_trajectory(features: np.ndarray, noise: str) -> np.ndarray:
 
     Every function below that takes ``noise`` starts with this step; on its result they
     measure with ``noise="none"``. Denoising being the costly part, a fit takes this step
-    once per activation (:func:`cpmp.fit_data.node_training_data`) and hands the result on
+    once per activation (:func:`cpmp.sequencer.fit_data.node_training_data`) and hands the result on
     in :attr:`~cpmp.predictors.NodeData.paths`.
     """
     x = _as_trajectory(features)

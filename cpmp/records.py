@@ -1,8 +1,8 @@
 """The records every layer shares: a transition, a sequencer note, a control tick, and the
 policy protocols a closed loop drives.
 
-The sequencer (:mod:`cpmp.sequencer`), the simulator runner (:mod:`cpmp.sim.runner`), the
-recordings (:mod:`cpmp.experiment.recording`) and the evaluation (:mod:`cpmp.evaluation`) all
+The sequencer (:mod:`cpmp.sequencer.sequencer`), the simulator runner (:mod:`cpmp.sim.runner`), the
+recordings (:mod:`cpmp.recordings`) and the evaluation (:mod:`cpmp.evaluation.offline`) all
 speak in these types. A producer fills the fields it knows; the others keep their documented
 defaults. (A demonstration's activations, :class:`cpmp.data.Activation`, live beside the
 demonstration record.)
@@ -99,7 +99,7 @@ class Policy(Protocol):
 
 
 class BatchedPolicy(Protocol):
-    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.batches.BatchedSequencer`.
+    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.sequencer.batch.BatchedSequencer`.
     ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool marks the episodes still running (the others'
     rows are to be ignored); the result holds one mapping variable -> MP per episode."""
 

@@ -7,7 +7,7 @@ python scripts/aggregate.py sweep_dir=logs/experiment-multirun/<timestamp>
 The files are written into sweep_dir; the path of aggregate.json is printed last.
 """
 
-from cpmp.experiment.cli import aggregate_main
+from cpmp.cli.main import aggregate_main
 
 if __name__ == "__main__":
     aggregate_main()

@@ -6,7 +6,7 @@ python scripts/bench.py --quick                       # small sizes (see docs/be
 python scripts/bench.py --sections fit,sequencer --fit-demos 6 --out logs/bench/mine
 """
 
-from cpmp.experiment.bench_cli import bench_main
+from cpmp.benchmarks.cli import bench_main
 
 if __name__ == "__main__":
     raise SystemExit(bench_main())

@@ -4,7 +4,7 @@ python scripts/bench_sequencer.py                      # synthetic demos
 python scripts/bench_sequencer.py --data demos.h5      # your own (or collected) demos
 """
 
-from cpmp.experiment.bench_cli import bench_sequencer_main
+from cpmp.benchmarks.cli import bench_sequencer_main
 
 if __name__ == "__main__":
     raise SystemExit(bench_sequencer_main())

@@ -6,7 +6,7 @@ Usage: python scripts/bench_sim.py [--width 0.25 --depth 0.15 --threads 1 --demo
 times the full loop with a sequencer fitted on ``--demos`` demonstrations (0 skips it).
 """
 
-from cpmp.experiment.bench_cli import bench_sim_main
+from cpmp.benchmarks.cli import bench_sim_main
 
 if __name__ == "__main__":
     raise SystemExit(bench_sim_main())

@@ -4,7 +4,7 @@ method and single options switched off, over training sizes and seeds. Prints JS
 python scripts/bench_synthetic.py [--seeds 0 1 2] [--sizes 3 6 9] [--episodes 20] [--out FILE]
 """
 
-from cpmp.experiment.bench_cli import bench_synthetic_main
+from cpmp.benchmarks.cli import bench_synthetic_main
 
 if __name__ == "__main__":
     raise SystemExit(bench_synthetic_main())

@@ -4,7 +4,7 @@
 python scripts/collect.py n_demos=15 seed=0 balanced=true task.width_range=[0.1,0.3]
 """
 
-from cpmp.experiment.cli import collect_main
+from cpmp.cli.main import collect_main
 
 if __name__ == "__main__":
     collect_main()

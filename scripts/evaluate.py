@@ -3,7 +3,7 @@
 python scripts/evaluate.py checkpoint=logs/train/.../model.pt data.path=my_demos.h5
 """
 
-from cpmp.experiment.cli import evaluate_main
+from cpmp.cli.main import evaluate_main
 
 if __name__ == "__main__":
     evaluate_main()

@@ -5,7 +5,7 @@ python scripts/experiment.py experiment=full      # the paper's sizes over 5 see
 python scripts/experiment.py -m launcher=joblib predictor=klr,klr_sparse,mlp
 """
 
-from cpmp.experiment.cli import experiment_main
+from cpmp.cli.main import experiment_main
 
 if __name__ == "__main__":
     experiment_main()

@@ -3,7 +3,7 @@
 python scripts/progress_field.py [predictor=klr_sparse]
 """
 
-from cpmp.experiment.cli import progress_field_main
+from cpmp.cli.main import progress_field_main
 
 if __name__ == "__main__":
     progress_field_main()

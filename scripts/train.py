@@ -3,7 +3,7 @@
 python scripts/train.py data.path=my_demos.h5 predictor=klr
 """
 
-from cpmp.experiment.cli import train_main
+from cpmp.cli.main import train_main
 
 if __name__ == "__main__":
     train_main()

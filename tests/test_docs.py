@@ -53,7 +53,7 @@ def test_readme_python_api_runs(tmp_path, monkeypatch):
 
 
 def test_data_format_examples_run_and_load(tmp_path, monkeypatch):
-    from cpmp.datafile import load_demonstrations
+    from cpmp.data.datafile import load_demonstrations
 
     monkeypatch.chdir(tmp_path)
     ns = run_blocks("docs/data_format.md")

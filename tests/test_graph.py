@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cpmp.data import Demonstration
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import CpmpError, DataError, UnknownMPError
 from cpmp.graph import SequenceGraph, build_graph, build_graphs
 

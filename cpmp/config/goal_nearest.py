@@ -1,5 +1,5 @@
 """The options of the goal-nearest baseline (``conf/sequencer/goal_nearest.yaml``; the baseline
-itself is :mod:`cpmp.goal_nearest`)."""
+itself is :mod:`cpmp.baselines.goal_nearest`)."""
 
 from __future__ import annotations
 

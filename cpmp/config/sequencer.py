@@ -8,9 +8,9 @@ from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError
 
 SWITCH_RULES = ("paper", "plateau")
-"""Values of :attr:`SequencerConfig.switch_rule` (see :mod:`cpmp.switching`)."""
+"""Values of :attr:`SequencerConfig.switch_rule` (see :mod:`cpmp.sequencer.switching`)."""
 COUPLINGS = ("none", "context")
-"""Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.switching`)."""
+"""Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.sequencer.switching`)."""
 NONFINITE_POLICIES = ("hold", "raise")
 """Values of :attr:`SequencerConfig.nonfinite`."""
 START_KERNELS = ("shared", "isotropic")
@@ -37,11 +37,11 @@ class SequencerConfig:
         switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
             min_improvement``, the paper's sentence read literally) or ``plateau`` (``p`` above
             the threshold for ``patience`` without a new maximum, cpmp's earlier rule); see
-            :mod:`cpmp.switching`.
+            :mod:`cpmp.sequencer.switching`.
         coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
             hold back a transition while another variable runs an MP never seen at that
             demonstrated switch, or one that has progressed less than at every demonstrated
-            one (learned from the labels; see :mod:`cpmp.switching`).
+            one (learned from the labels; see :mod:`cpmp.sequencer.switching`).
         progress_margin: with ``coupling=context``, another variable's MP counts as not far
             enough while its predicted φ is more than this below the least progress it had at
             a demonstrated switch (``None``: compare MPs only).

@@ -47,8 +47,8 @@ class TrainerConfig:
         lbfgs_history_size: LBFGS memory: the number of past updates kept (>= 1).
         early_stopping: lower the rate of an Adam fit (``mlp``, ``klr_sparse``'s sparsity
             phase) when the training loss stops improving, and stop it at the last such
-            plateau (see :class:`cpmp.training.LossPlateau`); ``False`` runs every epoch of the
-            budget. Convex solvers run their epochs regardless.
+            plateau (see :class:`cpmp.predictors.training.LossPlateau`); ``False`` runs every epoch
+            of the budget. Convex solvers run their epochs regardless.
         early_stopping_tol: an epoch improves on the best loss so far only if it lowers it by
             more than this fraction of its magnitude (>= 0).
         early_stopping_patience: after this many epochs in a row without such an

@@ -1,6 +1,12 @@
-"""Experiment outputs: rerun recordings of episodes (:mod:`cpmp.experiment.recording`) and the
-paper's figures (:mod:`cpmp.experiment.plots`).
+"""The main job (``cpmp-experiment``): the paper's evaluation with the simulator in front.
 
-Both submodules import their heavy dependencies (rerun, matplotlib) lazily or on import of the
-submodule itself, so ``import cpmp.experiment`` stays cheap.
+One module per stage, run in turn by ``jobs``: ``collection`` (scripted demonstrations and
+splits), ``fitting`` (a sequencer per training size), offline progress error
+(:mod:`cpmp.evaluation`), ``reproduction`` (closed-loop episodes, Table I), ``strategies``
+(the start-strategy map, Fig. 7), ``report`` (seeds pooled, ``report.json`` / ``report.md``,
+figures from ``plots``). ``settings`` says what a job is, ``config`` registers the schemas
+with Hydra and types a composed config, ``workers`` runs seeds and sizes in spawned
+processes, ``checkpoint_jobs`` are ``cpmp-train`` / ``cpmp-evaluate`` for your own data.
+
+Submodules import their heavy dependencies themselves, so ``import cpmp.experiment`` is cheap.
 """

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.evaluation import evaluate_offline
+from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.config import job_fit_settings
 from cpmp.experiment.console import stage
 from cpmp.experiment.fitting import train_sequencer
@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
     """The ``data`` group's file (checked to exist) and split; ``split: auto`` means
     ``auto_split`` when the file has that mask, else every demonstration."""
-    from cpmp.datafile import list_splits
+    from cpmp.data.datafile import list_splits
 
     if not cfg.data.get("path"):
         raise ConfigError("data.path is required: give an HDF5 file of demonstrations")
@@ -38,7 +38,7 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
     save ``model.pt`` into ``run_dir``; returns the checkpoint path."""
     settings = job_fit_settings(cfg)
-    from cpmp.datafile import load_demonstrations
+    from cpmp.data.datafile import load_demonstrations
 
     path, split = _demo_file(cfg, "train")
     demos = load_demonstrations(path, split=split)
@@ -57,8 +57,8 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
 def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     """Evaluate a checkpoint offline on a file's test split: progress MAE per node, replay of the
     recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON."""
-    from cpmp.checkpoints import load_sequencer
-    from cpmp.datafile import load_demonstrations
+    from cpmp.data.datafile import load_demonstrations
+    from cpmp.evaluation.checkpoints import load_sequencer
     from cpmp.experiment.plots import plot_progress_curves
 
     if not cfg.get("checkpoint"):
@@ -105,8 +105,8 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
 def _model_entry(seq: Any) -> dict[str, Any]:
     """What an evaluated checkpoint is: ``sequencer`` (``learned`` or ``goal_nearest``) and
     ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is)."""
+    from cpmp.baselines.goal_nearest import GoalNearestSequencer
     from cpmp.config.goal_nearest import KIND
-    from cpmp.goal_nearest import GoalNearestSequencer
 
     if isinstance(seq, GoalNearestSequencer):
         entry = predictor_entry("none", {}, {"kind": KIND})

@@ -44,7 +44,7 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
     """Stage 1 of one seed: record its demonstrations (saved as ``seed_<s>/demos.h5`` with the
     train/test split) and the demonstrator's run on every reproduction box. ``job``: the
     typed job (or its composed config, converted here)."""
-    from cpmp.datafile import save_demonstrations
+    from cpmp.data.datafile import save_demonstrations
     from cpmp.sim import sample_box
     from cpmp.sim.collect import sample_boxes
     from cpmp.sim.simulation import shared_kinematics
@@ -66,7 +66,7 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
         if failed:
             raise RuntimeError(f"the scripted demonstrator failed on {failed}")
         if settings.record_demos:
-            from cpmp.experiment.demo_recording import record_demo_rrd
+            from cpmp.recordings.demos import record_demo_rrd
 
             (seed_dir / "recordings").mkdir(exist_ok=True)
             for demo, box in zip(demos, boxes, strict=True):
@@ -84,7 +84,7 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
         expected = _record_together(repro_boxes, task, None, "expected")
     signatures = strategy_signatures(train)
     if settings.feature_noise > 0:
-        from cpmp.augment import add_feature_noise
+        from cpmp.data.augment import add_feature_noise
 
         train = add_feature_noise(train, settings.feature_noise, seed=seed)
     return SeedData(seed, train, test, repro_boxes, expected, signatures, seconds)

@@ -2,7 +2,7 @@
 
 **Registration** (:func:`register_configs`, run on import): the option dataclasses of
 :mod:`cpmp.config` (and :class:`~cpmp.experiment.settings.ExperimentSettings`,
-:class:`~cpmp.experiment.compare_settings.CompareSettings`) are stored in Hydra's ConfigStore
+:class:`~cpmp.compare.settings.CompareSettings`) are stored in Hydra's ConfigStore
 as ``schema_task``, ``schema_trainer``, ``schema_sequencer``, ``schema_experiment``,
 ``schema_compare``, ``schema_sequencer_goal_nearest`` (the baseline's options and its ``kind``)
 and one ``schema_predictor_<kind>`` per predictor kind (its options and ``kind``). Each option
@@ -16,7 +16,7 @@ validate themselves (``__post_init__``) and are what the stages and
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit_config` take.
 
 Importing this module costs Hydra and OmegaConf only (no torch, Lightning or MuJoCo): the
-command line is checked before those are loaded (:mod:`cpmp.experiment.cli_checks`).
+command line is checked before those are loaded (:mod:`cpmp.cli.checks`).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from collections.abc import Mapping
 from dataclasses import field
 from typing import Any
 
+from cpmp.compare.settings import CompareSettings
 from cpmp.config import (
     PREDICTOR_CONFIGS,
     FitConfig,
@@ -40,7 +41,6 @@ from cpmp.config import (
 )
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
-from cpmp.experiment.compare_settings import CompareSettings
 from cpmp.experiment.settings import ExperimentJob, ExperimentSettings, FitSettings
 
 

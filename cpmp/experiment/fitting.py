@@ -12,7 +12,7 @@ from cpmp.experiment.config import fit_settings
 from cpmp.experiment.settings import FitSettings
 
 if TYPE_CHECKING:
-    from cpmp.data import Demonstration
+    from cpmp.data.demonstration import Demonstration
 
 
 def train_sequencer(
@@ -23,13 +23,13 @@ def train_sequencer(
 ) -> Any:
     """Fit the sequencer ``settings`` describe on ``demos`` with ``seed`` (Lightning logs into
     ``log_dir`` when set): a :class:`~cpmp.sequencer.ConcurrentSequencer`, or the
-    :class:`~cpmp.goal_nearest.GoalNearestSequencer` baseline (no predictor, no trainer)."""
+    :class:`~cpmp.baselines.GoalNearestSequencer` baseline (no predictor, no trainer)."""
     if settings.goal_nearest is not None:
-        from cpmp.goal_nearest import GoalNearestSequencer
+        from cpmp.baselines.goal_nearest import GoalNearestSequencer
 
         options = dataclasses.asdict(settings.goal_nearest)
         return GoalNearestSequencer.fit(list(demos), seed=seed, **options)
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     fit = settings.fit
     trainer = fit.trainer

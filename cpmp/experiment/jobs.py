@@ -1,10 +1,11 @@
 """The main job, stage by stage: collect each seed's demonstrations
 (:mod:`~cpmp.experiment.collection`), then per training size D fit
-(:mod:`~cpmp.experiment.fitting`), evaluate offline (:func:`cpmp.evaluation.evaluate_offline`),
-reproduce (:mod:`~cpmp.experiment.reproduction`) and draw the strategy map
+(:mod:`~cpmp.experiment.fitting`), evaluate offline
+(:func:`cpmp.evaluation.offline.evaluate_offline`), reproduce
+(:mod:`~cpmp.experiment.reproduction`) and draw the strategy map
 (:mod:`~cpmp.experiment.strategies`); pool the seeds and write the report
-(:mod:`~cpmp.experiment.report`). With ``experiment.workers > 1`` the seeds and training sizes
-run on a process pool (:mod:`~cpmp.experiment.workers`)."""
+(:mod:`~cpmp.experiment.report`). With ``experiment.workers > 1`` the seeds and training sizes run
+on a process pool (:mod:`~cpmp.experiment.workers`)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.evaluation import evaluate_offline
+from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.collection import SeedData, collect_seed
 from cpmp.experiment.config import experiment_job
 from cpmp.experiment.console import timed
@@ -47,10 +48,10 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
     in a serial run. ``timings.json`` holds the wall time of every stage.
 
     A config with a ``compare`` node (``experiment=compare``) runs
-    :func:`cpmp.experiment.compare.run_compare` instead and returns ``compare.json``.
+    :func:`cpmp.compare.job.run_compare` instead and returns ``compare.json``.
     """
     if cfg.get("compare") is not None:
-        from cpmp.experiment.compare import run_compare
+        from cpmp.compare.job import run_compare
 
         return run_compare(cfg, run_dir)
     run_dir = Path(run_dir)

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 CURVE_KEYS = ("time", "predicted_mean", "predicted_std", "expected_mean")
 """Keys :func:`plot_progress_curves` needs in each curves dict (see
-:func:`cpmp.evaluation.progress_curves`)."""
+:func:`cpmp.evaluation.offline.progress_curves`)."""
 
 _STRATEGY_COLOURS = ("#4daf4a", "#ffd92f", "#377eb8")  # green, yellow, blue as in the paper
 _OTHER_COLOUR = "#e41a1c"  # red: a strategy that was never demonstrated
@@ -158,7 +158,7 @@ def plot_progress_curves(
     """Fig. 6: mean predicted progress over normalised time with a ±2 std band, the mean
     expected progress (dashed) and the ideal diagonal; one panel per label (e.g. "3 demos").
 
-    Each value is a dict from :func:`cpmp.evaluation.progress_curves` (needs
+    Each value is a dict from :func:`cpmp.evaluation.offline.progress_curves` (needs
     :data:`CURVE_KEYS`).
     """
     if not curves_by_label:

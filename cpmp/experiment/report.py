@@ -51,8 +51,9 @@ def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
 
 
 GOAL_NEAREST = "goal_nearest"
-"""The ``sequencer.kind`` of the baseline without a progress predictor (:mod:`cpmp.goal_nearest`;
-kept as a string here so that writing a report imports no model code)."""
+"""The ``sequencer.kind`` of the baseline without a progress predictor
+(:mod:`cpmp.baselines.goal_nearest`; kept as a string here so that writing a report imports no
+model code)."""
 
 NEAREST_PROGRESS_NOTE = (
     "sequencer=goal_nearest trains no progress predictor (the predictor group is not used); "
@@ -190,7 +191,7 @@ def experiment_files(job: ExperimentJob) -> dict[str, str]:
     if job.fit.goal_nearest is not None:  # no predictor: nothing for Lightning to fit
         del files["seed_<s>/lightning/D<d>/"]
         files["seed_<s>/model_D<d>.pt"] = (
-            "goal_nearest checkpoints (cpmp.checkpoints.load_sequencer)"
+            "goal_nearest checkpoints (cpmp.evaluation.checkpoints.load_sequencer)"
         )
     return files
 
@@ -211,7 +212,7 @@ def write_figures(
         strategy_map: :func:`cpmp.experiment.strategies.strategy_map`'s result with
             ``train_boxes``, (width, depth) of the training demonstrations.
     """
-    from cpmp.evaluation import progress_curves
+    from cpmp.evaluation.offline import progress_curves
     from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map
 
     settings = job.settings

@@ -12,14 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cpmp.evaluation import continuous_features, switch_distances
+from cpmp.evaluation.offline import continuous_features, switch_distances
 from cpmp.experiment.console import progress_bar
 from cpmp.experiment.strategies import classify_start
 
 if TYPE_CHECKING:
-    from cpmp.data import Demonstration
+    from cpmp.data.demonstration import Demonstration
     from cpmp.experiment.collection import SeedData
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
     from cpmp.sim import Box, TaskConfig
 
 log = logging.getLogger(__name__)
@@ -94,7 +94,7 @@ def reproduce(
     episodes are written into ``record_dir`` as ``.rrd`` (the choices of
     :attr:`~cpmp.experiment.settings.ExperimentSettings.record`; nothing without ``record_dir``).
     """
-    from cpmp.experiment.recording import EpisodeRecorder
+    from cpmp.recordings import EpisodeRecorder
     from cpmp.sim import Simulation, correct_strategy
     from cpmp.sim.runner import run_episodes
 

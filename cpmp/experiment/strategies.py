@@ -14,8 +14,8 @@ from cpmp.errors import DataError
 from cpmp.experiment.console import progress_bar
 
 if TYPE_CHECKING:
-    from cpmp.data import Demonstration
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.data.demonstration import Demonstration
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
     from cpmp.sim import TaskConfig
 
 OTHER = "other"

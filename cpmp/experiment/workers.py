@@ -1,7 +1,7 @@
 """The main job's worker processes: a spawned process pool running each seed's collection and
 then each of its training sizes, one torch thread per worker, every worker's log records sent to
 the main process (prefixed with their job) and handed to its handlers. :func:`spawned_pool`
-is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.experiment.compare_jobs`)."""
+is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.compare.runs`)."""
 
 from __future__ import annotations
 

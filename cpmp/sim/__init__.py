@@ -14,7 +14,7 @@ benchmark). The options are :class:`~cpmp.config.task.TaskConfig`.
 """
 
 from cpmp.config.task import TaskConfig
-from cpmp.data import mp_sequences
+from cpmp.data.demonstration import mp_sequences
 from cpmp.records import BatchedPolicy, TickInfo
 from cpmp.sim.collect import record_demonstration, record_demonstrations
 from cpmp.sim.demonstrator import ScriptedDemonstrator

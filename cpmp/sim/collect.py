@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from cpmp.config.task import TaskConfig, as_task_config
-from cpmp.data import Demonstration
-from cpmp.datafile import save_demonstrations
+from cpmp.data.datafile import save_demonstrations
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.policies import per_episode

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.data import Demonstration
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import BatchedPolicy, Policy
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from cpmp.config.task import TaskConfig, as_task_config
-from cpmp.data import Demonstration, mp_sequences
+from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import UnknownMPError
 from cpmp.records import BatchedPolicy, Policy, TickInfo, TransitionEvent
 from cpmp.sim.collect import record_demonstrations

@@ -14,6 +14,7 @@ import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from cpmp.compare.settings import CompareSettings, SweepSettings
 from cpmp.config import (
     ACTIVATIONS,
     PREDICTOR_CONFIGS,
@@ -27,7 +28,6 @@ from cpmp.config import (
 )
 from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
-from cpmp.experiment.compare_settings import CompareSettings, SweepSettings
 from cpmp.experiment.config import (
     experiment_job,
     fit_settings,
@@ -114,7 +114,7 @@ def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
     """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
     ``fit(demos)`` with no options is the main job's default configuration."""
     from cpmp.config import predictor_config
-    from cpmp.sequencer import PAPER_OPTIONS
+    from cpmp.sequencer.sequencer import PAPER_OPTIONS
 
     seq_keys = set(SequencerConfig.__dataclass_fields__)
 
@@ -337,7 +337,7 @@ def test_the_schema_rejects_a_value_of_the_wrong_type(override, key):
 
 
 def test_learned_policy_of_the_simulator_benchmark_is_the_main_jobs_default():
-    from cpmp.sim.bench import LEARNED_POLICY
+    from cpmp.benchmarks.sim_speed import LEARNED_POLICY
 
     main = job_fit_settings(compose_cfg("experiment")).fit
     assert FitConfig.from_options(**LEARNED_POLICY) == main
@@ -375,8 +375,8 @@ def test_experiment_job_is_typed_and_picklable():
 
 
 def test_keyword_fit_is_the_typed_fit(tmp_path):
-    from cpmp.sequencer import ConcurrentSequencer
-    from cpmp.synthetic import make_demonstrations
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+    from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)
     by_keyword = ConcurrentSequencer.fit(
@@ -506,7 +506,7 @@ def test_evaluate_without_checkpoint_or_with_missing_one(tmp_path):
 
 def test_evaluate_with_missing_demo_file(tmp_path):
     from cpmp.experiment.fitting import fit_sequencer
-    from cpmp.synthetic import make_demonstrations
+    from cpmp.worlds.two_point import make_demonstrations
 
     cfg = compose_cfg("train", ["trainer.logger=null"])
     seq = fit_sequencer(make_demonstrations(2, seed=0), cfg.predictor, None, cfg.trainer)
@@ -542,7 +542,7 @@ def test_fit_sequencer_with_the_default_trainer_config(predictor):
     """The trainer's ``lr`` (null by default) and an Adam predictor's own ``lr`` must not clash;
     a trainer ``lr`` that is set overrides the predictor's."""
     from cpmp.experiment.fitting import fit_sequencer
-    from cpmp.synthetic import make_demonstrations
+    from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)
     overrides = [f"predictor={predictor}", "trainer.logger=null", "trainer.max_epochs=2"]

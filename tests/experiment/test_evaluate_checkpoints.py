@@ -1,6 +1,6 @@
 """``cpmp-evaluate`` reads every checkpoint kind ``cpmp-train`` and the main job write (every
 predictor option with the learned sequencer, and the ``goal_nearest`` baseline) through one
-loader, :func:`cpmp.checkpoints.load_sequencer`."""
+loader, :func:`cpmp.evaluation.checkpoints.load_sequencer`."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import json
 import pytest
 from hydra import compose, initialize_config_dir
 
-from cpmp.checkpoints import load_sequencer
-from cpmp.datafile import load_demonstrations
-from cpmp.evaluation import activation_progress, progress_errors, replay_demonstrations
+from cpmp.baselines.goal_nearest import GoalNearestSequencer
+from cpmp.cli.main import CONF_DIR
+from cpmp.data.datafile import load_demonstrations
+from cpmp.evaluation.checkpoints import load_sequencer
+from cpmp.evaluation.offline import activation_progress, progress_errors, replay_demonstrations
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
-from cpmp.experiment.cli import CONF_DIR
-from cpmp.goal_nearest import GoalNearestSequencer
-from cpmp.sequencer import ConcurrentSequencer
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 PREDICTORS = sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml"))
 FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.epochs=20"]}

@@ -13,12 +13,12 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from cpmp.datafile import load_demonstrations
+from cpmp.cli.main import inspect_rrd_main
+from cpmp.data.datafile import load_demonstrations
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
-from cpmp.experiment.cli import inspect_rrd_main
 from cpmp.experiment.jobs import run_experiment
-from cpmp.experiment.recording import read_recording
-from cpmp.synthetic import make_demonstrations
+from cpmp.recordings import read_recording
+from cpmp.worlds.two_point import make_demonstrations
 
 # One thread: a second busy process on a 2-core machine slows torch's default two threads
 # down many times over; the script below runs with one thread too (cli.run_job).
@@ -106,9 +106,9 @@ def test_report_counts_and_distances_are_those_of_the_episodes(tiny):
 def test_report_progress_and_strategy_map_are_those_of_the_checkpoint(tiny):
     """The saved model, evaluated again on the saved test split and over the strategy grid,
     gives the report's progress errors and strategy-map accuracy."""
-    from cpmp.evaluation import activation_progress, progress_errors
+    from cpmp.evaluation.offline import activation_progress, progress_errors
     from cpmp.experiment.strategies import strategy_map, strategy_signatures
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
     from cpmp.sim import TaskConfig
 
     report = json.loads(tiny["report_path"].read_text())
@@ -141,7 +141,7 @@ def test_files_written(tiny):
     # tiny: 2 demos per strategy, 1 of each for training
     assert len(load_demonstrations(demos_h5, split="train")) == 3
     assert len(load_demonstrations(demos_h5, split="test")) == 3
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     seq = ConcurrentSequencer.load(run / "seed_0" / "model_D3.pt")
     assert set(seq.graphs) == set(load_demonstrations(demos_h5)[0].variables)
@@ -214,7 +214,7 @@ def test_script_prints_report_path_last_and_same_numbers(tiny):
 @pytest.fixture(scope="module")
 def demo_rrd(tiny) -> Path:
     """The first collected demonstration of the tiny run, replayed into an ``.rrd``."""
-    from cpmp.experiment.demo_recording import record_demo_rrd
+    from cpmp.recordings.demos import record_demo_rrd
     from cpmp.sim import Box, TaskConfig
 
     demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
@@ -226,7 +226,7 @@ def demo_rrd(tiny) -> Path:
 
 
 def test_demo_replayed_into_rrd(tiny, demo_rrd):
-    from cpmp.experiment.demo_recording import label_switches
+    from cpmp.recordings.demos import label_switches
 
     demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
     meta = demo.metadata
@@ -253,7 +253,7 @@ def test_demo_replayed_into_rrd(tiny, demo_rrd):
 
 def test_demo_rrd_rejects_non_simulator_demos(tiny, tmp_path):
     from cpmp.errors import DataError
-    from cpmp.experiment.demo_recording import record_demo_rrd
+    from cpmp.recordings.demos import record_demo_rrd
     from cpmp.sim import Box, TaskConfig
 
     synthetic = make_demonstrations(1, seed=0)[0]
@@ -303,8 +303,8 @@ def test_evaluate_checkpoint_on_test_split(checkpoint, demo_file, tmp_path):
 
 
 def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
-    from cpmp.evaluation import activation_progress
-    from cpmp.sequencer import ConcurrentSequencer
+    from cpmp.evaluation.offline import activation_progress
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     again = train(demo_file, tmp_path / "again")
     test = load_demonstrations(demo_file, split="test")
@@ -330,8 +330,8 @@ def test_bad_worker_count_is_a_config_error(bad):
 @pytest.mark.parametrize("bad", ["1.5", "true"])
 def test_bad_worker_override_is_refused_at_composition(bad):
     """Not an integer: the schema refuses the override before any job is built."""
+    from cpmp.cli.main import check_command
     from cpmp.errors import ConfigError
-    from cpmp.experiment.cli import check_command
 
     with pytest.raises(ConfigError, match=r"experiment\.workers"):
         check_command("experiment", ["experiment=tiny", f"experiment.workers={bad}"])

@@ -1,5 +1,5 @@
 """Figures: PNG output and argument validation (the statistics behind Fig. 6 are tested with
-:func:`cpmp.evaluation.progress_curves` in ``tests/test_evaluation.py``)."""
+:func:`cpmp.evaluation.offline.progress_curves` in ``tests/test_evaluation.py``)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from matplotlib.colors import to_rgb
 from matplotlib.image import imread
 
 from cpmp.errors import ConfigError, DataError
-from cpmp.evaluation import progress_curves
+from cpmp.evaluation.offline import progress_curves
 from cpmp.experiment.plots import (
     plot_progress_curves,
     plot_progress_field,

@@ -7,8 +7,8 @@ import dataclasses
 
 import numpy as np
 
-from cpmp.data import Demonstration
-from cpmp.datafile import load_demonstrations, save_demonstrations
+from cpmp.data.datafile import load_demonstrations, save_demonstrations
+from cpmp.data.demonstration import Demonstration
 from cpmp.sim import (
     STRATEGIES,
     Box,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpmp.data import Demonstration
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.sim.policies import PolicyList, ReplayPolicy, as_batched, per_episode
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cpmp.errors import ConfigError, UnknownMPError
-from cpmp.sequencer import ConcurrentSequencer
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import (
     Box,
     Simulation,

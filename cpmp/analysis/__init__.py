@@ -1,0 +1,3 @@
+"""Analysis of finished runs: ``aggregate`` tables and plots a Hydra sweep of the main job,
+``progress_field`` draws the worked progress-field example (paper Fig. 3) on synthetic data.
+"""

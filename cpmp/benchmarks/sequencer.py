@@ -1,0 +1,209 @@
+"""The sequencer's cost without the simulator: each predictor fitted and stepped
+(:func:`bench_sequencer`, ``scripts/bench_sequencer.py``), one episode at a time against
+batched episodes (:func:`bench_ticks`, the ``sequencer`` section of ``scripts/bench.py``), the
+Adam-trained predictors (:func:`bench_gradient`, the ``gradient`` section), and the
+closed-loop outcomes on the synthetic tasks (:func:`synthetic_outcomes`,
+``scripts/bench_synthetic.py``). Every function returns a JSON-ready dict; nothing here
+asserts a speed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cpmp.benchmarks.settings import check_count
+
+if TYPE_CHECKING:
+    from cpmp.benchmarks.settings import BenchSettings
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+TICK_TARGET_MS = 0.1
+"""Issue #9's target for the sequencer: <= 0.1 ms per episode-tick with 20 episodes batched."""
+
+
+def bench_sequencer(
+    demos: Sequence[Any],
+    predictors: Sequence[str],
+    n_ticks: int = 500,
+    seed: int = 0,
+    options: Mapping[str, Mapping[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Fit each predictor on ``demos`` and time :meth:`ConcurrentSequencer.step` over the first
+    demo's feature stream (``n_ticks`` ticks, cycling).
+
+    ``options``: per predictor kind, extra :meth:`ConcurrentSequencer.fit` options.
+
+    Returns per predictor: fit time [s], epochs run (the fit summary's ``epochs``), final
+    loss, step latency mean/p95 [ms], nodes, support points, parameter count and bytes.
+    """
+    import torch
+
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+    out: dict[str, Any] = {
+        "n_demos": len(demos),
+        "n_features": int(demos[0].n_features),
+        "torch_threads": torch.get_num_threads(),
+        "predictors": {},
+    }
+    stream = demos[0].features
+    for kind in predictors:
+        extra = dict((options or {}).get(kind, {}))
+        start = time.perf_counter()
+        seq = ConcurrentSequencer.fit(list(demos), kind, seed=seed, logger=None, **extra)
+        fit_s = time.perf_counter() - start
+        seq.reset(0.0, stream[0])
+        times = np.empty(n_ticks)
+        for k in range(n_ticks):
+            x = stream[(k + 1) % len(stream)]
+            t0 = time.perf_counter()
+            seq.step(0.01 * (k + 1), x)
+            times[k] = time.perf_counter() - t0
+        n_bytes = sum(t.numel() * t.element_size() for t in seq.predictor.state_dict().values())
+        out["predictors"][kind] = {
+            "fit_seconds": fit_s,
+            "epochs": seq.fit_summary.get("epochs"),
+            "max_epochs": extra.get("epochs", getattr(seq.predictor.config, "epochs", None)),
+            "loss": seq.fit_summary.get("loss"),
+            "step_ms_mean": float(times.mean() * 1e3),
+            "step_ms_p95": float(np.percentile(times, 95) * 1e3),
+            "n_nodes": len(seq.node_keys),
+            "n_support_total": seq.fit_summary.get("n_support_total"),
+            "solver": seq.fit_summary.get("solver"),
+            "n_parameters": seq.predictor.n_parameters(),
+            "state_bytes": int(n_bytes),
+        }
+    return out
+
+
+# ------------------------------------------------------------------------ sequencer ticks
+def bench_ticks(
+    seq: ConcurrentSequencer,
+    streams: Sequence[np.ndarray],
+    ticks: int,
+    dt: float = 0.01,
+) -> dict[str, Any]:
+    """Cost of the sequencer per episode-tick: ``len(streams)`` episodes of ``ticks`` ticks,
+    episode ``i`` fed ``streams[i] (n_i, d)`` (its last row once it ends), first one episode at
+    a time with :meth:`ConcurrentSequencer.step`, then all together with one
+    :class:`~cpmp.sequencer.batch.BatchedSequencer` call per tick.
+
+    Returns ``single`` and ``batched`` cost [ms per episode-tick] (mean; single also p95) and
+    whether both made the same transitions (``same_decisions``).
+    """
+    n = len(streams)
+    check_count("streams", n)
+    check_count("ticks", ticks)
+    inputs = np.stack(  # (ticks + 1, N, d)
+        [np.stack([s[min(k, len(s) - 1)] for s in streams]) for k in range(ticks + 1)]
+    )
+    per_call = np.empty((n, ticks))
+    single_events = []
+    for i in range(n):
+        seq.reset(0.0, inputs[0, i])
+        for k in range(1, ticks + 1):
+            start = time.perf_counter()
+            seq.step(k * dt, inputs[k, i])
+            per_call[i, k - 1] = time.perf_counter() - start
+        single_events.append([(e.t, e.variable, e.target) for e in seq.events])
+    batch = seq.batched(n)
+    batch.reset(0.0, inputs[0])
+    start = time.perf_counter()
+    for k in range(1, ticks + 1):
+        batch.step(k * dt, inputs[k])
+    batched = time.perf_counter() - start
+    batched_events = [[(e.t, e.variable, e.target) for e in ev] for ev in batch.events]
+    return {
+        "n_episodes": n,
+        "ticks": ticks,
+        "n_heads": len(seq.predictor.node_keys),
+        "single_ms": float(per_call.mean() * 1e3),
+        "single_ms_p95": float(np.percentile(per_call, 95) * 1e3),
+        "batched_ms": 1e3 * batched / (n * ticks),
+        "speedup": float(per_call.sum() / batched),
+        "target_ms": TICK_TARGET_MS,
+        "meets_target": 1e3 * batched / (n * ticks) <= TICK_TARGET_MS,
+        "same_decisions": single_events == batched_events,
+        "transitions": int(sum(len(e) for e in batched_events)),
+    }
+
+
+def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
+    """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations
+    (:func:`bench_sequencer`): fit time, epochs run, loss, step cost."""
+    from cpmp.worlds.two_point import make_demonstrations
+
+    demos = make_demonstrations(settings.gradient_demos, seed=settings.seed)
+    epochs = settings.gradient_epochs
+    options = {
+        kind: {} if epochs is None else {"epochs": epochs} for kind in settings.gradient_predictors
+    }
+    return bench_sequencer(
+        demos, settings.gradient_predictors, settings.ticks, settings.seed, options
+    )
+
+
+# ------------------------------------------------------------------- synthetic closed loop
+def synthetic_configs() -> dict[str, dict[str, Any]]:
+    """The sequencer options :func:`synthetic_outcomes` compares, by name: cpmp's defaults,
+    single options switched off, and the paper's method (as :meth:`ConcurrentSequencer.fit`
+    options)."""
+    from cpmp.sequencer.sequencer import PAPER_OPTIONS
+
+    return {
+        "defaults": {},
+        "coupling=none": {"coupling": "none"},
+        "switch_rule=plateau": {"switch_rule": "plateau"},
+        "recovery=false": {"recovery": False},
+        "paper": dict(PAPER_OPTIONS),
+    }
+
+
+def synthetic_outcomes(
+    seeds: Sequence[int],
+    sizes: Sequence[int],
+    episodes: int,
+    configs: Sequence[str],
+    on_row: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Closed-loop outcomes on the two synthetic tasks (no simulator): for each task
+    (``two_point``, ``relay``), training size D in ``sizes``, seed and named config of
+    :func:`synthetic_configs`, ``klr`` fitted on D demonstrations and run on ``episodes``
+    episodes (seeded ``1000 + seed``).
+
+    Returns ``{"episodes": episodes, "rows": [...]}``, each row ``task``, ``D``, ``seed``,
+    ``config`` and the counts ``complete``, ``wrong_start``, ``incomplete``; ``on_row`` is
+    called with each row as it is done.
+    """
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+    from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demos
+    from cpmp.worlds.relay.evaluation import evaluate as evaluate_relay
+    from cpmp.worlds.two_point import evaluate as evaluate_two_point
+    from cpmp.worlds.two_point import make_demonstrations as two_point_demos
+
+    options = synthetic_configs()
+    tasks = {
+        "two_point": (two_point_demos, evaluate_two_point),
+        "relay": (relay_demos, evaluate_relay),
+    }
+    rows = []
+    for task, (make, evaluate) in tasks.items():
+        for d in sizes:
+            for seed in seeds:
+                demos = make(d, seed)
+                for name in configs:
+                    seq = ConcurrentSequencer.fit(
+                        demos, "klr", seed=seed, logger=None, **options[name]
+                    )
+                    counts = evaluate(seq, None, episodes, 1000 + seed)
+                    row = {"task": task, "D": d, "seed": seed, "config": name}
+                    rows.append(
+                        {**row, **{k: counts[k] for k in ("complete", "wrong_start", "incomplete")}}
+                    )
+                    if on_row is not None:
+                        on_row(rows[-1])
+    return {"episodes": episodes, "rows": rows}

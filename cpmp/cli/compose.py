@@ -1,0 +1,220 @@
+"""Composing a cpmp command line's configuration as Hydra will, with Hydra and OmegaConf only
+(used by :mod:`cpmp.cli.checks`): the command line parsed by Hydra's own parser, the
+job override lists of a multirun sweep, the composed config with its interpolations resolved,
+and every Hydra/OmegaConf error turned into a one-line :class:`~cpmp.errors.ConfigError` /
+:class:`~cpmp.errors.CpmpFileError` naming the override (with a "did you mean" for a misspelt
+group option or key).
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+from cpmp.experiment.config import register_configs
+
+CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+"""The Hydra config directory: ``conf/`` of the repository this package is installed from."""
+
+
+def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
+    """``argv`` parsed by Hydra's own command-line parser; a bad flag is a :class:`ConfigError`
+    (argparse would print its usage and exit)."""
+    from hydra._internal.utils import get_args_parser
+
+    def error(message: str) -> None:
+        raise ConfigError(f"{message} (see --help)")
+
+    parser = get_args_parser()
+    parser.error = error  # type: ignore[method-assign]
+    return parser.parse_args(list(argv))
+
+
+def one_line(text: str) -> str:
+    """A Hydra/OmegaConf message as one line: search paths, documentation links and
+    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined."""
+    lines: list[str] = []
+    options: list[str] = []
+    for raw in str(text).splitlines():
+        line = raw.strip()
+        if re.match(r"(Config search path|Search path):", line):
+            break
+        if not line or line.startswith(("See https://", "full_key:", "object_type=")):
+            continue
+        if raw.startswith("\t"):
+            options.append(line)
+            continue
+        if options:
+            lines[-1] += " " + ", ".join(options)
+            options = []
+        lines.append(line.rstrip("."))
+    if options and lines:
+        lines[-1] += " " + ", ".join(options)
+    return "; ".join(lines)
+
+
+def parse_overrides(overrides: Sequence[str]) -> list[Any]:
+    """``overrides`` parsed by Hydra's override parser (one ``Override`` each); an override it
+    cannot parse is a :class:`ConfigError` that shows the syntax."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    parser = OverridesParser.create()
+    parsed = []
+    for line in overrides:
+        try:
+            parsed.append(parser.parse_override(line))
+        except HydraException as err:
+            raise ConfigError(
+                f"cannot parse the override {line!r}: {one_line(str(err))} (Hydra's override "
+                "syntax: key=value, +new_key=value, ~key; quote values with spaces or commas)"
+            ) from None
+    return parsed
+
+
+def _composition_error(
+    err: Exception, overrides: Sequence[Any], config_name: str, config_dir: str | None
+) -> ConfigError:
+    """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
+    from hydra.errors import MissingConfigException
+
+    text = str(err)
+    missing = re.search(r"Could not find '([^']+)/([^']+)'", text)
+    if isinstance(err, MissingConfigException) and missing:
+        group, option = missing.groups()
+        found = re.search(r"Available options in '[^']+':\n((?:\t.*\n?)*)", text)
+        choices = found.group(1).split() if found else []
+        close = difflib.get_close_matches(option, choices, n=1)
+        hint = f" (did you mean {group}={close[0]}?)" if close else ""
+        return ConfigError(
+            f"{group}={option}: no such option{hint}; choose one of {', '.join(choices)}"
+        )
+    key = re.match(r"Could not override '([^']+)'", text)
+    if key:
+        name = key.group(1)
+        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
+        others = [o.input_line for o in overrides if "." not in o.key_or_group]
+        hint = _key_hint(name, config_name, others, config_dir)
+        return ConfigError(
+            f"{line}: the {config_name} config has no key {name!r}{hint}; "
+            f"to add a new key write +{line}"
+        )
+    exists = re.match(r"Could not append to config. An item is already at '([^']+)'", text)
+    if exists:
+        name = exists.group(1)
+        line = next((o.input_line for o in overrides if o.key_or_group == name), name)
+        return ConfigError(f"{line}: {name} exists already; set it without the +: {line[1:]}")
+    if "Ambiguous value for argument" in text or "requires --multirun" in text:
+        line = re.search(r"'([^']+)'", text)
+        return ConfigError(
+            f"{line.group(1) if line else 'an override'} lists several values: add -m "
+            "(--multirun) to run one job per value; for a list write key=[a,b], for a string "
+            "with commas quote it: key='a,b'"
+        )
+    merging = re.match(r"Error merging override (.+)", text)
+    if merging and err.__cause__ is not None:
+        return ConfigError(f"{merging.group(1)}: {one_line(str(err.__cause__))}")
+    if "Cannot find primary config" in text:
+        return ConfigError(f"{one_line(text)}; the configs live in {CONF_DIR}")
+    if "Primary config directory not found" in text:
+        return ConfigError(
+            f"cpmp's config directory {CONF_DIR} is missing: the cpmp commands run from a "
+            "source checkout installed with pip install -e ."
+        )
+    cause = err.__cause__
+    detail = f": {one_line(str(cause))}" if cause is not None and str(cause) else ""
+    return ConfigError(f"{one_line(text)}{detail}")
+
+
+def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
+    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it in the config
+    composed with ``groups`` (the overrides of groups and top-level keys)."""
+    from omegaconf import DictConfig, OmegaConf
+
+    parent, _, leaf = key.rpartition(".")
+    try:
+        cfg = compose_config(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
+    except CpmpError:
+        return ""
+    node = OmegaConf.select(cfg, parent) if parent else cfg
+    names = [str(k) for k in node if k != "hydra"] if isinstance(node, DictConfig) else []
+    close = difflib.get_close_matches(leaf, names, n=1)
+    return f" (did you mean {'.'.join([*filter(None, [parent]), close[0]])!r}?)" if close else ""
+
+
+def compose_config(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
+    """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``, raising
+    :class:`ConfigError` for anything Hydra cannot compose."""
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    register_configs()  # the schema of conf/, in case Hydra's ConfigStore was cleared
+    overrides = list(overrides)
+    if config_dir is not None:
+        overrides = _with_search_path(overrides, config_dir)
+    parsed = parse_overrides(overrides)
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose(config_name, overrides=overrides, return_hydra_config=True)
+    except (HydraException, OmegaConfBaseException, ValueError) as err:
+        raise _composition_error(err, parsed, config_name, config_dir) from None
+
+
+def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:
+    """``overrides`` with ``--config-dir`` added to ``hydra.searchpath`` (as Hydra adds it)."""
+    path = Path(config_dir).absolute()
+    if not path.is_dir():
+        raise CpmpFileError(f"--config-dir {config_dir}: no such directory")
+    rest, searchpath = [], []
+    for override, line in zip(parse_overrides(overrides), overrides, strict=True):
+        if override.get_key_element() == "hydra.searchpath":
+            searchpath = [str(v) for v in override.value()]
+        else:
+            rest.append(line)
+    entries = ",".join(f"'{p}'" for p in [*searchpath, f"file://{path}"])
+    return [*rest, f"hydra.searchpath=[{entries}]"]
+
+
+def resolved_job(cfg: Any) -> dict[str, Any]:
+    """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved."""
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    hydra_config = HydraConfig.instance()  # for ${hydra:...}; restored after
+    previous = hydra_config.cfg
+    hydra_config.set_config(cfg)
+    job = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])
+    try:
+        return OmegaConf.to_container(job, resolve=True)  # type: ignore[return-value]
+    except OmegaConfBaseException as err:
+        key = getattr(err, "full_key", None)
+        raise ConfigError(f"{key or 'config'}: {one_line(str(err))}") from None
+    finally:
+        hydra_config.cfg = previous
+
+
+def sweep_jobs(parsed: list[Any]) -> list[list[str]]:
+    """The job override lists of a multirun (Hydra's basic sweeper: every combination)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.errors import HydraException
+
+    hydra_lines, task = [], []
+    for o in parsed:
+        if o.is_hydra_override():
+            if o.is_sweep_override():
+                raise ConfigError(f"{o.input_line}: Hydra's own settings cannot be swept")
+            hydra_lines.append(o.input_line)
+        else:
+            task.append(o)
+    try:
+        (batch,) = BasicSweeper.split_arguments(task, max_batch_size=None)
+    except HydraException as err:
+        raise ConfigError(one_line(str(err))) from None
+    return [[*hydra_lines, *job] for job in batch]

@@ -1,0 +1,29 @@
+"""Offline evaluation: progress error against eq. 1 (Fig. 6), switch distances (Table Ib) and
+open-loop replay of demonstrations, and loading any sequencer checkpoint to evaluate it.
+"""
+
+from cpmp.evaluation.checkpoints import load_sequencer
+from cpmp.evaluation.offline import (
+    ActivationProgress,
+    activation_progress,
+    continuous_features,
+    evaluate_offline,
+    progress_curves,
+    progress_errors,
+    replay_demonstrations,
+    stream_progress,
+    switch_distances,
+)
+
+__all__ = [
+    "ActivationProgress",
+    "activation_progress",
+    "continuous_features",
+    "evaluate_offline",
+    "load_sequencer",
+    "progress_curves",
+    "progress_errors",
+    "replay_demonstrations",
+    "stream_progress",
+    "switch_distances",
+]

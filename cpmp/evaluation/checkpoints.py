@@ -1,0 +1,37 @@
+"""Loading a sequencer checkpoint whose kind is not known in advance.
+
+Each sequencer writes and reads its own checkpoints (``save``/``load``, through
+:func:`cpmp.io.save_checkpoint` and :func:`cpmp.io.load_checkpoint`); :func:`load_sequencer`
+reads any of them, for the jobs that evaluate a given ``model.pt``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cpmp.baselines.goal_nearest import CHECKPOINT_FORMAT, GoalNearestSequencer
+from cpmp.config.goal_nearest import KIND
+from cpmp.errors import CheckpointFormatError, CpmpFileError
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+
+def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequencer:
+    """Load any sequencer checkpoint cpmp writes (the main job's ``model_D<d>.pt``,
+    ``train.py``'s ``model.pt``): a :class:`~cpmp.sequencer.ConcurrentSequencer` with any
+    predictor, or a :class:`~cpmp.baselines.GoalNearestSequencer`; the checkpoint's own
+    format decides.
+
+    Both share the :meth:`~cpmp.sequencer.ConcurrentSequencer.load` interface offline
+    evaluation needs (``graphs``, ``feature_names``, ``node_keys``, ``progress``, ``predictor``
+    with ``scaler`` and ``stateful``, ``replay``). A missing, damaged or untrusted file raises
+    :class:`CpmpFileError` as that loader does; a file of neither format names both.
+    """
+    try:
+        return ConcurrentSequencer.load(path)
+    except CheckpointFormatError as err:
+        if err.found != CHECKPOINT_FORMAT:
+            raise CpmpFileError(
+                f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
+                "written by scripts/train.py or a model_D<d>.pt of scripts/experiment.py"
+            ) from err
+    return GoalNearestSequencer.load(path)

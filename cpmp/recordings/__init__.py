@@ -1,0 +1,104 @@
+"""Rerun recordings of episodes: write with :class:`EpisodeRecorder`
+(:mod:`~cpmp.recordings.writer`), read back offline with :func:`read_recording` and
+:func:`read_views` (:mod:`~cpmp.recordings.reader`). Every name is importable from
+here. The layout below (entity paths, record names, log texts, feature panels, blueprint, 3D
+scene) is written down in :mod:`~cpmp.recordings.layout`, which both sides use; the
+per-tick series are buffered by :mod:`~cpmp.recordings.columns`.
+
+Layout of a recording (one ``.rrd`` file per episode). Time-series data sit on two timelines:
+``time`` (a duration, seconds since the episode start) and ``tick`` (sequence, 0-based index of
+the :meth:`EpisodeRecorder.log_tick` call).
+
+=====================================  ===================================================
+entity path                            content
+=====================================  ===================================================
+``world/<body>``                       ``Transform3D`` per tick: body pose in the world
+``world/<body>/<geom>``                static ``Transform3D`` (geom pose in the body frame)
+                                       and one of ``Boxes3D``/``Capsules3D``/
+                                       ``Cylinders3D``/``Ellipsoids3D`` (sphere); ``<geom>``
+                                       is the geom's ``name``, default ``geom_<i>``
+``features/<name>``                    ``Scalars``: one feature per entity (static
+                                       ``SeriesLines`` name: the feature name)
+``progress/<variable>/<mp>/phi``       ``Scalars``: predicted progress φ of the node
+``progress/<variable>/<mp>/entry``     ``Scalars``: 1 - φ
+``progress/<variable>/<mp>/exit``      ``Scalars``: φ
+``transition/<variable>/<target>``     ``Scalars``: transition probability to ``target``
+``active/<variable>``                  ``TextLog`` ``"<variable>: <mp>"`` and
+                                       ``StateChange`` ``<mp>`` when the active MP changes
+``active/<variable>/index``            ``Scalars`` per tick: index of the active MP in
+                                       ``mp_names[variable]``
+``status``                             ``TextDocument`` (markdown), logged when an active
+                                       MP changes, at each transition and at the outcome:
+                                       the active MP of every variable, the last
+                                       transition, the outcome
+``events/transitions``                 ``TextLog`` ``"left_pos: approach -> grasp (p=0.71)"``
+                                       plus the machine-readable ``cpmp.Transition`` record
+``events/transitions/<variable>``      the same ``TextLog``, per control variable
+``events/notes``                       ``TextLog`` ``"<kind>: <text>"`` plus ``cpmp.Note``
+``events/outcome``                     ``TextLog`` ``"outcome: <outcome> (<reason>)"`` at
+                                       the episode end (level ``WARN`` for a failure) plus
+                                       the ``cpmp.Outcome`` record
+=====================================  ===================================================
+
+Blueprint (the viewer's default layout): the 3D scene above the ``status`` document; one
+time-series panel per feature group (:func:`group_features`: box, each hand, goal distances,
+touch, ... from the feature names, at most 8 series each, legend in a corner); a tab per
+control variable with its φ (= exit), entry and transition probabilities; the active MPs as
+lanes of a state timeline; the events log (transitions, notes, outcome) with the text as its
+first column. The blueprint and selection panels start collapsed and the full time panel open
+(its rows mark every event). :func:`read_views` lists the views.
+
+Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
+``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
+``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
+probability), ``cpmp.Note:{kind,variable,text}`` and ``cpmp.Outcome:{outcome,reason}``
+(strings); their time is the ``time`` timeline of the row. The episode name is the recording
+name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,
+``feature_names``, ``feature_groups``, ``mp_names`` and ``metadata`` (all but the first as JSON
+text; metadata values that JSON cannot encode are stored as ``str``).
+
+Scalars and body poses are buffered and sent column-wise (``send_columns``) every
+``flush_every`` ticks (default 5000) and on :meth:`EpisodeRecorder.close`, one row per tick and
+tuple of entities: one ``rr.log`` call per entity and tick would cost more than the simulation
+itself (see docs/benchmarks.md), and an aborted episode sends nothing. The file is written
+beside the target under a temporary name and renamed onto it only by a successful
+:meth:`EpisodeRecorder.close`, so a failed or aborted episode leaves no partial file.
+"""
+
+from __future__ import annotations
+
+from cpmp.recordings.layout import (
+    GEOM_TYPES,
+    MAX_SERIES_PER_PANEL,
+    TOUCH_WORDS,
+    group_features,
+    outcome_text,
+    transition_text,
+)
+from cpmp.recordings.reader import (
+    RecordingSummary,
+    SequencerNote,
+    TransitionEvent,
+    ViewInfo,
+    format_summary,
+    read_recording,
+    read_views,
+)
+from cpmp.recordings.writer import EpisodeRecorder
+
+__all__ = [
+    "GEOM_TYPES",
+    "MAX_SERIES_PER_PANEL",
+    "TOUCH_WORDS",
+    "EpisodeRecorder",
+    "RecordingSummary",
+    "SequencerNote",
+    "TransitionEvent",
+    "ViewInfo",
+    "format_summary",
+    "group_features",
+    "outcome_text",
+    "read_recording",
+    "read_views",
+    "transition_text",
+]

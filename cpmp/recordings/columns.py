@@ -1,0 +1,157 @@
+"""The per-tick series of a recording: :class:`ColumnBuffer` makes, checks and names the entity
+paths of a row layout once, keeps one row per tick for each tuple of entity paths (scalars) and
+of bodies (poses), and sends each entity's column with one ``send_columns`` call (why:
+:mod:`cpmp.recordings`).
+
+``rerun`` is imported inside the functions, so importing this module is cheap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from cpmp.recordings.layout import check_mp, entity
+
+_RowBuffer = tuple[list[int], list[float], list[np.ndarray]]
+"""Ticks, times [s] and one row (K,) of scalar values per tick for a tuple of K entity paths."""
+_PoseBuffer = tuple[list[int], list[float], list[np.ndarray], list[np.ndarray]]
+"""Ticks, times [s], positions (B, 3) and xyzw quaternions (B, 4) per tick for B bodies."""
+
+
+class ColumnBuffer:
+    """The per-tick series of one recording stream, buffered in the order they were added.
+
+    Args:
+        rec: the ``rr.RecordingStream`` the series names are logged to and the columns sent to.
+        mp_names: control variable -> its MP names, to check the variables and MPs of a layout.
+    """
+
+    def __init__(self, rec: Any, mp_names: Mapping[str, Sequence[str]]) -> None:
+        self._rec = rec
+        self._mp_names = mp_names
+        self._rows: dict[tuple[str, ...], _RowBuffer] = {}
+        self._poses: dict[tuple[str, ...], _PoseBuffer] = {}
+        # The paths of a (kind, variable, MP names) layout are made, checked and named once.
+        self._layouts: dict[tuple[Any, ...], tuple[str, ...]] = {}
+        self._named_series: set[str] = set()
+
+    def name_series(self, path: str, name: str) -> None:
+        """Give the series at ``path`` its legend ``name`` (a static ``SeriesLines``), once."""
+        import rerun as rr
+
+        if path not in self._named_series:
+            self._named_series.add(path)
+            self._rec.log(path, rr.SeriesLines(names=[name]), static=True)
+
+    def progress_paths(self, variable: str, mps: tuple[str, ...]) -> tuple[str, ...]:
+        """``phi``, ``entry``, ``exit`` paths of each MP in ``mps`` (MP-major), checked, named."""
+        key = ("progress", variable, mps)
+        if key not in self._layouts:
+            series = [(mp, part) for mp in mps for part in ("phi", "entry", "exit")]
+            self._add_layout(
+                key,
+                [(variable, mp) for mp in mps],
+                [(("progress", variable, mp, part), f"{mp} {part}") for mp, part in series],
+            )
+        return self._layouts[key]
+
+    def transition_paths(self, variable: str, targets: tuple[str, ...]) -> tuple[str, ...]:
+        """``transition/<variable>/<target>`` of each of ``targets``, checked, named."""
+        key = ("transition", variable, targets)
+        if key not in self._layouts:
+            self._add_layout(
+                key,
+                [(variable, target) for target in targets],
+                [(("transition", variable, target), f"to {target}") for target in targets],
+            )
+        return self._layouts[key]
+
+    def index_paths(self, variables: tuple[str, ...]) -> tuple[str, ...]:
+        """``active/<variable>/index`` of each of ``variables``, checked."""
+        key = ("active", variables)
+        if key not in self._layouts:
+            self._add_layout(
+                key,
+                [(variable, None) for variable in variables],
+                [(("active", variable, "index"), None) for variable in variables],
+            )
+        return self._layouts[key]
+
+    def _add_layout(
+        self,
+        key: tuple[Any, ...],
+        checks: Sequence[tuple[str, str | None]],
+        series: Sequence[tuple[tuple[str, ...], str | None]],
+    ) -> None:
+        """Check the (variable, MP or ``None``) pairs ``checks``, then make the entity path of
+        each of ``series`` (path parts, series name or ``None``), name its series and keep the
+        paths as layout ``key``."""
+        for variable, mp in checks:
+            check_mp(self._mp_names, variable, mp)
+        paths = tuple(entity(*parts) for parts, _ in series)
+        for path, (_, name) in zip(paths, series, strict=True):
+            if name is not None:
+                self.name_series(path, name)
+        self._layouts[key] = paths
+
+    def add_row(self, paths: tuple[str, ...], tick: int, t: float, row: np.ndarray) -> None:
+        """One tick's values ``row`` (K,) of the K scalar entities ``paths`` at ``t`` [s]."""
+        ticks, times, rows = self._rows.setdefault(paths, ([], [], []))
+        ticks.append(tick)
+        times.append(t)
+        rows.append(row)
+
+    def add_poses(
+        self,
+        bodies: tuple[str, ...],
+        tick: int,
+        t: float,
+        positions: np.ndarray,
+        quats: np.ndarray,
+    ) -> None:
+        """One tick's poses of ``bodies``: positions (B, 3) [m], xyzw quaternions (B, 4)."""
+        ticks, times, position_rows, quat_rows = self._poses.setdefault(bodies, ([], [], [], []))
+        ticks.append(tick)
+        times.append(t)
+        position_rows.append(positions)
+        quat_rows.append(quats)
+
+    def send(self) -> None:
+        """Send every buffered column to the recording stream (scalars to their
+        entity, poses as ``Transform3D`` to ``world/<body>``, on the ``time`` and ``tick``
+        timelines) and empty the buffers."""
+        import rerun as rr
+
+        def indexes(ticks: list[int], times: list[float]) -> list[Any]:
+            return [
+                rr.TimeColumn("time", duration=np.asarray(times)),
+                rr.TimeColumn("tick", sequence=np.asarray(ticks)),
+            ]
+
+        for paths, (ticks, times, rows) in self._rows.items():
+            if ticks:
+                table = np.asarray(rows, dtype=float)  # (T, K)
+                for j, path in enumerate(paths):
+                    self._rec.send_columns(
+                        path,
+                        indexes=indexes(ticks, times),
+                        columns=rr.Scalars.columns(scalars=table[:, j]),
+                    )
+                for column in (ticks, times, rows):
+                    column.clear()
+        for bodies, (ticks, times, positions, quats) in self._poses.items():
+            if ticks:
+                translation, rotation = np.stack(positions), np.stack(quats)  # (T, B, 3|4)
+                for j, body in enumerate(bodies):
+                    self._rec.send_columns(
+                        entity("world", body),
+                        indexes=indexes(ticks, times),
+                        columns=rr.Transform3D.columns(
+                            translation=translation[:, j], quaternion=rotation[:, j]
+                        ),
+                    )
+                for column in (ticks, times, positions, quats):
+                    column.clear()

@@ -1,0 +1,341 @@
+"""Read episode recordings back offline: :func:`read_recording` (events, outcome, metadata),
+:func:`read_views` (the blueprint's views) and :func:`format_summary`.
+
+``rerun`` is imported inside the functions, so importing this module is cheap.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import uuid
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+from cpmp.errors import CpmpFileError
+from cpmp.recordings.layout import (
+    NOTE_ARCHETYPE,
+    OUTCOME_ARCHETYPE,
+    PROPERTY_NAME,
+    TRANSITION_ARCHETYPE,
+    outcome_text,
+    transition_text,
+)
+from cpmp.records import SequencerNote, TransitionEvent
+
+if TYPE_CHECKING:
+    import os
+
+
+class ViewInfo(NamedTuple):
+    """One view of a recording's blueprint: ``kind`` (rerun's view class, e.g. ``TimeSeries``,
+    ``TextLog``, ``StateTimeline``), display ``name``, ``origin`` entity path and the
+    ``contents`` query lines (``+ features/box_x``)."""
+
+    kind: str
+    name: str
+    origin: str
+    contents: list[str]
+
+
+@dataclass
+class RecordingSummary:
+    """What :func:`read_recording` finds in an ``.rrd`` file.
+
+    ``episodes``: episode names (recording name, else ``application_id/recording_id``), one per
+    recording in the file. ``transitions``: in time order (a recording keeps no feature
+    vector: their ``state`` is ``None``). ``notes``: in time order. ``outcome``/``reason``: of
+    the last outcome logged, ``None`` if none. ``duration``: last time on the ``time`` timeline [s].
+    ``n_ticks``: number of distinct ``tick`` values. ``entity_paths``: sorted, without the
+    leading ``/`` and without recording properties. ``metadata``: the recorder's ``metadata``.
+    ``feature_groups``: plot panel -> feature names (empty for files written before panels).
+    """
+
+    episodes: list[str]
+    transitions: list[TransitionEvent]
+    outcome: str | None
+    reason: str | None
+    duration: float
+    n_ticks: int
+    entity_paths: list[str]
+    metadata: dict[str, Any] = field(default_factory=dict)
+    notes: list[SequencerNote] = field(default_factory=list)
+    feature_groups: dict[str, list[str]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict of the fields, each transition and note as a dict with named fields
+        (transitions without ``state``, which a recording does not hold)."""
+        data = asdict(self)
+        data["transitions"] = [
+            {k: v for k, v in asdict(event).items() if k != "state"} for event in self.transitions
+        ]
+        return data
+
+
+def _first(cell: Any) -> Any:
+    """A component cell reads back as a list (one batch); return its first value or None."""
+    if isinstance(cell, list):
+        return cell[0] if cell else None
+    return cell
+
+
+def _times_seconds(batch: Any) -> list[float] | None:
+    if "time" not in batch.schema.names:
+        return None
+    column = batch.column("time")
+    raw = column.cast("int64").to_pylist()
+    scale = 1e-9 if str(column.type).startswith(("duration", "timestamp")) else 1.0
+    return [math.nan if value is None else value * scale for value in raw]
+
+
+def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
+    """``(path, RrdReader)``; :class:`~cpmp.errors.CpmpFileError` for a missing path."""
+    from rerun.chunk import RrdReader
+
+    file = Path(path)
+    if not file.exists():
+        raise CpmpFileError(f"recording {file} does not exist")
+    if not file.is_file():
+        raise CpmpFileError(f"recording {file} is not a file")
+    try:
+        return file, RrdReader(file)
+    except (RuntimeError, ValueError, OSError) as err:
+        raise CpmpFileError(f"cannot read {file} as a rerun recording (.rrd): {err}") from err
+
+
+def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
+    """Read an ``.rrd`` file back offline and summarise it (see :class:`RecordingSummary`).
+
+    Raises :class:`~cpmp.errors.CpmpFileError` if ``path`` is missing or not a rerun recording.
+    """
+    from rerun.error_utils import RerunWarning
+
+    try:
+        with warnings.catch_warnings():
+            # A truncated file warns about its missing footer before failing: the error says it.
+            warnings.simplefilter("ignore", RerunWarning)
+            file, reader = _open(path)
+            stores = reader.recordings()
+            batches = [
+                (index, store, chunk.entity_path, chunk.to_record_batch())
+                for index, store in enumerate(stores)
+                for chunk in reader.stream(store=store)
+            ]
+    except CpmpFileError:
+        raise
+    except (RuntimeError, ValueError, OSError) as err:
+        raise CpmpFileError(f"cannot read {path} as a rerun recording (.rrd): {err}") from err
+    if not stores:
+        raise CpmpFileError(f"{file} contains no rerun recording")
+
+    names: dict[int, str] = {}
+    metadata: dict[str, Any] = {}
+    feature_groups: dict[str, list[str]] = {}
+    ticks: dict[int, set[int]] = {index: set() for index in range(len(stores))}
+    entity_paths: set[str] = set()
+    transitions: list[TransitionEvent] = []
+    notes: list[SequencerNote] = []
+    outcomes: list[tuple[float, int, str, str]] = []
+    duration = 0.0
+    for index, _store, entity_path, batch in batches:
+        columns = batch.schema.names
+        entity = entity_path.lstrip("/")
+        if entity.startswith("__properties"):
+            if "RecordingInfo:name" in columns:
+                names[index] = str(_first(batch.column("RecordingInfo:name")[0].as_py()))
+            if entity == f"__properties/{PROPERTY_NAME}":
+                if "metadata" in columns:
+                    metadata = json.loads(_first(batch.column("metadata")[0].as_py()) or "{}")
+                if "feature_groups" in columns:
+                    cell = _first(batch.column("feature_groups")[0].as_py())
+                    feature_groups = json.loads(cell or "{}")
+            continue
+        entity_paths.add(entity)
+        times = _times_seconds(batch)
+        if times:
+            finite = [t for t in times if math.isfinite(t)]
+            duration = max([duration, *finite])
+        if "tick" in columns:
+            ticks[index].update(v for v in batch.column("tick").to_pylist() if v is not None)
+        if times is None:
+            continue
+        if f"{TRANSITION_ARCHETYPE}:variable" in columns:
+            fields = {
+                name: batch.column(f"{TRANSITION_ARCHETYPE}:{name}").to_pylist()
+                for name in ("variable", "source", "target", "probability")
+            }
+            kind_column = f"{TRANSITION_ARCHETYPE}:kind"
+            kinds = (
+                batch.column(kind_column).to_pylist()
+                if kind_column in columns
+                else [None] * len(times)
+            )
+            for row, t in enumerate(times):
+                if _first(fields["variable"][row]) is None:
+                    continue
+                transitions.append(
+                    TransitionEvent(
+                        t=t,
+                        variable=str(_first(fields["variable"][row])),
+                        source=str(_first(fields["source"][row])),
+                        target=str(_first(fields["target"][row])),
+                        probability=float(_first(fields["probability"][row])),
+                        kind=str(_first(kinds[row]) or "switch"),
+                    )
+                )
+        if f"{NOTE_ARCHETYPE}:kind" in columns:
+            cells = {
+                name: batch.column(f"{NOTE_ARCHETYPE}:{name}").to_pylist()
+                for name in ("kind", "variable", "text")
+            }
+            for row, t in enumerate(times):
+                if _first(cells["kind"][row]) is not None:
+                    notes.append(
+                        SequencerNote(
+                            t,
+                            str(_first(cells["kind"][row])),
+                            str(_first(cells["variable"][row]) or ""),
+                            str(_first(cells["text"][row]) or ""),
+                        )
+                    )
+        if f"{OUTCOME_ARCHETYPE}:outcome" in columns:
+            outcome_column = batch.column(f"{OUTCOME_ARCHETYPE}:outcome").to_pylist()
+            reason_column = (
+                batch.column(f"{OUTCOME_ARCHETYPE}:reason").to_pylist()
+                if f"{OUTCOME_ARCHETYPE}:reason" in columns
+                else [None] * len(times)
+            )
+            for row, t in enumerate(times):
+                outcome = _first(outcome_column[row])
+                if outcome is not None:
+                    reason = _first(reason_column[row])
+                    outcomes.append((t, len(outcomes), str(outcome), str(reason or "")))
+
+    transitions.sort(key=lambda event: event.t)
+    notes.sort(key=lambda note: note.t)
+    last_outcome = max(outcomes, default=None)
+    episodes = [
+        names.get(index, f"{store.application_id}/{store.recording_id}")
+        for index, store in enumerate(stores)
+    ]
+    return RecordingSummary(
+        episodes=episodes,
+        transitions=transitions,
+        outcome=last_outcome[2] if last_outcome else None,
+        reason=last_outcome[3] if last_outcome else None,
+        duration=duration,
+        n_ticks=sum(len(values) for values in ticks.values()),
+        entity_paths=sorted(entity_paths),
+        metadata=metadata,
+        notes=notes,
+        feature_groups=feature_groups,
+    )
+
+
+def read_views(path: str | os.PathLike[str]) -> list[ViewInfo]:
+    """The views of the default blueprint stored in an ``.rrd`` file, in layout order (depth
+    first from the root container); ``[]`` if the file has no blueprint.
+
+    Raises :class:`~cpmp.errors.CpmpFileError` if ``path`` is missing or not a rerun recording.
+    """
+    from rerun.error_utils import RerunWarning
+
+    views: dict[str, dict[str, Any]] = {}
+    containers: dict[str, list[str]] = {}
+    root = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RerunWarning)
+            _, reader = _open(path)
+            blueprints = reader.blueprints()
+            chunks = [chunk for store in blueprints[:1] for chunk in reader.stream(store=store)]
+    except CpmpFileError:
+        raise
+    except (RuntimeError, ValueError, OSError) as err:
+        raise CpmpFileError(f"cannot read {path} as a rerun recording (.rrd): {err}") from err
+    for chunk in chunks:
+        batch = chunk.to_record_batch()
+        columns = batch.schema.names
+        entity = chunk.entity_path.strip("/")
+
+        # The last row of a column holds the blueprint's current value.
+        cells = {
+            name: batch.column(name)[batch.num_rows - 1].as_py()
+            for name in columns
+            if name.startswith(
+                ("Viewport", "ContainerBlueprint:", "ViewBlueprint:", "ViewContents:")
+            )
+        }
+        if "ViewportBlueprint:root_container" in cells:
+            root = _first(cells["ViewportBlueprint:root_container"])
+        if "ContainerBlueprint:contents" in cells:
+            containers[entity] = [str(c) for c in cells["ContainerBlueprint:contents"] or []]
+        if "ViewBlueprint:class_identifier" in cells:
+            view = views.setdefault(entity, {})
+            view["kind"] = str(_first(cells["ViewBlueprint:class_identifier"]))
+            view["name"] = str(_first(cells.get("ViewBlueprint:display_name")) or "")
+            view["origin"] = str(_first(cells.get("ViewBlueprint:space_origin")) or "")
+        if "ViewContents:query" in cells and entity.endswith("/ViewContents"):
+            query = cells["ViewContents:query"] or []
+            views.setdefault(entity.removesuffix("/ViewContents"), {})["contents"] = query
+
+    order: list[str] = []
+
+    def visit(container: str) -> None:
+        for child in (c.strip("/") for c in containers.get(container, [])):
+            if child in views:
+                order.append(child)
+            else:
+                visit(child)
+
+    if root is not None:
+        visit(f"container/{uuid.UUID(bytes=bytes(root))}")
+    order += [key for key in views if key not in order]
+    return [
+        ViewInfo(
+            views[key].get("kind", ""),
+            views[key].get("name", ""),
+            views[key].get("origin", ""),
+            [str(line) for line in views[key].get("contents") or []],
+        )
+        for key in dict.fromkeys(order)
+        if "kind" in views[key]
+    ]
+
+
+def format_summary(summary: RecordingSummary) -> str:
+    """Human-readable multi-line text of a :class:`RecordingSummary`."""
+    lines = [
+        f"episode: {', '.join(summary.episodes)}",
+        f"ticks: {summary.n_ticks}, duration: {summary.duration:.3f} s",
+    ]
+    if summary.feature_groups:
+        panels = ", ".join(f"{g} ({len(m)})" for g, m in summary.feature_groups.items())
+        lines.append(f"feature panels: {panels}")
+    lines.append(f"transitions ({len(summary.transitions)}):")
+    lines += [
+        f"  t={e.t:8.3f} s  "
+        + transition_text(e.variable, e.source, e.target, e.probability, e.kind)
+        for e in summary.transitions
+    ]
+    if summary.notes:
+        lines.append(f"notes ({len(summary.notes)}):")
+        lines += [f"  t={n.t:8.3f} s  {n.kind}: {n.text}" for n in summary.notes]
+    if summary.outcome is None:
+        lines.append("outcome: none recorded")
+    else:
+        lines.append(outcome_text(summary.outcome, summary.reason or ""))
+    return "\n".join(lines)
+
+
+__all__ = [
+    "RecordingSummary",
+    "SequencerNote",
+    "TransitionEvent",
+    "ViewInfo",
+    "format_summary",
+    "read_recording",
+    "read_views",
+]

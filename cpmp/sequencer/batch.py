@@ -1,0 +1,193 @@
+"""``N`` episodes of a sequencer at once, for many rollouts (:func:`cpmp.sim.run_episodes`).
+
+:class:`EpisodeBatch` is what every batched policy shares (per-episode ``active``, ``events``,
+``notes``); :class:`BatchedSequencer` runs ``N`` episodes of a
+:class:`~cpmp.sequencer.ConcurrentSequencer` with one predictor call per tick for all of them;
+:class:`GoalNearestBatch` runs those of the goal-nearest baseline one after another. Build
+either with the sequencer's ``batched(n)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from cpmp.errors import ConfigError, CpmpError, DataError
+from cpmp.records import SequencerNote, TransitionEvent
+from cpmp.sequencer.episode import SequencerEpisode
+
+if TYPE_CHECKING:
+    from cpmp.baselines.goal_nearest import GoalNearestSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+Times = float | np.ndarray
+"""One time [s] for every episode, or ``(N,)`` times."""
+Features = np.ndarray | torch.Tensor
+"""Features ``(N, d)`` of ``N`` episodes."""
+LiveMask = np.ndarray | Sequence[bool] | None
+"""``(N,)`` bool: the episodes a batch call advances (``None``: all)."""
+
+
+class EpisodeBatch:
+    """What every batched policy shares: ``episodes``, one object per episode with its
+    ``active`` MPs, ``events`` and ``notes``, and per-episode views of them."""
+
+    episodes: list[Any]
+
+    @staticmethod
+    def checked_count(n: int) -> int:
+        """``n`` as the number of episodes of a batch; :class:`ConfigError` unless ``n >= 1``."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
+        return int(n)
+
+    def _inputs(
+        self, t: Times, x: Features, live: LiveMask, d: int
+    ) -> tuple[list[float], np.ndarray, list[int]]:
+        """Checked times ``(N,)`` as floats, features ``(N, d)`` float64 and the live rows."""
+        n = len(self.episodes)
+        if isinstance(x, torch.Tensor):
+            x = x.detach().cpu().numpy()
+        xn = np.asarray(x, dtype=np.float64)
+        if xn.shape != (n, d):
+            raise DataError(
+                f"a batch of {n} episodes needs features of shape ({n}, {d}), got {tuple(xn.shape)}"
+            )
+        try:
+            times = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
+        except ValueError as err:
+            raise DataError(f"t must be one time or {n} times, got shape {np.shape(t)}") from err
+        if not np.isfinite(times).all():
+            raise DataError(f"time must be finite, got t={t}")
+        if live is None:
+            rows = list(range(n))
+        else:
+            mask = np.asarray(live)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise DataError(
+                    f"live must be a boolean mask of shape ({n},), got {mask.dtype} of shape "
+                    f"{mask.shape}"
+                )
+            rows = np.flatnonzero(mask).tolist()
+        return times.tolist(), xn, rows
+
+    @property
+    def n_episodes(self) -> int:
+        """N, the number of episodes."""
+        return len(self.episodes)
+
+    def __len__(self) -> int:
+        return len(self.episodes)
+
+    @property
+    def active(self) -> list[dict[str, str]]:
+        """Per episode, variable -> active MP (empty before its first reset)."""
+        return [dict(ep.active) for ep in self.episodes]
+
+    @property
+    def events(self) -> list[list[TransitionEvent]]:
+        """Per episode, its transitions."""
+        return [ep.events for ep in self.episodes]
+
+    @property
+    def notes(self) -> list[list[SequencerNote]]:
+        """Per episode, its notes."""
+        return [ep.notes for ep in self.episodes]
+
+
+class BatchedSequencer(EpisodeBatch):
+    """``n`` independent episodes of one fitted :class:`ConcurrentSequencer`, stepped together.
+
+    Every tick evaluates all nodes' predictors in one call over the features ``(N, d)`` of the
+    live episodes; each episode then decides exactly as a :class:`ConcurrentSequencer` of its
+    own would (same events, notes and tick information; φ may differ in the last bits, ~1e-14,
+    where the predictor rounds a batch of rows differently). Build one with
+    ``seq.batched(n)`` or ``BatchedSequencer(seq, n)``::
+
+        batch = seq.batched(len(x0))
+        active = batch.reset(0.0, x0)  # x0 (N, d) -> one dict variable -> MP per episode
+        active = batch.step(0.01, x1, live=running)  # running: (N,) bool, others skipped
+        batch.episodes[i].events, batch.episodes[i].notes, batch.episodes[i].last_tick
+
+    ``live`` (optional, ``(N,)`` bool) leaves the other episodes untouched (finished
+    rollouts). A stateful predictor (``predictor.stateful``, e.g. ``dtw``) runs one stream
+    per episode: :meth:`reset` restarts all ``N`` streams and every call evaluates all
+    ``N`` rows (so every row must hold finite features), whatever ``live`` says.
+    """
+
+    def __init__(self, seq: ConcurrentSequencer, n: int) -> None:
+        self.sequencer = seq
+        self.episodes = [SequencerEpisode(seq) for _ in range(self.checked_count(n))]
+        """One :class:`SequencerEpisode` per episode (``active``, ``events``, ``notes``,
+        ``last_tick``)."""
+
+    def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+        """Start the ``live`` episodes (default: all) at time ``t`` [s] (scalar or ``(N,)``)
+        with features ``x (N, d)``; returns every episode's active MPs."""
+        seq = self.sequencer
+        ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
+        stateful = getattr(seq.predictor, "stateful", False)
+        if stateful:
+            seq.predictor.reset_state(len(self.episodes))
+        if rows:
+            phi = seq.heads(xn if stateful else xn[rows])
+            for j, i in enumerate(rows):
+                self.episodes[i].start(ts[i], xn[i], phi[i if stateful else j])
+        return self.active
+
+    def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+        """Advance the ``live`` episodes (default: all) one tick at time ``t`` [s] (scalar or
+        ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs."""
+        seq = self.sequencer
+        ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
+        for i in rows:
+            try:
+                self.episodes[i].check_time(ts[i])
+            except CpmpError as err:
+                raise type(err)(f"episode {i}: {err}") from err
+        if not rows:
+            return self.active
+        stateful = getattr(seq.predictor, "stateful", False)
+        phi = seq.progress(xn if stateful else xn[rows])
+        if stateful:
+            phi = phi[rows]
+        finite = np.isfinite(phi).all(axis=1).tolist()
+        for i, row, ok in zip(rows, phi.tolist(), finite, strict=True):
+            try:
+                self.episodes[i].advance(ts[i], xn[i], row, ok)
+            except CpmpError as err:
+                raise type(err)(f"episode {i}: {err}") from err
+        return self.active
+
+
+class GoalNearestBatch(EpisodeBatch):
+    """``N`` independent episodes of one fitted
+    :class:`~cpmp.baselines.GoalNearestSequencer` (build with ``seq.batched(n)``), with the
+    interface of :class:`BatchedSequencer`: ``reset``/``step`` take ``t`` (scalar or ``(N,)``)
+    [s], features ``x (N, d)`` and an optional ``live (N,)`` bool mask (other episodes are left
+    untouched) and return every episode's active MPs; ``episodes[i]`` holds episode ``i``'s
+    ``events`` and ``last_tick``.
+    """
+
+    def __init__(self, episodes: Sequence[GoalNearestSequencer]) -> None:
+        self.episodes = list(episodes)
+
+    def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+        """Start the ``live`` episodes (default: all)."""
+        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
+        for i in rows:
+            self.episodes[i].reset(ts[i], xn[i])
+        return self.active
+
+    def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+        """Advance the ``live`` episodes (default: all) one tick."""
+        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
+        for i in rows:
+            try:
+                self.episodes[i].step(ts[i], xn[i])
+            except CpmpError as err:
+                raise type(err)(f"episode {i}: {err}") from err
+        return self.active

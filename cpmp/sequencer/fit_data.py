@@ -1,0 +1,186 @@
+"""What a fit learns from and what it checks afterwards: per-node training data, the non-finite
+and degenerate-node checks, label-glitch warnings.
+
+:meth:`cpmp.sequencer.ConcurrentSequencer.fit_config` builds one :class:`~cpmp.predictors.NodeData`
+per node (its scaled samples and progress targets, eq. 1) with :func:`node_training_data`,
+fits them with :func:`cpmp.predictors.training.fit_predictor`, then reports what it found with
+:func:`glitch_warnings` and :func:`fit_warnings`; :func:`initial_combinations` are the
+demonstrated starts of ``start_rule="joint"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from cpmp.errors import DataError
+from cpmp.graph import SequenceGraph
+from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
+from cpmp.progress import path_length, path_trajectory, progress_labels
+
+if TYPE_CHECKING:
+    from cpmp.data.demonstration import Demonstration
+
+
+def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
+    """Keys of the start heads: ``(variable, START_PREFIX + mp)`` per initial node."""
+    return [
+        (v, START_PREFIX + mp) for v in sorted(graphs) for mp in sorted(graphs[v].initial_nodes)
+    ]
+
+
+def initial_combinations(
+    demos: Sequence[Demonstration], variables: Sequence[str]
+) -> list[dict[str, str]]:
+    """The distinct initial MP per variable of the demonstrations (variable -> MP), in order of
+    first appearance (what ``start_rule="joint"`` chooses among)."""
+    combos: list[dict[str, str]] = []
+    for demo in demos:
+        combo = {v: str(demo.labels[v][0]) for v in variables}
+        if combo not in combos:
+            combos.append(combo)
+    return combos
+
+
+def node_training_data(
+    graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
+) -> list[NodeData]:
+    """Per-node training samples (scaled features) and progress targets (eq. 1, or normalised
+    time for a predictor with ``labels = "time"``), in the predictor's node order;
+    ``subsample`` keeps every k-th sample (and the last) for the loss.
+
+    Each activation is scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for
+    ``path_denoised`` labels) and labelled once; a start head shares its node's.
+    """
+    denoised = predictor.labels == "path_denoised"  # then eq. 1 ("path") along denoised paths
+    noise, kind = ("auto", "path") if denoised else ("none", predictor.labels)
+    measured: dict[tuple[str, str], tuple[list[np.ndarray], ...]] = {}
+    out = []
+    for v, key_mp in predictor.node_keys:
+        mp = key_mp.removeprefix(START_PREFIX)
+        if (v, mp) not in measured:
+            acts = graphs[v].activations[mp]
+            if not acts:
+                raise DataError(f"node {v}/{mp} has no activation data to train on")
+            scaled = [predictor.scaler.transform(a.features) for a in acts]
+            paths = [path_trajectory(f, noise) for f in scaled]
+            targets = [progress_labels(p, a.time, kind) for p, a in zip(paths, acts, strict=True)]
+            measured[(v, mp)] = (scaled, paths, targets)
+        scaled, paths, targets = measured[(v, mp)]
+        keep = [_stride(len(f), subsample) for f in scaled]
+        x = np.concatenate([f[k] for f, k in zip(scaled, keep, strict=True)])
+        y = np.concatenate([y[k] for y, k in zip(targets, keep, strict=True)])
+        dt = predictor.dtype_
+        out.append(
+            NodeData(
+                key=(v, key_mp),
+                x=torch.as_tensor(x, dtype=dt),
+                target=torch.as_tensor(y, dtype=dt),
+                activations=scaled,
+                paths=paths,
+                labels=targets,
+            )
+        )
+    return out
+
+
+def demo_progress(
+    graphs: Mapping[str, SequenceGraph], data: Sequence[NodeData], n_samples: Sequence[int]
+) -> list[dict[str, np.ndarray]]:
+    """The fit's progress labels laid out along the demonstrations the ``graphs`` were built
+    from: per demonstration (``n_samples`` each), per variable, ``(n,)``, every activation
+    labelled as its node trained on it (what :meth:`cpmp.sequencer.switching.Coupling.learn`
+    measures the demonstrated switches with, so that it need not label them again)."""
+    out = [{v: np.zeros(n) for v in graphs} for n in n_samples]
+    for node in data:
+        v, mp = node.key
+        if mp.startswith(START_PREFIX):
+            continue  # a start head shares its node's labels
+        for a, labels in zip(graphs[v].activations[mp], node.labels, strict=True):
+            out[a.demo][v][a.start : a.stop] = labels
+    return out
+
+
+def nonfinite_parameters(module: torch.nn.Module) -> list[str]:
+    """Names of the floating-point parameters and buffers of ``module`` holding NaN or inf."""
+    return [
+        name
+        for name, value in module.state_dict().items()
+        if value.is_floating_point() and not torch.isfinite(value).all()
+    ]
+
+
+DEGENERATE_PATH = 1e-9
+"""Total L1 path length (scaled features) below which a node's activations count as still."""
+UNSEPARATED_MAE = 0.2
+"""Mean absolute progress error on a node's own training data above which it is reported."""
+
+
+GLITCH_SAMPLES = 2
+"""Activations of at most this many samples between two other MPs are reported as likely
+label glitches."""
+
+
+def glitch_warnings(
+    graphs: Mapping[str, SequenceGraph], demos: Sequence[Demonstration]
+) -> list[str]:
+    """One message per node with an activation of at most :data:`GLITCH_SAMPLES` samples in
+    the middle of a demonstration (A...A, B, C...C): such a node can hardly ever be entered in
+    closed loop, and the sequencer would wait there."""
+    out = []
+    for v in sorted(graphs):
+        for mp, acts in sorted(graphs[v].activations.items()):
+            short = [
+                a
+                for a in acts
+                if a.stop - a.start <= GLITCH_SAMPLES
+                and a.start > 0
+                and a.stop < demos[a.demo].n_samples
+            ]
+            if short:
+                a = short[0]
+                name = demos[a.demo].name or f"demonstration {a.demo}"
+                out.append(
+                    f"node {v}/{mp}: its activation in {name} lasts {a.stop - a.start} "
+                    f"sample(s) (from sample {a.start}); if that is a label glitch, relabel it, "
+                    "or the sequencer may wait in this MP"
+                )
+    return out
+
+
+def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:
+    """Degenerate nodes, one message each: activations without feature change (their progress
+    falls back to normalised time, which the features cannot show) and nodes whose fitted φ
+    misses their own targets by more than :data:`UNSEPARATED_MAE` on average."""
+    out = []
+    with torch.no_grad():
+        for i, node in enumerate(data):
+            v, mp = node.key
+            if mp.startswith(START_PREFIX):
+                continue  # the same activations as the node itself
+            name = f"node {v}/{mp}"
+            length = sum(path_length(a) for a in node.activations)
+            if length < DEGENERATE_PATH:
+                out.append(
+                    f"{name}: the features do not change during its activations, so its "
+                    "progress cannot be predicted from them; add a feature that moves while "
+                    "this MP runs"
+                )
+                continue
+            logit = predictor.node_logits(node.x, i)
+            mae = float((torch.sigmoid(logit) - node.target).abs().mean())
+            if mae > UNSEPARATED_MAE:
+                out.append(
+                    f"{name}: the predictor cannot fit its progress (training MAE {mae:.2f}); "
+                    "its activations may look alike at start and end in these features"
+                )
+    return out
+
+
+def _stride(n: int, k: int) -> np.ndarray:
+    """Indices ``0, k, 2k, ...`` of ``n`` samples, always including the last one."""
+    idx = np.arange(0, n, k)
+    return idx if idx[-1] == n - 1 else np.append(idx, n - 1)

@@ -1,0 +1,67 @@
+"""Checks on what the sequencers are given: times, feature vectors, demonstrations.
+
+Shared by :class:`~cpmp.sequencer.ConcurrentSequencer`, the batches of
+:mod:`cpmp.sequencer.episode` and :class:`~cpmp.baselines.GoalNearestSequencer`, so that the same
+mistake gives the same message whichever is used; each raises :class:`~cpmp.errors.DataError`
+saying what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from cpmp.errors import DataError
+
+if TYPE_CHECKING:
+    from cpmp.data.demonstration import Demonstration
+
+
+def checked_time(t: float) -> float:
+    """``t`` [s] as a float; :class:`~cpmp.errors.DataError` unless it is finite."""
+    t = float(t)
+    if not math.isfinite(t):
+        raise DataError(f"time must be finite, got t={t}")
+    return t
+
+
+def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:
+    """Features ``x (..., d)`` as a float64 array, checked against ``feature_names`` (d of them)
+    and for finiteness; :class:`~cpmp.errors.DataError` says what is wrong."""
+    if isinstance(x, torch.Tensor):
+        x = x.detach().cpu().numpy()
+    xn = np.asarray(x, dtype=np.float64)
+    if xn.ndim == 0 or xn.shape[-1] != len(feature_names):
+        raise DataError(
+            f"expected features with {len(feature_names)} entries "
+            f"({', '.join(list(feature_names)[:4])}, ...), got shape {tuple(xn.shape)}"
+        )
+    if not np.isfinite(xn).all():
+        raise DataError("features contain NaN or inf; the sequencer needs finite features")
+    return xn
+
+
+def checked_demonstrations(
+    demos: Sequence[Demonstration], fitter: str
+) -> tuple[list[Demonstration], list[str]]:
+    """The demonstrations as a list and their shared feature names; ``fitter`` (e.g.
+    ``"ConcurrentSequencer.fit"``) names the caller in the message when there are none.
+
+    Raises:
+        DataError: no demonstrations, or two with different feature names.
+    """
+    demos = list(demos)
+    if not demos:
+        raise DataError(f"{fitter} needs at least one demonstration, got none")
+    feature_names = list(demos[0].feature_names)
+    for m, demo in enumerate(demos):
+        if list(demo.feature_names) != feature_names:
+            raise DataError(
+                f"{demo.name or f'demonstration {m}'} has features {list(demo.feature_names)}"
+                f" but the first demonstration has {feature_names}; all must match"
+            )
+    return demos, feature_names

@@ -1,0 +1,370 @@
+"""The concurrent sequencer: one sequence graph per control variable.
+
+Transition rule (paper section III): at the start each graph activates the initial node with
+the highest entry probability ``1 - φ`` (or, with ``start_rule="joint"``, the demonstrated
+combination of initial nodes with the highest summed log entry probability). At every tick, for
+each successor ``s`` of the current node ``c`` the transition probability is
+``p_s = φ_c(x) · (1 - φ_s(x))``; a switching rule (:mod:`cpmp.sequencer.switching`) decides when
+the best successor fires. In the paper the graphs are coupled only through the shared features
+``x``; cpmp's defaults also hold back transitions whose context (the other variables' MPs) was never
+demonstrated, and resolve stalls (:mod:`cpmp.sequencer.switching`).
+
+``ConcurrentSequencer.fit(demos)`` with no options gives cpmp's recommended configuration;
+``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` the paper's method.
+``seq.batched(n)`` (:class:`~cpmp.sequencer.batch.BatchedSequencer`) runs ``n`` episodes with one
+predictor call per tick. What a fit trains on and checks: :mod:`cpmp.sequencer.fit_data`; the state
+machine of one episode: :mod:`cpmp.sequencer.episode`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from cpmp.config import FitConfig, SequencerConfig
+from cpmp.errors import ConfigError, DataError
+from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
+from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
+from cpmp.predictors.training import fit_predictor
+from cpmp.records import SequencerNote, TickInfo, TransitionEvent
+from cpmp.sequencer.batch import BatchedSequencer
+from cpmp.sequencer.episode import NodeIndex, SequencerEpisode
+from cpmp.sequencer.fit_data import (
+    demo_progress,
+    fit_warnings,
+    glitch_warnings,
+    initial_combinations,
+    node_training_data,
+    nonfinite_parameters,
+    start_keys,
+)
+from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
+from cpmp.sequencer.switching import Coupling, indicator_features
+
+if TYPE_CHECKING:
+    from cpmp.data.demonstration import Demonstration
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "cpmp-sequencer"
+CHECKPOINT_VERSION = 2
+CHECKPOINT = CheckpointSpec(
+    CHECKPOINT_FORMAT,
+    (1, CHECKPOINT_VERSION),
+    "cpmp sequencer",
+    "load a file written by ConcurrentSequencer.save, or retrain the model with scripts/train.py",
+)
+"""The sequencer's checkpoint kind (it still reads version 1 files)."""
+
+PAPER_OPTIONS: dict[str, Any] = {
+    "feature_weighting": "none",
+    "feature_scaling": "none",
+    "path_noise": "none",
+    "start_kernel": "shared",
+    "start_rule": "independent",
+    "switch_rule": "paper",
+    "coupling": "none",
+    "recovery": False,
+}
+"""Fit options that turn :meth:`ConcurrentSequencer.fit`'s defaults into the paper's method:
+``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` (the main job's
+``predictor=klr sequencer=paper``)."""
+
+
+class ConcurrentSequencer:
+    """Concurrent sequence graphs with learned progress predictors.
+
+    Build one with :meth:`fit` (from demonstrations) or :meth:`load` (from a checkpoint); drive it
+    with :meth:`reset` then :meth:`step` once per control tick.
+    """
+
+    def __init__(
+        self,
+        graphs: Mapping[str, SequenceGraph],
+        predictor: ProgressPredictor,
+        feature_names: Sequence[str],
+        config: SequencerConfig | None = None,
+        fit_summary: dict[str, Any] | None = None,
+        initial_combinations: Sequence[Mapping[str, str]] | None = None,
+        coupling: Coupling | None = None,
+        feature_range: np.ndarray | None = None,
+    ) -> None:
+        self.graphs = dict(graphs)
+        self.predictor = predictor.eval()
+        self.feature_names = list(feature_names)
+        self.config = config or SequencerConfig()
+        self.fit_summary = fit_summary or {}
+        self.initial_combinations = [dict(c) for c in initial_combinations or []]
+        """Initial MP per variable of each demonstration (distinct; for ``start_rule=joint``)."""
+        if len(self.feature_names) != predictor.n_features:
+            raise ConfigError(
+                f"{len(self.feature_names)} feature names for a predictor of "
+                f"{predictor.n_features} features"
+            )
+        self.nodes = NodeIndex.build(self.graphs, predictor.node_keys)
+        """Where each node's φ sits among the predictor's heads, and the successor tables."""
+        self.coupling = coupling or Coupling()
+        """Learned contexts of the demonstrated switches (used with ``coupling="context"``)."""
+        self.feature_range = (
+            np.ones(len(self.feature_names))
+            if feature_range is None
+            else np.asarray(feature_range, dtype=np.float64).reshape(-1)
+        )
+        """(d,) range of each feature in the training data (stall detection's unit)."""
+        if self.feature_range.shape != (len(self.feature_names),):
+            raise ConfigError(
+                f"feature_range has {self.feature_range.size} entries for "
+                f"{len(self.feature_names)} features"
+            )
+        self._episode = SequencerEpisode(self)
+
+    # ----------------------------------------------------------------------------- fitting
+    @classmethod
+    def fit(
+        cls,
+        demos: Sequence[Demonstration],
+        predictor: str = "klr",
+        **options: Any,
+    ) -> ConcurrentSequencer:
+        """Build the sequence graphs and fit every node's progress predictor: the keyword form
+        of :meth:`fit_config`, ``fit_config(demos, FitConfig.from_options(predictor,
+        **options))``.
+
+        Args:
+            demos: labelled demonstrations sharing feature names and control variables.
+            predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse``, ``mlp`` or a baseline.
+            **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
+                ``l2``, ``feature_scaling``: the fields of its options class), sequencer
+                options (:class:`~cpmp.config.SequencerConfig`), trainer options
+                (:class:`~cpmp.config.TrainerConfig`), ``seed``, ``variables`` and
+                ``subsample`` (:class:`~cpmp.config.FitConfig`); an unknown name raises
+                :class:`~cpmp.errors.ConfigError`.
+        """
+        return cls.fit_config(demos, FitConfig.from_options(predictor, **options))
+
+    @classmethod
+    def fit_config(
+        cls, demos: Sequence[Demonstration], config: FitConfig | None = None
+    ) -> ConcurrentSequencer:
+        """Build the sequence graphs and fit every node's progress predictor as ``config``
+        says (``None``: cpmp's defaults, the main job's ``predictor=klr_path
+        sequencer=coupled``)."""
+        config = config or FitConfig()
+        predictor = config.predictor
+        demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
+        graphs = build_graphs(demos, config.variables)
+        node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
+        if config.sequencer.start_kernel == "isotropic":
+            node_keys += start_keys(graphs)
+        model = PREDICTORS[predictor](node_keys, len(feature_names), config.predictor_config)
+        all_x = np.concatenate([d.features for d in demos], axis=0)
+        model.scaler.fit(all_x, model.config.feature_scaling)
+        data = node_training_data(graphs, model, config.subsample)
+        summary = fit_predictor(model, data, config.trainer, seed=config.seed)
+        bad = nonfinite_parameters(model)
+        if bad:
+            raise DataError(
+                f"the {predictor} fit produced non-finite parameters ({', '.join(bad)}); "
+                "check the feature magnitudes and the options gamma / l2 / lr"
+            )
+        summary["n_demos"] = len(demos)
+        summary["warnings"] = glitch_warnings(graphs, demos) + fit_warnings(model, data)
+        for text in summary["warnings"]:
+            log.warning("%s", text)
+        combos = initial_combinations(demos, sorted(graphs))
+        progress = demo_progress(graphs, data, [d.n_samples for d in demos])
+        coupling = Coupling.learn(demos, sorted(graphs), progress=progress)
+        feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
+        return cls(
+            graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range
+        )
+
+    # ----------------------------------------------------------------------------- inference
+    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
+        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
+        return self.heads(x, len(self.nodes.keys))
+
+    def heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
+        """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
+        ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others)."""
+        xn = checked_features(x, self.feature_names)
+        with torch.no_grad():
+            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn)), heads).numpy()
+
+    @property
+    def node_keys(self) -> list[tuple[str, str]]:
+        """(variable, MP) of every node, in the order of :meth:`progress`'s columns."""
+        return list(self.nodes.keys)
+
+    def predict_progress(self, x: np.ndarray) -> dict[str, dict[str, float]]:
+        """φ of every node for one feature vector ``x (d,)``: variable -> MP -> φ."""
+        state = np.asarray(x, dtype=np.float64).reshape(-1)
+        return self.nodes.phi_dict(self.progress(state))
+
+    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
+        demonstrated combination of initial nodes with the highest summed log entry probability
+        when ``start_rule="joint"``)."""
+        t = checked_time(t)
+        self.predictor.reset_state(1)
+        phi = self.heads(np.asarray(x, dtype=np.float64).reshape(-1))
+        return self._episode.start(t, x, phi)
+
+    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
+        t = self._episode.check_time(t)
+        state = np.asarray(x, dtype=np.float64).reshape(-1)
+        phi = self.progress(state)
+        return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()))
+
+    def batched(self, n: int) -> BatchedSequencer:
+        """``n`` independent episodes of this sequencer, stepped together (see
+        :class:`~cpmp.sequencer.batch.BatchedSequencer`)."""
+        return BatchedSequencer(self, n)
+
+    @property
+    def active(self) -> dict[str, str]:
+        """Variable -> active MP of the current episode (empty before :meth:`reset`)."""
+        return self._episode.active
+
+    @property
+    def events(self) -> list[TransitionEvent]:
+        """The transitions of the current episode, in order."""
+        return self._episode.events
+
+    @property
+    def notes(self) -> list[SequencerNote]:
+        """The notes of the current episode (held transitions, recoveries, non-finite φ)."""
+        return self._episode.notes
+
+    @property
+    def last_tick(self) -> TickInfo | None:
+        """What the last :meth:`reset` or :meth:`step` computed (``None`` before a reset)."""
+        return self._episode.last_tick
+
+    def replay(
+        self, time: np.ndarray, features: np.ndarray
+    ) -> tuple[dict[str, list[str]], list[TransitionEvent]]:
+        """Run the sequencer open-loop over a recorded feature stream ``(n,), (n, d)``.
+
+        Returns the MP sequence per variable and the transition events.
+        """
+        seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
+        for t, x in zip(time[1:], features[1:], strict=True):
+            before = dict(self.active)
+            after = self.step(t, x)
+            for v, mp in after.items():
+                if mp != before[v]:
+                    seqs[v].append(mp)
+        return seqs, list(self.events)
+
+    # ----------------------------------------------------------------------------- persistence
+    def save(self, path: str | Path) -> Path:
+        """Write a checkpoint (graphs, predictor weights, configs) atomically to ``path``."""
+        return save_checkpoint(
+            path,
+            {
+                "format": CHECKPOINT_FORMAT,
+                "version": CHECKPOINT_VERSION,
+                "feature_names": self.feature_names,
+                "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
+                "predictor": {"spec": self.predictor.spec(), "state": self.predictor.state_dict()},
+                "sequencer": dataclasses.asdict(self.config),
+                "fit_summary": to_builtin(self.fit_summary),
+                "initial_combinations": self.initial_combinations,
+                "coupling": self.coupling.to_dict(),
+                "feature_range": self.feature_range.tolist(),
+            },
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ConcurrentSequencer:
+        """Load a checkpoint written by :meth:`save` (this version's or version 1)."""
+        return load_checkpoint(path, CHECKPOINT, cls._from_payload)
+
+    @classmethod
+    def _from_payload(cls, payload: dict[str, Any], version: int) -> ConcurrentSequencer:
+        """Rebuild from a checkpoint payload, checking it against its own spec."""
+        known = {"format", "version", "sequencer", "graphs", "predictor", "feature_names"}
+        missing = sorted(known - set(payload))
+        if missing:
+            raise KeyError(f"missing entries {missing}")
+        options = dict(payload["sequencer"])
+        unknown = sorted(set(options) - {f.name for f in dataclasses.fields(SequencerConfig)})
+        if unknown:
+            raise ValueError(f"unknown sequencer options {unknown}")
+        if version == 1:
+            # Written before the switching rules, coupling and recovery existed: keep its
+            # behaviour (the plateau rule, graphs coupled through the features only).
+            options.update(switch_rule="plateau", coupling="none", recovery=False)
+        graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
+        predictor = predictor_from_spec(payload["predictor"]["spec"])
+        state = payload["predictor"]["state"]
+        expected = predictor.state_dict()
+        problems = [f"missing {k}" for k in expected if k not in state]
+        problems += [f"unexpected {k}" for k in state if k not in expected]
+        problems += [
+            f"{k} has shape {tuple(state[k].shape)}, the spec needs {tuple(v.shape)}"
+            for k, v in expected.items()
+            if k in state and (not isinstance(state[k], torch.Tensor) or state[k].shape != v.shape)
+        ]
+        if problems:
+            raise ValueError("predictor state does not match its spec: " + "; ".join(problems))
+        predictor.load_state_dict(state)
+        bad = nonfinite_parameters(predictor)
+        if bad:
+            raise ValueError(f"non-finite predictor parameters: {', '.join(bad)}")
+        feature_range = payload.get("feature_range")
+        if feature_range is not None:
+            feature_range = np.asarray(feature_range, dtype=np.float64)
+            if (
+                feature_range.shape != (predictor.n_features,)
+                or not np.isfinite(feature_range).all()
+            ):
+                raise ValueError(
+                    f"feature_range must be {predictor.n_features} finite numbers, got shape "
+                    f"{feature_range.shape}"
+                )
+        return cls(
+            graphs,
+            predictor,
+            payload["feature_names"],
+            SequencerConfig(**options),
+            payload.get("fit_summary", {}),
+            payload.get("initial_combinations", []),
+            Coupling.from_dict(payload.get("coupling", [])),
+            feature_range,
+        )
+
+    def with_config(self, **options: Any) -> ConcurrentSequencer:
+        """A sequencer sharing graphs and predictor but with other transition-rule options."""
+        config = dataclasses.replace(self.config, **options)
+        return ConcurrentSequencer(
+            self.graphs,
+            self.predictor,
+            self.feature_names,
+            config,
+            self.fit_summary,
+            self.initial_combinations,
+            self.coupling,
+            self.feature_range,
+        )
+
+    def describe(self) -> str:
+        """All graphs as text, each followed by its learned switch contexts (the coupling)."""
+        parts = []
+        for v in sorted(self.graphs):
+            parts.append(self.graphs[v].to_text())
+            lines = self.coupling.describe(v)
+            if lines:
+                used = "" if self.config.coupling == "context" else " (not used: coupling=none)"
+                parts.append(f"{v}: switch contexts{used}")
+                parts += lines
+        return "\n".join(parts)

@@ -1,0 +1,383 @@
+"""When a control variable switches: the switching rules, the learned coupling between graphs and
+stall recovery. Pure Python on top of the per-tick transition probabilities; used by
+:class:`cpmp.sequencer.ConcurrentSequencer`.
+
+**Switching rules** decide, per variable and tick, whether the best successor ``s`` of the
+current node fires, given its transition probability ``p_s(t) = φ_current(x) · (1 - φ_s(x))``:
+
+* ``paper`` — the paper's sentence read literally: "above a certain threshold and has not
+  improved over the last 50 ms": ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
+  min_improvement``, where ``p(t - patience)`` is the same successor's ``p`` at the last tick at
+  or before ``t - patience``. A ``p`` that peaks above the threshold and then falls back fires;
+  a ``p`` still rising waits.
+* ``plateau`` — ``p`` must stay above the threshold for ``patience`` seconds without a new
+  maximum (cpmp's earlier rule). It misses switches whose ``p`` crosses the threshold near its
+  peak and then declines as the next MPs start to move.
+
+**Coupling** (the paper's discussion asks for more than the shared features): for every
+demonstrated switch ``source -> target`` of a variable, the MPs every *other* variable was
+running when it happened (the labels one sample before and at the switch, so that switches made
+in the same tick in either order are both allowed), and how far each of those MPs had
+progressed (the least expected progress, eq. 1, over the demonstrations). A transition whose
+context — the other variables' current MPs — contains an MP never seen for that switch, or an
+MP whose predicted progress φ is more than a margin below the least demonstrated one, is held
+back. It is learned from the labels alone (nothing task-specific), per other variable (a
+product of marginal sets, more lenient than requiring a demonstrated joint context).
+
+**Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds while
+the features are at rest (every feature moves slower than ``rest_speed`` times its training
+range per second). Then the single candidate transition most consistent with the coupling, and
+among those the most probable, fires if its ``p`` reaches ``recovery_threshold``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from cpmp.config.sequencer import COUPLINGS, SWITCH_RULES
+
+if TYPE_CHECKING:
+    from cpmp.data.demonstration import Demonstration
+
+
+_EPS_T = 1e-9
+"""Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
+
+
+class SwitchRule(Protocol):
+    """Per-variable switching state: fed every tick with the successors' ``p``."""
+
+    def reset(self) -> None:
+        """Forget the history (called when the variable's node changes)."""
+
+    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        """Record the successors' ``p`` at time ``t`` [s]; return the index of the successor
+        to switch to now (only one with ``allowed[i]``), or ``None``."""
+
+
+def _best(p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+    """Index of the highest allowed ``p`` (the first of equals), ``None`` if none is allowed."""
+    if len(p) == 1:
+        return 0 if allowed[0] else None
+    best = None
+    for i, (value, ok) in enumerate(zip(p, allowed, strict=True)):
+        if ok and (best is None or value > p[best]):
+            best = i
+    return best
+
+
+class PaperRule:
+    """``p(t) > threshold`` and ``p(t) <= p(t - patience) + min_improvement`` (see module doc)."""
+
+    def __init__(self, threshold: float, patience: float, min_improvement: float) -> None:
+        self.threshold = threshold
+        self.patience = patience
+        self.min_improvement = min_improvement
+        self._history: deque[tuple[float, list[float]]] = deque()
+
+    def reset(self) -> None:
+        self._history.clear()
+
+    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        history = self._history
+        history.append((t, list(p)))
+        # Keep exactly one entry at or before t - patience: the reference tick.
+        reference = t - self.patience + _EPS_T
+        while len(history) >= 2 and history[1][0] <= reference:
+            history.popleft()
+        best = _best(p, allowed)
+        if best is None or p[best] <= self.threshold:
+            return None
+        t_ref, p_ref = history[0]
+        if t_ref > reference:
+            return None  # the node has not been active for `patience` yet
+        return best if p[best] <= p_ref[best] + self.min_improvement else None
+
+
+class PlateauRule:
+    """``p`` above ``threshold`` for ``patience`` seconds without a new maximum."""
+
+    def __init__(self, threshold: float, patience: float, min_improvement: float) -> None:
+        self.threshold = threshold
+        self.patience = patience
+        self.min_improvement = min_improvement
+        self._target: int | None = None
+        self._best = 0.0
+        self._since = 0.0
+
+    def reset(self) -> None:
+        self._target = None
+
+    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        best = _best(p, allowed)
+        if best is None or p[best] <= self.threshold:
+            self._target = None
+            return None
+        if self._target != best:
+            self._target, self._best, self._since = best, p[best], t
+        elif p[best] > self._best + self.min_improvement:
+            self._best, self._since = p[best], t
+        if t - self._since >= self.patience - _EPS_T:
+            self._target = None
+            return best
+        return None
+
+
+def make_rule(name: str, threshold: float, patience: float, min_improvement: float) -> SwitchRule:
+    """A fresh switching rule ``name`` (one of :data:`SWITCH_RULES`)."""
+    cls = {"paper": PaperRule, "plateau": PlateauRule}[name]
+    return cls(threshold, patience, min_improvement)
+
+
+Edge = tuple[str, str, str]
+"""(variable, source MP, target MP)."""
+
+
+@dataclass
+class Coupling:
+    """Contexts of the demonstrated switches (see module doc).
+
+    Attributes:
+        contexts: ``(variable, source, target)`` -> other variable -> MPs it ran at that switch.
+        progress: ``(variable, source, target)`` -> other variable -> MP -> the lowest expected
+            progress (eq. 1) that MP had reached at a demonstrated switch, for other variables
+            that kept running the same MP through the switch.
+    """
+
+    contexts: dict[Edge, dict[str, frozenset[str]]] = field(default_factory=dict)
+    progress: dict[Edge, dict[str, dict[str, float]]] = field(default_factory=dict)
+
+    @classmethod
+    def learn(
+        cls,
+        demos: Sequence[Demonstration],
+        variables: Sequence[str],
+        transform: Callable[[np.ndarray], np.ndarray] | None = None,
+        labels: str = "path",
+        progress: Sequence[Mapping[str, np.ndarray]] | None = None,
+    ) -> Coupling:
+        """Collect the contexts of every switch of ``variables`` in ``demos``; ``transform``
+        maps features ``(n, d)`` to the space progress is measured in (the predictor's
+        scaling) and ``labels`` is the predictor's kind of progress label
+        (:func:`cpmp.progress.progress_labels`), so that the learned progress thresholds are
+        in the units of the φ they are compared with (e.g. eq. 1 on the denoised trajectory of
+        noisy demonstrations). ``progress``: each demonstration's labels per variable ``(n,)``
+        when the caller has them already (a fit: :func:`cpmp.sequencer.fit_data.demo_progress`);
+        ``transform`` and ``labels`` are then not used."""
+        contexts: dict[Edge, dict[str, set[str]]] = {}
+        progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
+        variables = list(variables)
+        if progress is None:
+            from cpmp.progress import demo_labels
+
+            progress = [demo_labels(demo, variables, transform, labels) for demo in demos]
+        for demo, done in zip(demos, progress, strict=True):
+            mps = {v: np.asarray(demo.labels[v]) for v in variables}
+            for v in variables:
+                lab = mps[v]
+                for i in np.flatnonzero(lab[1:] != lab[:-1]) + 1:
+                    edge = (v, str(lab[i - 1]), str(lab[i]))
+                    ctx = contexts.setdefault(edge, {})
+                    prog = progress_seen.setdefault(edge, {})
+                    for u in variables:
+                        if u == v:
+                            continue
+                        before, after = str(mps[u][i - 1]), str(mps[u][i])
+                        ctx.setdefault(u, set()).update((before, after))
+                        if before == after:
+                            seen = prog.setdefault(u, {})
+                            seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
+        return cls(
+            {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
+            {e: c for e, c in progress_seen.items() if c},
+        )
+
+    def inconsistent(
+        self,
+        edge: Edge,
+        active: Mapping[str, str],
+        phi: Mapping[str, float] | None = None,
+        margin: float | None = None,
+    ) -> list[str]:
+        """Why a transition along ``edge`` is inconsistent with every demonstrated context: one
+        entry per other variable that runs an MP never seen at this switch, or (with ``phi``,
+        each variable's predicted progress of its active MP, and a ``margin``) whose MP is
+        more than ``margin`` less advanced than at any demonstrated switch. Empty: consistent
+        (also for an edge that was never demonstrated)."""
+        unseen, bounds = self.gates(edge, active, None if phi is None else margin)
+        out = [f"{u} runs {active[u]}" for u in unseen]
+        for u, least, bound in bounds:
+            if u in phi and phi[u] < bound:
+                out.append(
+                    f"{u} has {active[u]} at progress {phi[u]:.2f} (demonstrated >= {least:.2f})"
+                )
+        return out
+
+    def gates(
+        self, edge: Edge, active: Mapping[str, str], margin: float | None = None
+    ) -> tuple[list[str], list[tuple[str, float, float]]]:
+        """The part of :meth:`inconsistent` that depends on the other variables' MPs only
+        (fixed between switches, so a sequencer computes it once per context).
+
+        Returns ``unseen``: the other variables that run an MP never seen at this switch; and
+        ``bounds``: ``(variable, least, least - margin)`` for every other variable whose MP had
+        a least demonstrated progress ``least`` at this switch (empty when ``margin`` is
+        ``None``). The transition is inconsistent once per ``unseen`` variable and once per
+        bound whose variable's φ is below ``least - margin``.
+        """
+        unseen = [
+            u
+            for u, mps in (self.contexts.get(edge) or {}).items()
+            if u in active and active[u] not in mps
+        ]
+        bounds = []
+        if margin is not None:
+            for u, seen in (self.progress.get(edge) or {}).items():
+                mp = active.get(u)
+                if mp in seen:
+                    bounds.append((u, seen[mp], seen[mp] - margin))
+        return unseen, bounds
+
+    def describe(self, variable: str) -> list[str]:
+        """One line per switch of ``variable``: the other variables' demonstrated MPs (and
+        the least progress at which they were seen)."""
+        lines = []
+        for (v, source, target), ctx in sorted(self.contexts.items()):
+            if v != variable:
+                continue
+            prog = self.progress.get((v, source, target), {})
+            parts = []
+            for u, mps in sorted(ctx.items()):
+                part = f"{u} in {{{', '.join(sorted(mps))}}}"
+                if u in prog:
+                    part += (
+                        " ("
+                        + ", ".join(f"{mp} >= {q:.2f}" for mp, q in sorted(prog[u].items()))
+                        + ")"
+                    )
+                parts.append(part)
+            lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
+        return lines
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON/checkpoint-friendly form."""
+        return {
+            "switches": [
+                {
+                    "variable": v,
+                    "source": s,
+                    "target": t,
+                    "context": {u: sorted(m) for u, m in sorted(c.items())},
+                    "progress": {
+                        u: dict(sorted(q.items()))
+                        for u, q in sorted(self.progress.get((v, s, t), {}).items())
+                    },
+                }
+                for (v, s, t), c in sorted(self.contexts.items())
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> Coupling:
+        """Inverse of :meth:`to_dict` (also reads the list form of checkpoint version 2)."""
+        rows = data.get("switches", []) if isinstance(data, Mapping) else data
+        contexts, progress = {}, {}
+        for r in rows:
+            edge = (str(r["variable"]), str(r["source"]), str(r["target"]))
+            contexts[edge] = {str(u): frozenset(map(str, m)) for u, m in r["context"].items()}
+            prog = {
+                str(u): {str(mp): float(q) for mp, q in seen.items()}
+                for u, seen in (r.get("progress") or {}).items()
+            }
+            if prog:
+                progress[edge] = prog
+        return cls(contexts, progress)
+
+
+def indicator_features(x: np.ndarray) -> np.ndarray:
+    """``(d,)`` bool: features of ``x (N, d)`` that take at most two distinct values (binary
+    signals such as touch; they flicker while a contact is made or broken)."""
+    x = np.asarray(x, dtype=np.float64)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    return np.all((x == lo) | (x == hi), axis=0)
+
+
+class StallDetector:
+    """Tracks when any variable last switched and when the features last moved.
+
+    ``feature_range (d,)``: each feature's range in the training data; motion is measured
+    relative to it, so the detector does not depend on the features' units. Features with a
+    range of 0 are ignored (:meth:`ConcurrentSequencer.fit` gives indicator features range 0:
+    a touch signal that flickers is not motion).
+    """
+
+    def __init__(self, feature_range: np.ndarray, stall_time: float, rest_speed: float) -> None:
+        r = np.asarray(feature_range, dtype=np.float64)
+        varies = r > 1e-12 * max(float(np.max(r, initial=0.0)), 1e-300)
+        self.inv_range = np.divide(1.0, r, out=np.zeros_like(r), where=varies)
+        self.stall_time = stall_time
+        self.rest_speed = rest_speed
+        self._x: np.ndarray | None = None
+        self.last_switch = 0.0
+        self.last_motion = 0.0
+
+    def reset(self, t: float, x: np.ndarray) -> None:
+        self._x = np.array(x, dtype=np.float64)
+        self.last_switch = self.last_motion = t
+
+    def observe(self, t: float, x: np.ndarray) -> None:
+        """Feed the features ``x (d,)`` of the tick at ``t`` [s].
+
+        Motion is a displacement of any feature by more than ``rest_speed * stall_time`` of
+        its range from where the features were when motion was last seen (a dead band: contact
+        jitter that goes back and forth never adds up to motion, a slow drift does)."""
+        if self._x is None:
+            self._x = np.array(x, dtype=np.float64)
+            return
+        moved = float((np.abs(x - self._x) * self.inv_range).max(initial=0.0))
+        if moved > self.rest_speed * self.stall_time:
+            self.last_motion = t
+            self._x = np.array(x, dtype=np.float64)
+
+    def switched(self, t: float) -> None:
+        self.last_switch = t
+
+    def stalled(self, t: float) -> bool:
+        """No switch for ``stall_time`` and no motion for ``stall_time``."""
+        since = t - self.stall_time + _EPS_T
+        return self.last_switch <= since and self.last_motion <= since
+
+
+def recovery_choice(
+    candidates: Sequence[tuple[str, str, str, float, int]], threshold: float
+) -> tuple[str, str, str, float] | None:
+    """Pick the stall-recovery transition.
+
+    ``candidates``: ``(variable, source, target, p, n_inconsistent)`` for every successor of
+    every variable's current node. Returns the one with the fewest inconsistent other variables
+    and, among those, the highest ``p``, if that ``p`` reaches ``threshold``; else ``None``.
+    """
+    ok = [c for c in candidates if c[3] >= threshold]
+    if not ok:
+        return None
+    v, s, t, p, _ = min(ok, key=lambda c: (c[4], -c[3], c[0], c[2]))
+    return v, s, t, p
+
+
+__all__ = [
+    "COUPLINGS",
+    "SWITCH_RULES",
+    "Coupling",
+    "PaperRule",
+    "PlateauRule",
+    "StallDetector",
+    "SwitchRule",
+    "indicator_features",
+    "make_rule",
+    "recovery_choice",
+]

@@ -1,0 +1,129 @@
+"""The relay task's scripted demonstrator (:mod:`cpmp.worlds.relay.world`): its labelled
+demonstrations and the same finite state machine as a closed-loop policy.
+
+The scripted demonstrator (a finite state machine) switches as soon as a guard holds, with no
+settle time:
+
+* gripper ``open -> close``: carrier within ``tolerance`` of its goal and receiver within
+  ``tolerance`` of the object; ``close -> hold``: grip force >= ``contact_force`` (``close``
+  would settle at ``light_force``); ``hold -> release``: receiver within ``tolerance`` of the
+  destination.
+* carrier ``carry/present -> retreat`` and receiver ``approach -> withdraw/stow``: the gripper
+  was holding at the previous tick (they feel the receiver take the object); carrier ``retreat
+  -> rest``: within ``tolerance`` of home.
+
+The synchronisation the features alone leave ambiguous: once the gripper starts closing, its
+fingers travel for about 0.3 s before they touch the object, and no feature moves meanwhile.
+That state lies far along ``carry``/``present`` and ``approach`` in feature space (both hands
+have arrived; only a small rise of the force is left) and close to where ``retreat`` and
+``withdraw``/``stow`` start, so graphs coupled only through the features (sequencer option
+``coupling="none"``) fire them during the pause: the object leaves with the carrier, or the
+receiver leaves without it, and the task cannot complete. The labels tell the difference: those
+switches were only demonstrated while the gripper was in ``hold``, which the learned coupling
+(``coupling="context"``) requires.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cpmp.data.demonstration import Demonstration, DemonstrationLog
+from cpmp.errors import ConfigError
+from cpmp.worlds.relay.world import (
+    FEATURE_NAMES,
+    STRATEGIES,
+    VARIABLES,
+    RelayEpisode,
+    RelayTask,
+)
+
+_CARRIER_OUT = ("carry", "present")
+
+
+def script(
+    task: RelayTask, x: np.ndarray, episode: RelayEpisode, active: dict[str, str]
+) -> dict[str, str]:
+    """The demonstrator's switches from features ``x (6,)`` and the current MPs ``active``.
+
+    Guards on other variables' MPs read ``active`` (this tick's labels), so such a switch
+    comes one tick after the one it waits for.
+    """
+    carrier, receiver, force = x[0:2], x[2:4], x[4]
+    tol = task.tolerance
+    new = dict(active)
+    if active["gripper"] == "open" and active["carrier"] in _CARRIER_OUT:
+        goal = episode.meeting_point if active["carrier"] == "carry" else episode.present_point
+        if np.linalg.norm(carrier - goal) < tol and np.linalg.norm(receiver - carrier) < tol:
+            new["gripper"] = "close"
+    if active["gripper"] == "close" and force >= task.contact_force:
+        new["gripper"] = "hold"
+    if active["carrier"] == "retreat" and np.linalg.norm(carrier - episode.carrier_home) < tol:
+        new["carrier"] = "rest"
+    if active["gripper"] == "hold":
+        if active["carrier"] in _CARRIER_OUT:
+            new["carrier"] = "retreat"
+        if active["receiver"] == "approach":
+            new["receiver"] = "withdraw" if episode.strategy == "meet" else "stow"
+        if (
+            active["receiver"] in ("withdraw", "stow")
+            and np.linalg.norm(receiver - episode.destination) < tol
+        ):
+            new["gripper"] = "release"
+    return new
+
+
+def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None) -> Demonstration:
+    """The scripted demonstrator's labelled demonstration of ``episode``, recorded every
+    ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``)."""
+    state = task.initial_state(episode)
+    active = task.initial_mps(episode)
+    log = DemonstrationLog(VARIABLES)
+    t = 0.0
+    while True:
+        x = task.features(state, episode)
+        log.append(t, x, active)
+        if task.at_goal(state, episode) or t >= task.max_time:
+            break
+        active = script(task, x, episode, active)
+        task.advance(state, episode, active)
+        t = round(t + task.dt, 10)
+    metadata = {
+        "task": "relay",
+        "context": episode.context,
+        "strategy": episode.strategy,
+        "reached_goal": task.at_goal(state, episode),
+    }
+    return log.to_demonstration(FEATURE_NAMES, name, metadata)
+
+
+class ScriptedPolicy:
+    """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy`
+    interface (it knows the episode's goals, as the demonstrator does)."""
+
+    def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
+        self.task = task
+        self.episode = episode
+        self.active: dict[str, str] = {}
+
+    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        self.active = self.task.initial_mps(self.episode)
+        return dict(self.active)
+
+    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        self.active = script(self.task, np.asarray(x, float), self.episode, self.active)
+        return dict(self.active)
+
+
+def make_demonstrations(
+    n: int, seed: int = 0, task: RelayTask | None = None
+) -> list[Demonstration]:
+    """``n`` demonstrations alternating meet and fetch (``demo_0`` meet), reproducible from
+    ``seed``."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ConfigError(f"n must be a positive integer, got {n!r}")
+    task = task or RelayTask()
+    rng = np.random.default_rng(seed)
+    return [
+        demonstrate(task, task.sample_episode(rng, STRATEGIES[i % 2]), name=f"demo_{i}")
+        for i in range(n)
+    ]

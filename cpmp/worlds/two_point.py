@@ -1,0 +1,189 @@
+"""A small synthetic concurrent task, for examples, tests and quick experiments.
+
+Two control variables move two points ``a`` and ``b`` on a line with first-order attractors
+``ṗ = K (g - p)``; a context feature ``c`` in [0, 1] selects one of two strategies:
+
+* ``c < 0.5`` (sequential): ``a`` moves out while ``b`` waits at 0; then ``a`` holds while
+  ``b`` moves out; once ``b`` arrived both return to 0.
+* ``c >= 0.5`` (parallel): ``a`` and ``b`` move out at once (``b`` is faster and holds at its
+  goal); once both arrived both return to 0.
+
+Features are ``x = [p_a, p_b, c]``. Variable ``a`` runs ``a_go -> a_wait -> a_back``
+(sequential) or ``a_go -> a_back`` (parallel); ``b`` runs ``b_wait -> b_go -> b_back`` or
+``b_go -> b_back``. So ``a``'s graph branches, ``b``'s has two initial nodes, and the graphs
+synchronise through the shared features only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cpmp.data.demonstration import Demonstration, DemonstrationLog
+from cpmp.errors import ConfigError
+from cpmp.records import Policy
+
+FEATURE_NAMES = ["p_a", "p_b", "context"]
+VARIABLES = ["a", "b"]
+
+
+@dataclass
+class SyntheticTask:
+    """The two-point concurrent task.
+
+    Attributes:
+        dt: control period [s].
+        max_time: episode time limit [s].
+        gain: attractor gains K of ``a`` and ``b`` [1/s].
+        tolerance: the demonstrator switches when a point is this close to its goal.
+        start_jitter: half-width of the uniform jitter of the start positions around 0.
+        goal_jitter: half-width of the uniform jitter of the "out" goals around 1 (goals are not
+            features, so a jitter makes the end of an MP unobservable; 0 by default).
+    """
+
+    # the world
+    dt: float = 0.01
+    max_time: float = 8.0
+    gain: tuple[float, float] = (2.5, 4.0)
+    # the demonstrator
+    tolerance: float = 0.02
+    # the episodes
+    start_jitter: float = 0.05
+    goal_jitter: float = 0.0
+
+    def __post_init__(self) -> None:
+        if min(self.gain) <= 0 or self.dt <= 0 or self.tolerance <= 0 or self.max_time <= 0:
+            raise ConfigError("gain, dt, tolerance and max_time must all be > 0")
+
+    def sample_episode(self, rng: np.random.Generator, context: float | None = None) -> dict:
+        """Random start positions, goals and context for one episode."""
+        return {
+            "start": rng.uniform(-self.start_jitter, self.start_jitter, size=2),
+            "goal": 1.0 + rng.uniform(-self.goal_jitter, self.goal_jitter, size=2),
+            "context": float(rng.uniform(0.0, 1.0) if context is None else context),
+        }
+
+    def goals(self, episode: dict, active: dict[str, str]) -> np.ndarray:
+        """Attractor goals ``(2,)`` of the active MPs."""
+        out = np.zeros(2)
+        for i, v in enumerate(VARIABLES):
+            mp = active[v]
+            if mp.endswith("_go") or mp == "a_wait":
+                out[i] = episode["goal"][i]
+        return out
+
+    def _demo_switch(self, p: np.ndarray, g: np.ndarray, active: dict[str, str]) -> dict[str, str]:
+        near = np.abs(g - p) < self.tolerance
+        a, b = active["a"], active["b"]
+        new = dict(active)
+        if a == "a_go" and b == "b_wait" and near[0]:
+            new["a"] = "a_wait"
+        if b == "b_wait" and a == "a_wait":
+            new["b"] = "b_go"
+        if b == "b_go" and near[1] and a in ("a_go", "a_wait") and near[0]:
+            new["a"], new["b"] = "a_back", "b_back"
+        return new
+
+    def demonstrate(self, episode: dict, name: str | None = None) -> Demonstration:
+        """The scripted demonstrator's labelled demonstration of ``episode``."""
+        parallel = episode["context"] >= 0.5
+        active = {"a": "a_go", "b": "b_go" if parallel else "b_wait"}
+        p = np.array(episode["start"], dtype=float)
+        log = DemonstrationLog(VARIABLES)
+        t = 0.0
+        while t <= self.max_time:
+            log.append(t, [p[0], p[1], episode["context"]], active)
+            if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
+                break
+            g = self.goals(episode, active)
+            active = self._demo_switch(p, g, active)
+            p = p + self.dt * np.asarray(self.gain) * (self.goals(episode, active) - p)
+            t = round(t + self.dt, 10)
+        metadata = {
+            "context": episode["context"],
+            "strategy": "parallel" if parallel else "sequential",
+        }
+        return log.to_demonstration(FEATURE_NAMES, name, metadata)
+
+    def rollout(self, episode: dict, policy: Policy) -> tuple[dict[str, list[str]], bool]:
+        """Run ``policy`` closed-loop on ``episode``.
+
+        Returns the executed MP sequence per variable and whether both points returned home.
+        """
+        p = np.array(episode["start"], dtype=float)
+        x = np.array([p[0], p[1], episode["context"]])
+        active = policy.reset(0.0, x)
+        seqs = {v: [active[v]] for v in VARIABLES}
+        t = 0.0
+        while t < self.max_time:
+            p = p + self.dt * np.asarray(self.gain) * (self.goals(episode, active) - p)
+            t = round(t + self.dt, 10)
+            x = np.array([p[0], p[1], episode["context"]])
+            active = policy.step(t, x)
+            for v in VARIABLES:
+                if active[v] != seqs[v][-1]:
+                    seqs[v].append(active[v])
+            if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
+                return seqs, True
+        return seqs, False
+
+
+def evaluate(
+    seq: Policy, task: SyntheticTask | None = None, n_episodes: int = 20, seed: int = 0
+) -> dict[str, int]:
+    """Closed-loop outcomes of ``seq`` on ``n_episodes`` random episodes (seeded): ``wrong_start``
+    (the initial MPs differ from the demonstrator's for the episode's context), ``incomplete``
+    (both points not home within ``max_time``) or ``complete``."""
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
+        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    task = task or SyntheticTask()
+    rng = np.random.default_rng(seed)
+    counts = {"complete": 0, "wrong_start": 0, "incomplete": 0}
+    for _ in range(n_episodes):
+        episode = task.sample_episode(rng)
+        seqs, done = task.rollout(episode, seq)
+        want = {"a": "a_go", "b": "b_go" if episode["context"] >= 0.5 else "b_wait"}
+        if {v: s[0] for v, s in seqs.items()} != want:
+            counts["wrong_start"] += 1
+        else:
+            counts["complete" if done else "incomplete"] += 1
+    return counts
+
+
+def make_demonstrations(
+    n: int, seed: int = 0, task: SyntheticTask | None = None
+) -> list[Demonstration]:
+    """``n`` demonstrations alternating the two strategies, reproducible from ``seed``."""
+    task = task or SyntheticTask()
+    rng = np.random.default_rng(seed)
+    demos = []
+    for i in range(n):
+        lo, hi = (0.0, 0.45) if i % 2 == 0 else (0.55, 1.0)
+        context = float(rng.uniform(lo, hi))
+        demos.append(task.demonstrate(task.sample_episode(rng, context), name=f"demo_{i}"))
+    return demos
+
+
+def curved_trajectories(n: int = 4, seed: int = 0, n_samples: int = 100) -> list[Demonstration]:
+    """``n`` curved 2-D trajectories from a start region near (0.1, 0.1) to an end region near
+    (0.9, 0.9), each one activation of a single MP ``move`` (the setting of the paper's Fig. 3).
+    """
+    rng = np.random.default_rng(seed)
+    u = np.linspace(0.0, 1.0, n_samples)[:, None]
+    demos = []
+    for i in range(n):
+        start = np.array([0.1, 0.1]) + rng.uniform(-0.06, 0.06, 2)
+        end = np.array([0.9, 0.9]) + rng.uniform(-0.06, 0.06, 2)
+        bend = np.array([0.5, 0.5]) + rng.uniform(-0.35, 0.35, 2)
+        x = (1 - u) ** 2 * start + 2 * (1 - u) * u * bend + u**2 * end  # quadratic Bezier
+        demos.append(
+            Demonstration(
+                time=u[:, 0] * 2.0,
+                features=x,
+                labels={"var": np.array(["move"] * n_samples)},
+                feature_names=["x1", "x2"],
+                name=f"demo_{i}",
+            )
+        )
+    return demos

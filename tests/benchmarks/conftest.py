@@ -1,0 +1,3 @@
+"""Fixtures of the simulator benchmark tests (defined in ``tests/sim_fixtures.py``)."""
+
+from sim_fixtures import boxes, cfg, demos  # noqa: F401 (fixtures)

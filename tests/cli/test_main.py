@@ -1,0 +1,363 @@
+"""The command-line entry points (``cpmp-*`` console scripts and ``scripts/*.py``): every kind
+of bad override ends a Hydra command with exit status 2 and one ``error:`` line naming it,
+before torch, Lightning or MuJoCo are imported; ``evaluate`` reports MPs the model does not
+know."""
+
+from __future__ import annotations
+
+import json
+import logging
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from cpmp.cli.main import COMMANDS, CONF_DIR, _Task, check_command
+from cpmp.data.datafile import save_demonstrations
+from cpmp.data.demonstration import Demonstration
+from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint
+
+ROOT = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+HEAVY = ("torch", "lightning", "mujoco", "pytorch_kinematics", "rerun", "matplotlib")
+
+
+def console_script(name: str) -> str:
+    """The installed ``cpmp-<name>`` command (``pip install -e .`` puts it beside python)."""
+    path = BIN / f"cpmp-{name.replace('_', '-')}"
+    assert path.is_file(), f"{path} is missing: re-install with pip install -e ."
+    return str(path)
+
+
+def run(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def error_line(proc: subprocess.CompletedProcess) -> str:
+    """The one ``error:`` line of a failed command (exit status 2, no traceback)."""
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, proc.stderr
+    return errors[0]
+
+
+# Every kind of bad override on every Hydra command: (command, argv, words the error names).
+# ``{file}`` stands for an existing file. All of them fail in check_command (light imports).
+LIGHT_CASES = [
+    # an unknown option of a config group
+    ("experiment", ["predictor=svm"], ["predictor=svm", "klr_path"]),
+    ("train", ["predictor=svm"], ["predictor=svm", "klr_path"]),
+    ("evaluate", ["data=nope"], ["data=nope", "default"]),
+    ("collect", ["task=defalt"], ["task=defalt", "did you mean task=default"]),
+    ("aggregate", ["hydra/launcher=nope"], ["hydra/launcher=nope", "joblib"]),
+    ("progress_field", ["predictor=svm"], ["predictor=svm", "klr_sparse"]),
+    ("experiment", ["-m", "launcher=slrum"], ["launcher=slrum", "did you mean launcher=slurm"]),
+    # an unknown key
+    ("experiment", ["predictr=klr"], ["predictr=klr", "did you mean 'predictor'", "+predictr"]),
+    ("experiment", ["experiment.n_boxs=3"], ["experiment.n_boxs", "'experiment.n_boxes'"]),
+    ("train", ["data.pth=x.h5"], ["data.pth=x.h5", "'data.path'"]),
+    ("evaluate", ["checkpont=m.pt"], ["checkpont=m.pt", "'checkpoint'"]),
+    ("collect", ["n_demo=3"], ["n_demo=3", "'n_demos'"]),
+    ("aggregate", ["sweepdir=x"], ["sweepdir=x", "'sweep_dir'"]),
+    ("progress_field", ["n_trajectory=3"], ["n_trajectory=3", "'n_trajectories'"]),
+    ("experiment", ["+predictor.gamma=2"], ["+predictor.gamma=2", "predictor.gamma=2"]),
+    # a value of the wrong type, an override Hydra cannot parse, an unresolvable interpolation
+    ("experiment", ["experiment.n_boxes=abc"], ["experiment.n_boxes='abc'", "integer"]),
+    ("experiment", ["experiment.seeds=[0,x]"], ["experiment.seeds", "'x'", "integer"]),
+    ("experiment", ["predictor.gamma=[1"], ["predictor.gamma=[1"]),
+    ("experiment", ["experiment.n_boxes=${nope}"], ["experiment.n_boxes", "nope"]),
+    ("experiment", ["predictor=klr,mlp"], ["predictor=klr,mlp", "--multirun"]),
+    ("experiment", ["predictor.bias=1"], ["predictor.bias=1", "boolean"]),
+    # ... against the schema (cpmp.config) where the default (null) says nothing
+    ("experiment", ["predictor.max_support=abc"], ["predictor.max_support=abc", "Integer"]),
+    ("experiment", ["--cfg", "job", "trainer.max_epochs=x"], ["trainer.max_epochs=x", "Integer"]),
+    ("train", ["seed=abc"], ["seed='abc'", "integer"]),
+    ("train", ["seed=-1"], ["seed=-1", "non-negative"]),
+    ("evaluate", ["data.split=3"], ["data.split=3", "string"]),
+    ("collect", ["balanced=maybe"], ["balanced='maybe'", "boolean"]),
+    ("collect", ["n_demos=0"], ["n_demos=0", ">= 1"]),
+    ("aggregate", ["hydra.job.chdir=abc"], ["hydra.job.chdir=abc", "bool"]),
+    ("progress_field", ["seed=1.5"], ["seed=1.5", "integer"]),
+    # a missing file or directory, an unset required path
+    ("experiment", ["--config-dir", "nope"], ["--config-dir nope"]),
+    ("train", [], ["data.path is required"]),
+    ("train", ["data.path=nope.h5"], ["data.path=nope.h5", "no such file"]),
+    ("evaluate", ["checkpoint=nope.pt", "data.path={file}"], ["checkpoint=nope.pt"]),
+    ("evaluate", ["checkpoint={file}", "data.path=nope.h5"], ["data.path=nope.h5"]),
+    ("collect", ["--config-dir", "nope"], ["--config-dir nope"]),
+    ("aggregate", ["sweep_dir=nope"], ["sweep_dir=nope", "no such directory"]),
+    ("progress_field", ["--config-dir", "nope"], ["--config-dir nope"]),
+    # a sweep is checked job by job before the first one starts
+    (
+        "experiment",
+        ["-m", "predictor=klr,mlp", "predictor.support_scale=1,2"],
+        ["predictor.support_scale=1", "job predictor=mlp predictor.support_scale=1"],
+    ),
+    # a bad flag
+    ("train", ["--nope"], ["--nope"]),
+]
+
+
+def case_id(case: tuple[str, list[str], list[str]]) -> str:
+    return f"{case[0]}:{' '.join(case[1]) or '(none)'}"
+
+
+def fill(argv: list[str], file: Path) -> list[str]:
+    return [a.replace("{file}", str(file)) for a in argv]
+
+
+@pytest.fixture
+def some_file(tmp_path: Path) -> Path:
+    path = tmp_path / "exists.bin"
+    path.write_bytes(b"not read by the checks")
+    return path
+
+
+@pytest.mark.parametrize("case", LIGHT_CASES, ids=case_id)
+def test_bad_override_exits_2_with_one_error_line(case, tmp_path, some_file):
+    command, argv, names = case
+    proc = run([console_script(command), *fill(argv, some_file)], cwd=tmp_path)
+    line = error_line(proc)
+    assert proc.stderr.strip() == line  # nothing but the error line
+    for name in names:
+        assert name in line
+    assert not (tmp_path / "logs").exists()  # no run directory: failed before Hydra ran
+
+
+def test_light_checks_import_no_heavy_module(tmp_path, some_file):
+    """Every bad override above fails, and every good command line passes, in a fresh
+    interpreter that has not imported torch, Lightning, MuJoCo, rerun or matplotlib."""
+    cases = [(c, fill(a, some_file)) for c, a, _ in LIGHT_CASES]
+    good = [
+        ("experiment", ["experiment=tiny", "predictor=mlp", "predictor.lr=0.1"]),
+        ("train", [f"data.path={some_file}", "seed=3"]),
+        ("evaluate", [f"checkpoint={some_file}", f"data.path={some_file}"]),
+        ("aggregate", [f"sweep_dir={tmp_path}"]),
+    ]
+    code = f"""
+import json, sys
+from cpmp.errors import CpmpError
+from cpmp.cli.main import check_command
+failed = []
+for command, argv in {cases!r}:
+    try:
+        check_command(command, argv)
+    except CpmpError:
+        failed.append(True)
+    else:
+        failed.append(False)
+passed = [len(check_command(command, argv)) for command, argv in {good!r}]
+heavy = [m for m in {HEAVY!r} if m in sys.modules]
+print(json.dumps({{"failed": failed, "passed": passed, "heavy": heavy}}))
+"""
+    proc = run([sys.executable, "-c", code], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["failed"] == [True] * len(cases)
+    assert out["passed"] == [1] * len(good)
+    assert out["heavy"] == []
+
+
+@pytest.mark.parametrize(
+    ("command", "argv", "n_jobs"),
+    [
+        ("experiment", ["predictor.gamma=2"], 1),  # an integer where the default is a float
+        ("experiment", ["trainer.logger=null"], 1),  # null where the default is a string
+        ("experiment", ["experiment.max_time=5"], 1),  # a null default takes any type
+        ("experiment", ["experiment.seeds=[0,1]"], 1),
+        ("experiment", ["-m", "predictor=klr,klr_sparse", "predictor.gamma=2,4"], 4),
+        ("train", ["-m", "seed=range(3)", "data.path={file}"], 3),
+        ("evaluate", ["data.split=null", "checkpoint={file}", "data.path={file}"], 1),
+        ("experiment", ["--cfg", "job", "experiment.n_boxes=-1"], 0),  # prints, runs nothing
+        ("experiment", ["--help"], 0),
+    ],
+)
+def test_good_command_lines_pass_the_checks(command, argv, n_jobs, some_file):
+    jobs = check_command(command, fill(argv, some_file))
+    assert len(jobs) == n_jobs
+    if n_jobs == 4:
+        combos = {(j.cfg.predictor.kind, j.cfg.predictor.gamma) for j in jobs}
+        assert combos == {("klr", 2), ("klr", 4), ("klr_sparse", 2), ("klr_sparse", 4)}
+    if command == "train":
+        assert [j.cfg.seed for j in jobs] == [0, 1, 2]
+
+
+def test_config_dir_adds_options_of_your_own(tmp_path):
+    (tmp_path / "predictor").mkdir()
+    (tmp_path / "predictor" / "mine.yaml").write_text(
+        "defaults:\n  - klr\n  - _self_\ngamma: 3.0\n"
+    )
+    (job,) = check_command("experiment", ["--config-dir", str(tmp_path), "predictor=mine"])
+    assert (job.cfg.predictor.kind, job.cfg.predictor.gamma) == ("klr", 3.0)
+    with pytest.raises(ConfigError, match=r"predictor\.gamma='x'.*default is 3\.0"):
+        check_command("experiment", ["-cd", str(tmp_path), "predictor=mine", "predictor.gamma=x"])
+
+
+def test_check_command_raises_cpmp_errors(tmp_path):
+    with pytest.raises(ConfigError, match="predictr"):
+        check_command("experiment", ["predictr=klr"])
+    with pytest.raises(CpmpFileError, match=r"nope\.h5"):
+        check_command("train", [f"data.path={tmp_path / 'nope.h5'}"])
+
+
+# Bad values the job's own checks find (they import torch; MuJoCo for the task): still one line,
+# still before Hydra starts the job (no run directory).
+DEEP_CASES = [
+    ("train", ["data.path={file}", "sequencer.threshold=2"], ["sequencer.threshold=2"]),
+    ("collect", ["task.max_time=-1"], ["task.max_time=-1", "max_time"]),
+    ("progress_field", ["predictor.gamma=-1"], ["predictor.gamma=-1", "gamma"]),
+    (
+        "experiment",
+        ["-m", "experiment.n_boxes=2,-1"],
+        ["experiment.n_boxes must be >= 1, got -1", "job experiment.n_boxes=-1"],
+    ),
+]
+
+
+@pytest.mark.parametrize("case", DEEP_CASES, ids=case_id)
+def test_bad_value_fails_before_the_job_starts(case, tmp_path, some_file):
+    command, argv, names = case
+    proc = run([console_script(command), *fill(argv, some_file)], cwd=tmp_path)
+    line = error_line(proc)
+    for name in names:
+        assert name in line
+    assert not (tmp_path / "logs").exists()
+
+
+def test_user_error_inside_the_job_exits_2(tmp_path, some_file):
+    """A damaged checkpoint is found by the job: the same one-line error and status 2."""
+    proc = run(
+        [
+            console_script("evaluate"),
+            f"checkpoint={some_file}",
+            f"data.path={some_file}",
+            f"hydra.run.dir={tmp_path / 'run'}",
+        ],
+        cwd=tmp_path,
+    )
+    assert str(some_file) in error_line(proc)
+
+
+@pytest.mark.parametrize("script", sorted(COMMANDS))
+def test_scripts_are_wrappers_of_the_commands(script, tmp_path):
+    proc = run([sys.executable, str(ROOT / "scripts" / f"{script}.py"), "nokey=1"], cwd=tmp_path)
+    assert f"the {script} config has no key 'nokey'" in error_line(proc)
+
+
+def test_help_lists_the_config_groups(tmp_path):
+    proc = run([console_script("experiment"), "--help"], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    predictors = ", ".join(sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml")))
+    assert f"predictor: {predictors}" in proc.stdout
+
+
+def test_command_runs_from_anywhere_into_logs_of_its_job(tmp_path):
+    """The installed command finds the repository's conf/ from another directory and names
+    its run directory after the job."""
+    proc = run([console_script("progress_field"), "n_trajectories=2"], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    png = Path(proc.stdout.strip().splitlines()[-1])
+    assert png.is_file() and png.name == "progress_field.png"
+    assert png.parent.parent == tmp_path / "logs" / "progress_field"
+    assert (png.parent / "progress_field.log").is_file()
+    assert json.loads((png.parent / "progress_field.json").read_text())["n_trajectories"] == 2
+
+
+def test_task_pickles_with_its_job_name():
+    """The joblib and SLURM launchers pickle the task; Hydra reads the job name from it."""
+    task = pickle.loads(pickle.dumps(_Task("collect")))
+    assert (task.name, task.__module__) == ("collect", "collect")
+
+
+def test_console_scripts_run_their_command(monkeypatch):
+    """``cpmp-<name>`` of pyproject's [project.scripts] is ``cli.<name>_main``, which runs
+    Hydra command ``name`` (and says so in its docstring)."""
+    import tomllib
+
+    from cpmp.cli import main as cli
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    ran: list[str] = []
+    monkeypatch.setattr(cli, "run_command", ran.append)
+    for name in sorted(COMMANDS):
+        script = f"cpmp-{name.replace('_', '-')}"
+        assert scripts[script] == f"cpmp.cli.main:{name}_main"
+        main = getattr(cli, f"{name}_main")
+        assert main.__name__ == f"{name}_main"
+        assert main.__doc__ == f"``{script}``: {COMMANDS[name].summary}."
+        main()
+    assert ran == sorted(COMMANDS)
+
+
+def test_conf_dir_is_the_repository_conf():
+    assert CONF_DIR == ROOT / "conf"
+    assert sorted(COMMANDS) == sorted(p.stem for p in CONF_DIR.glob("*.yaml"))
+
+
+def test_inspect_rrd_reports_unreadable_files(tmp_path):
+    bad = tmp_path / "bad.rrd"
+    bad.write_text("not an rrd")
+    proc = run([console_script("inspect_rrd"), str(bad)], cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "bad.rrd" in proc.stderr
+
+
+# ---------------------------------------------------------- evaluate: MPs the model lacks
+def renamed(demo: Demonstration, old: str, new: str) -> Demonstration:
+    """``demo`` with MP ``old`` called ``new``."""
+    labels = {v: np.where(lab == old, new, lab) for v, lab in demo.labels.items()}
+    return Demonstration(
+        time=demo.time,
+        features=demo.features,
+        labels=labels,
+        feature_names=demo.feature_names,
+        name=demo.name,
+    )
+
+
+def evaluate(tmp_path: Path, seq, demos: list[Demonstration]) -> dict:
+    checkpoint = seq.save(tmp_path / "model.pt")
+    data = tmp_path / "test.h5"
+    save_demonstrations(data, demos)
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("evaluate", [f"checkpoint={checkpoint}", f"data.path={data}"])
+    return json.loads(evaluate_checkpoint(cfg, tmp_path).read_text())
+
+
+def test_evaluate_reports_mps_the_model_does_not_know(tmp_path, fitted_klr, test_demos, caplog):
+    demos = list(test_demos)
+    victim = next(i for i, d in enumerate(demos) if "b_wait" in set(d.labels["b"]))
+    demos[victim] = renamed(demos[victim], "b_wait", "b_pause")
+    n_renamed = sum(s.mp == "b_pause" for s in demos[victim].segments("b"))
+    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.checkpoint_jobs"):
+        out = evaluate(tmp_path, fitted_klr, demos)
+    assert out["unknown_mps"] == [
+        {
+            "variable": "b",
+            "mp": "b_pause",
+            "known_variable": True,
+            "activations": n_renamed,
+            "demos": [demos[victim].name],
+        }
+    ]
+    total = sum(len(d.segments(v)) for d in demos for v in d.variables)
+    assert out["progress"]["n_activations"] == total - n_renamed
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and f"b/b_pause ({n_renamed}x)" in warnings[0]
+    markdown = (tmp_path / "evaluation.md").read_text()
+    assert "MPs the model does not know" in markdown
+    assert f"| b | b_pause | {n_renamed} | {demos[victim].name} |" in markdown
+
+
+def test_evaluate_of_known_mps_reports_none(tmp_path, fitted_klr, test_demos, caplog):
+    with caplog.at_level(logging.WARNING, logger="cpmp.experiment.checkpoint_jobs"):
+        out = evaluate(tmp_path, fitted_klr, list(test_demos))
+    assert out["unknown_mps"] == []
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert "does not know" not in (tmp_path / "evaluation.md").read_text()

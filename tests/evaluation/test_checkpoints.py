@@ -1,0 +1,96 @@
+"""Checkpoints: a sequencer's are validated against their own spec on load, and
+:func:`cpmp.evaluation.checkpoints.load_sequencer` reads either kind, telling a file of another
+format from a damaged one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from cpmp.baselines.goal_nearest import GoalNearestSequencer
+from cpmp.errors import CpmpFileError
+from cpmp.evaluation.checkpoints import load_sequencer
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+
+@pytest.fixture(scope="module")
+def payload(fitted_klr, tmp_path_factory):
+    path = fitted_klr.save(tmp_path_factory.mktemp("ckpt") / "m.pt")
+    return torch.load(path, weights_only=True)
+
+
+def _corrupt(payload, how):
+    p = {**payload, "predictor": {**payload["predictor"]}}
+    state = dict(p["predictor"]["state"])
+    p["predictor"]["state"] = state
+    if how == "nan_weights":
+        state["weight"] = state["weight"].clone().fill_(float("nan"))
+    elif how == "missing_key":
+        del state["bias"]
+    elif how == "extra_key":
+        state["surprise"] = torch.zeros(2)
+    elif how == "wrong_shape":
+        state["weight"] = state["weight"][:, :2].clone()
+    elif how == "extra_option":
+        p["sequencer"] = {**p["sequencer"], "warp_drive": True}
+    elif how == "bad_option":
+        p["sequencer"] = {**p["sequencer"], "threshold": float("nan")}
+    elif how == "no_graphs":
+        del p["graphs"]
+    elif how == "bad_range":
+        p["feature_range"] = [1.0]
+    return p
+
+
+@pytest.mark.parametrize(
+    ("how", "message"),
+    [
+        ("nan_weights", "non-finite predictor parameters: weight"),
+        ("missing_key", "missing bias"),
+        ("extra_key", "unexpected surprise"),
+        ("wrong_shape", "weight has shape"),
+        ("extra_option", "unknown sequencer options \\['warp_drive'\\]"),
+        ("bad_option", "threshold"),
+        ("no_graphs", "missing entries \\['graphs'\\]"),
+        ("bad_range", "feature_range"),
+    ],
+)
+def test_corrupt_checkpoints_are_file_errors(payload, tmp_path, how, message):
+    path = tmp_path / f"{how}.pt"
+    torch.save(_corrupt(payload, how), path)
+    with pytest.raises(CpmpFileError, match=message):
+        ConcurrentSequencer.load(path)
+
+
+def test_intact_checkpoint_still_loads(payload, tmp_path, fitted_klr, test_demos):
+    path = tmp_path / "ok.pt"
+    torch.save(payload, path)
+    x = test_demos[0].features[:5]
+    assert np.array_equal(ConcurrentSequencer.load(path).progress(x), fitted_klr.progress(x))
+
+
+def test_load_sequencer_refuses_other_files_by_name(tmp_path, train_demos):
+    import torch
+
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else", "weights": torch.zeros(2)}, other)
+    with pytest.raises(CpmpFileError, match="neither a cpmp sequencer nor a goal_nearest"):
+        load_sequencer(other)
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(CpmpFileError, match="not a readable") as err:
+        load_sequencer(junk)
+    assert "neither" not in str(err.value)  # a damaged file is not called a format mismatch
+    with pytest.raises(CpmpFileError, match="does not exist"):
+        load_sequencer(tmp_path / "missing.pt")
+    # a damaged checkpoint of a known format keeps its loader's own message
+    seq = GoalNearestSequencer.fit(train_demos)
+    payload = torch.load(seq.save(tmp_path / "gn.pt"), weights_only=True)
+    del payload["entries"]
+    torch.save(payload, tmp_path / "gn_damaged.pt")
+    with pytest.raises(CpmpFileError, match="damaged goal_nearest checkpoint"):
+        load_sequencer(tmp_path / "gn_damaged.pt")
+    loaded = load_sequencer(tmp_path / "gn.pt")
+    x = train_demos[0].features[:5]
+    assert np.array_equal(loaded.progress(x), seq.progress(x))

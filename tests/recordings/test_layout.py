@@ -1,0 +1,147 @@
+"""The layout pieces of a recording on their own (no file written): the status document, MP
+name checks, geoms and body poses as the writer logs them, and the per-tick series buffer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpmp.errors import ConfigError, DataError, UnknownMPError
+from cpmp.recordings.columns import ColumnBuffer
+from cpmp.recordings.layout import (
+    check_feature_groups,
+    check_mp,
+    entity,
+    geom_archetypes,
+    parse_geom,
+    pose_rows,
+    status_markdown,
+)
+
+MP_NAMES = {"left_pos": ["approach", "grasp"], "right_fingers": ["open", "close"]}
+
+
+def test_status_markdown() -> None:
+    text = status_markdown(
+        "demo 1", 1.234, {"left_pos": "grasp"}, list(MP_NAMES), "x -> y at 1.00 s", "outcome: ok"
+    )
+    assert text.split("\n") == [
+        "**demo 1** · t = 1.23 s",
+        "",
+        "| variable | active MP |",
+        "|---|---|",
+        "| left_pos | grasp |",
+        "| right_fingers | - |",
+        "",
+        "last transition: x -> y at 1.00 s",
+        "",
+        "**outcome: ok**",
+    ]
+    assert status_markdown("e", 0.0, {}, []).split("\n")[2:] == [
+        "| variable | active MP |",
+        "|---|---|",
+    ]
+
+
+def test_check_mp() -> None:
+    check_mp(MP_NAMES, "left_pos")
+    check_mp(MP_NAMES, "left_pos", "grasp")
+    with pytest.raises(UnknownMPError, match=r"unknown control variable 'head'.*'left_pos'"):
+        check_mp(MP_NAMES, "head")
+    with pytest.raises(UnknownMPError, match=r"unknown MP 'open' for variable 'left_pos'"):
+        check_mp(MP_NAMES, "left_pos", "open")
+
+
+def test_check_feature_groups_appends_the_rest_as_other() -> None:
+    groups = check_feature_groups({"ab": ("b", "a")}, ["a", "b", "c", "d"])
+    assert groups == {"ab": ["b", "a"], "other": ["c", "d"]}
+    with pytest.raises(ConfigError, match=r"features \['a'\] are in several groups"):
+        check_feature_groups({"x": ["a"], "y": ["a", "b"]}, ["a", "b"])
+
+
+def test_parse_geom_defaults_and_colour() -> None:
+    geom = parse_geom(3, {"body": "arm", "type": "sphere", "size": [0.05, 0, 0]})
+    assert (geom["body"], geom["name"], geom["type"], geom["size"]) == (
+        "arm",
+        "geom_3",
+        "sphere",
+        [0.05, 0.0, 0.0],
+    )
+    np.testing.assert_array_equal(geom["pos"], [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(geom["quat"], [1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(geom["rgba"], [153, 153, 153, 255])  # 0.6 * 255
+    # Colours are clipped to [0, 1] before scaling; 0.5 * 255 = 127.5 rounds to even (128).
+    rgba = parse_geom(0, {"body": "b", "type": "box", "size": [1, 1, 1], "rgba": [2, -1, 0.5, 1]})
+    np.testing.assert_array_equal(rgba["rgba"], [255, 0, 128, 255])
+    with pytest.raises(ConfigError, match=r"geoms\[2\] quat must have shape \(4,\)"):
+        parse_geom(2, {"body": "b", "type": "box", "size": [1, 1, 1], "quat": [1, 0, 0]})
+    with pytest.raises(ConfigError, match=r"geoms\[0\]: missing 'body'"):
+        parse_geom(0, {"type": "box", "size": [1, 1, 1]})
+
+
+def test_geom_archetypes_centre_capsules_and_turn_quaternions() -> None:
+    """MuJoCo capsules are centred on the geom frame, rerun's start at z = 0: the shape is
+    shifted down by its half-length; the pose's wxyz quaternion is logged as xyzw."""
+    geom = parse_geom(
+        0,
+        {"body": "b", "type": "capsule", "size": [0.04, 0.15], "quat": [0.5, 0.1, 0.2, 0.3]},
+    )
+    local, shape = geom_archetypes(geom)
+    assert shape.lengths.as_arrow_array().to_pylist() == [pytest.approx(0.3)]
+    translation = shape.translations.as_arrow_array().to_pylist()
+    assert translation == [pytest.approx([0.0, 0.0, -0.15])]
+    quaternion = local.quaternion.as_arrow_array().to_pylist()
+    assert quaternion == [pytest.approx([0.1, 0.2, 0.3, 0.5])]
+
+
+def test_pose_rows() -> None:
+    bodies, positions, quats = pose_rows(
+        {"box": ([1, 2, 3], [1, 0, 0, 0]), "arm": ([4, 5, 6], [0.5, 0.1, 0.2, 0.3])}
+    )
+    assert bodies == ("box", "arm")
+    np.testing.assert_array_equal(positions, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(quats, [[0, 0, 0, 1], [0.1, 0.2, 0.3, 0.5]])
+    with pytest.raises(DataError, match=r"position of body 'arm' must have shape \(3,\)"):
+        pose_rows({"box": ([1, 2, 3], [1, 0, 0, 0]), "arm": ([4, 5], [1, 0, 0, 0])})
+
+
+class _Stream:
+    """Stands in for ``rr.RecordingStream``: keeps what is logged and sent."""
+
+    def __init__(self) -> None:
+        self.logged: list[str] = []
+        self.sent: list[tuple[str, int]] = []
+
+    def log(self, path: str, *archetypes: object, static: bool = False) -> None:
+        assert static
+        self.logged.append(path)
+
+    def send_columns(self, path: str, indexes: list, columns: object) -> None:
+        self.sent.append((path, len(indexes[0].times)))
+
+
+def test_column_buffer_makes_each_layout_once_and_sends_each_entity() -> None:
+    stream = _Stream()
+    columns = ColumnBuffer(stream, MP_NAMES)
+    paths = columns.progress_paths("left_pos", ("approach", "grasp"))
+    assert paths == tuple(
+        entity("progress", "left_pos", mp, part)
+        for mp in ("approach", "grasp")
+        for part in ("phi", "entry", "exit")
+    )
+    assert columns.progress_paths("left_pos", ("approach", "grasp")) is paths
+    assert stream.logged == list(paths)  # each series named once
+    index = columns.index_paths(("left_pos", "right_fingers"))
+    assert index == ("active/left_pos/index", "active/right_fingers/index")
+    assert stream.logged == list(paths)  # the index series are not named
+    with pytest.raises(UnknownMPError, match="'lift'"):
+        columns.transition_paths("left_pos", ("grasp", "lift"))
+    assert stream.logged == list(paths)  # nothing named for a layout that fails its check
+
+    for tick in range(3):
+        columns.add_row(paths, tick, 0.1 * tick, np.arange(6.0))
+    columns.add_poses(("box",), 2, 0.2, np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]]))
+    columns.send()
+    assert stream.sent == [(path, 3) for path in paths] + [("world/box", 1)]
+    columns.send()  # the buffers were emptied
+    assert len(stream.sent) == len(paths) + 1

@@ -1,0 +1,355 @@
+"""The concurrent sequencer: transition rule, replay, closed loop, persistence, bad input."""
+
+import dataclasses
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+import torch
+
+from cpmp.config import SequencerConfig
+from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
+from cpmp.evaluation.offline import replay_demonstrations
+from cpmp.graph import SequenceGraph
+from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.worlds.two_point import SyntheticTask, make_demonstrations
+
+
+class FeatureIsProgress(ProgressPredictor):
+    """Test double with known outputs: node k's progress is feature k."""
+
+    kind: ClassVar[str] = "feature_is_progress"
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        return torch.logit(z.clamp(1e-9, 1 - 1e-9))
+
+
+def _chain_sequencer(**config):
+    """One variable with nodes A -> B, B -> C; features are (φ_A, φ_B, φ_C)."""
+    g = SequenceGraph("v")
+    for mp in "ABC":
+        g.add_node(mp)
+    g.initial_nodes = {"A", "B"}
+    g.edges = {("A", "B"), ("B", "C")}
+    model = FeatureIsProgress([("v", "A"), ("v", "B"), ("v", "C")], 3, PredictorConfig())
+    return ConcurrentSequencer({"v": g}, model, ["pa", "pb", "pc"], SequencerConfig(**config))
+
+
+def test_initial_node_is_highest_entry_probability():
+    seq = _chain_sequencer()
+    assert seq.reset(0.0, [0.3, 0.1, 0.0]) == {"v": "B"}  # entry 0.9 > 0.7
+    assert seq.reset(0.0, [0.05, 0.1, 0.0]) == {"v": "A"}
+    # C has the highest entry probability but is not an initial node
+    assert seq.reset(0.0, [0.5, 0.6, 0.0]) == {"v": "A"}
+
+
+def test_plateau_switch_after_patience_without_improvement():
+    seq = _chain_sequencer(
+        switch_rule="plateau", threshold=0.65, patience=0.05, min_improvement=1e-3
+    )
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant
+    for k in range(1, 5):
+        assert seq.step(0.01 * k, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.01 .. 0.04 s: waiting
+    assert seq.step(0.05, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.04 s since first above threshold
+    assert seq.step(0.06, [0.7, 0.0, 0.0]) == {"v": "B"}  # 50 ms without improvement
+    (event,) = seq.events
+    assert (event.t, event.source, event.target) == (0.06, "A", "B")
+    assert event.probability == pytest.approx(0.7)
+    np.testing.assert_allclose(event.state, [0.7, 0.0, 0.0])
+
+
+def test_plateau_improving_probability_delays_switch():
+    seq = _chain_sequencer(switch_rule="plateau", patience=0.05, min_improvement=1e-3)
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    t, p = 0.0, 0.66
+    while p < 0.95:  # rises 0.01 per tick: always improving, so no switch
+        t = round(t + 0.01, 10)
+        assert seq.step(t, [p, 0.0, 0.0]) == {"v": "A"}
+        p += 0.01
+    flat = p - 0.01  # the last value stepped
+    for _ in range(4):  # then flat: no switch before 50 ms passed since the last improvement
+        t = round(t + 0.01, 10)
+        assert seq.step(t, [flat, 0.0, 0.0]) == {"v": "A"}
+    assert seq.step(round(t + 0.01, 10), [flat, 0.0, 0.0]) == {"v": "B"}
+
+
+def test_plateau_creeping_improvement_below_tolerance_does_not_block():
+    creeping = [0.7 + 1e-4 * k for k in range(20)]
+    strict = _chain_sequencer(switch_rule="plateau", min_improvement=0.0)
+    tolerant = _chain_sequencer(switch_rule="plateau", min_improvement=1e-3)
+    for seq in (strict, tolerant):
+        seq.reset(0.0, [0.0, 0.0, 0.0])
+        for k, p in enumerate(creeping, start=1):
+            seq.step(0.01 * k, [p, 0.0, 0.0])
+    assert strict.active == {"v": "A"}  # strict comparison never fires on an asymptote
+    assert tolerant.active == {"v": "B"}
+
+
+def test_plateau_below_threshold_never_switches_and_dip_resets():
+    seq = _chain_sequencer(switch_rule="plateau", threshold=0.65, patience=0.05)
+    seq.reset(0.0, [0.0, 0.0, 0.0])
+    for k in range(1, 30):
+        seq.step(0.01 * k, [0.64, 0.0, 0.0])
+    assert seq.active == {"v": "A"}
+    for k, p in enumerate([0.7, 0.7, 0.7, 0.5, 0.7, 0.7, 0.7], start=30):
+        seq.step(0.01 * k, [p, 0.0, 0.0])
+    assert seq.active == {"v": "A"}  # the dip below threshold restarted the 50 ms
+
+
+def test_terminal_node_stays():
+    seq = _chain_sequencer(patience=0.0)
+    seq.reset(0.0, [0.95, 0.0, 0.0])
+    assert seq.active == {"v": "B"}
+    seq.step(0.01, [0.0, 0.9, 0.0])
+    assert seq.active == {"v": "C"}
+    for k in range(2, 10):
+        assert seq.step(0.01 * k, [1.0, 1.0, 1.0]) == {"v": "C"}
+    assert seq.last_tick.transition_probs == {"v": {}}
+
+
+def test_replay_reproduces_held_out_sequences(fitted_klr, test_demos):
+    result = replay_demonstrations(fitted_klr, test_demos)
+    assert result["all_match"] == 1.0, result["per_demo"]
+    # measured mean 0.035, std 0.012 (features span ~[0, 1]); a switch more than 0.1 away from
+    # the demonstrated state would be a visibly early or late transition
+    assert result["distance_mean"] < 0.1
+    assert result["n_switches"] == sum(
+        len(d.switch_indices(v)) for d in test_demos for v in d.variables
+    )
+
+
+def test_predict_progress_and_tick_info(fitted_klr, test_demos):
+    x = test_demos[0].features[0]
+    phi = fitted_klr.predict_progress(x)
+    assert set(phi) == {"a", "b"}
+    assert set(phi["b"]) == {"b_wait", "b_go", "b_back"}
+    assert phi["a"]["a_go"] < 0.2  # an activation's start has low progress
+    fitted_klr.reset(0.0, x)
+    fitted_klr.step(0.01, test_demos[0].features[1])
+    info = fitted_klr.last_tick
+    assert info.active == fitted_klr.active and set(info.transition_probs) == {"a", "b"}
+
+
+def test_closed_loop_synthetic_task(fitted_klr):
+    task, rng = SyntheticTask(), np.random.default_rng(5)
+    done = [task.rollout(task.sample_episode(rng), fitted_klr)[1] for _ in range(20)]
+    assert sum(done) >= 18  # measured 20/20; allow two misses of an honest closed loop
+
+
+def test_fit_is_reproducible(train_demos):
+    a = ConcurrentSequencer.fit(train_demos, "mlp", seed=3, logger=None, epochs=20)
+    b = ConcurrentSequencer.fit(train_demos, "mlp", seed=3, logger=None, epochs=20)
+    c = ConcurrentSequencer.fit(train_demos, "mlp", seed=4, logger=None, epochs=20)
+    x = train_demos[0].features
+    assert np.array_equal(a.progress(x), b.progress(x))
+    assert not np.array_equal(a.progress(x), c.progress(x))
+
+
+def test_save_load_bit_exact(fitted_klr, test_demos, tmp_path):
+    path = fitted_klr.save(tmp_path / "model.pt")
+    loaded = ConcurrentSequencer.load(path)
+    x = test_demos[2].features
+    assert np.array_equal(loaded.progress(x), fitted_klr.progress(x))
+    for v, g in fitted_klr.graphs.items():
+        h = loaded.graphs[v]
+        assert (h.nodes, h.initial_nodes, h.edges) == (g.nodes, g.initial_nodes, g.edges)
+    assert loaded.config == fitted_klr.config
+    assert loaded.feature_names == fitted_klr.feature_names
+    assert (
+        replay_demonstrations(loaded, test_demos[:2])["per_demo"]
+        == replay_demonstrations(fitted_klr, test_demos[:2])["per_demo"]
+    )
+
+
+@pytest.mark.parametrize("kind", ["klr_sparse", "mlp"])
+def test_save_load_other_predictors(train_demos, tmp_path, kind):
+    seq = ConcurrentSequencer.fit(train_demos, kind, seed=0, logger=None, epochs=30)
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    x = train_demos[1].features
+    assert np.array_equal(loaded.progress(x), seq.progress(x))
+
+
+def test_failed_save_leaves_no_partial_file(fitted_klr, tmp_path, monkeypatch):
+    path = tmp_path / "model.pt"
+    fitted_klr.save(path)
+    before = path.read_bytes()
+
+    def broken(obj, f, *args, **kwargs):
+        with open(f, "wb") as fh:
+            fh.write(b"partial")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(torch, "save", broken)
+    with pytest.raises(OSError, match="disk full"):
+        fitted_klr.save(path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["model.pt"]
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(CpmpFileError, match="does not exist"):
+        ConcurrentSequencer.load(tmp_path / "missing.pt")
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"not a checkpoint")
+    with pytest.raises(CpmpFileError, match="not a readable cpmp sequencer checkpoint"):
+        ConcurrentSequencer.load(garbage)
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else"}, other)
+    with pytest.raises(CpmpFileError, match="not a cpmp sequencer checkpoint"):
+        ConcurrentSequencer.load(other)
+    hostile = tmp_path / "hostile.pt"
+    torch.save({"format": "cpmp-sequencer", "payload": Path("/etc/passwd")}, hostile)
+    with pytest.raises(CpmpFileError, match="not a trusted cpmp sequencer checkpoint") as info:
+        ConcurrentSequencer.load(hostile)
+    assert "weights_only=False" not in str(info.value)
+
+
+def test_bad_inputs(fitted_klr, train_demos):
+    with pytest.raises(ConfigError, match="unknown predictor"):
+        ConcurrentSequencer.fit(train_demos, predictor="forest")
+    with pytest.raises(ConfigError, match="unknown option 'treshold'"):
+        ConcurrentSequencer.fit(train_demos, treshold=0.5)
+    with pytest.raises(ConfigError, match="threshold must be in"):
+        ConcurrentSequencer.fit(train_demos, threshold=1.5)
+    with pytest.raises(ConfigError, match="patience"):
+        SequencerConfig(patience=-0.1)
+    with pytest.raises(DataError, match="at least one demonstration"):
+        ConcurrentSequencer.fit([])
+    with pytest.raises(DataError, match="3 entries"):
+        fitted_klr.predict_progress(np.zeros(4))
+    with pytest.raises(DataError, match="NaN"):
+        fitted_klr.reset(0.0, np.array([0.0, np.nan, 0.0]))
+    fresh = ConcurrentSequencer(fitted_klr.graphs, fitted_klr.predictor, fitted_klr.feature_names)
+    with pytest.raises(NotFittedError, match="reset"):
+        fresh.step(0.0, np.zeros(3))
+    fresh.reset(1.0, np.zeros(3))
+    with pytest.raises(DataError, match="time went backwards"):
+        fresh.step(0.5, np.zeros(3))
+
+
+def test_mismatched_feature_names_rejected(train_demos):
+    from cpmp.data.demonstration import Demonstration
+
+    d = train_demos[0]
+    renamed = Demonstration(d.time, d.features, d.labels, ["x", "y", "z"], "demo_x")
+    with pytest.raises(DataError, match="all must match"):
+        ConcurrentSequencer.fit([train_demos[1], renamed])
+
+
+def test_synthetic_demos_are_reproducible():
+    a, b = make_demonstrations(2, seed=7), make_demonstrations(2, seed=7)
+    assert all(np.array_equal(x.features, y.features) for x, y in zip(a, b, strict=True))
+
+
+def _two_graph_sequencer(start_rule):
+    """Variables u (initial U1, U2) and w (initial W1, W2); demonstrated starts: (U1, W1) and
+    (U2, W2). Features are the four nodes' φ in order U1, U2, W1, W2."""
+    graphs = {}
+    for v, names in (("u", ["U1", "U2"]), ("w", ["W1", "W2"])):
+        g = SequenceGraph(v)
+        for mp in names:
+            g.add_node(mp)
+        g.initial_nodes = set(names)
+        graphs[v] = g
+    keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2")]
+    model = FeatureIsProgress(keys, 4, PredictorConfig())
+    combos = [{"u": "U1", "w": "W1"}, {"u": "U2", "w": "W2"}]
+    return ConcurrentSequencer(
+        graphs, model, ["a", "b", "c", "d"], SequencerConfig(start_rule=start_rule), None, combos
+    )
+
+
+def test_joint_start_never_mixes_strategies():
+    # independently, u prefers U1 (entry 0.9 vs 0.8) and w prefers W2 (0.85 vs 0.8): a mixture
+    x = np.array([0.1, 0.2, 0.2, 0.15])
+    assert _two_graph_sequencer("independent").reset(0.0, x) == {"u": "U1", "w": "W2"}
+    # jointly: log 0.9 + log 0.8 = -0.328 beats log 0.8 + log 0.85 = -0.386
+    joint = _two_graph_sequencer("joint").reset(0.0, x)
+    assert joint == {"u": "U1", "w": "W1"}
+    x2 = np.array([0.1, 0.05, 0.3, 0.05])  # U2 and W2 clearly better
+    assert _two_graph_sequencer("joint").reset(0.0, x2) == {"u": "U2", "w": "W2"}
+
+
+def test_fit_records_initial_combinations_and_checkpoint_keeps_them(fit_on_train, tmp_path):
+    seq = fit_on_train("klr", start_rule="joint")
+    assert sorted(c["b"] for c in seq.initial_combinations) == ["b_go", "b_wait"]
+    assert all(c["a"] == "a_go" for c in seq.initial_combinations)
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    assert loaded.initial_combinations == seq.initial_combinations
+    assert loaded.config.start_rule == "joint"
+    with pytest.raises(ConfigError, match="start_rule"):
+        SequencerConfig(start_rule="vote")
+
+
+def test_min_exit_gate_keeps_unfinished_mp():
+    # p = 0.7 * (1 - 0.0) = 0.7 > 0.65, but the current MP is only 70 % done
+    gated = _chain_sequencer(min_exit=0.9, patience=0.0)
+    free = _chain_sequencer(min_exit=0.0, patience=0.0)
+    for seq in (gated, free):
+        seq.reset(0.0, [0.0, 0.0, 0.0])
+        seq.step(0.01, [0.7, 0.0, 0.0])
+    assert free.active == {"v": "B"}
+    assert gated.active == {"v": "A"}
+    gated.step(0.02, [0.95, 0.0, 0.0])
+    assert gated.active == {"v": "B"}
+    with pytest.raises(ConfigError, match="min_exit"):
+        SequencerConfig(min_exit=1.0)
+
+
+def test_isotropic_start_heads(fit_on_train, train_demos, tmp_path):
+    seq = fit_on_train("klr", feature_weighting="path", start_kernel="isotropic")
+    n = len(seq.node_keys)
+    heads = seq.predictor.node_keys[n:]
+    assert heads == [("a", "start:a_go"), ("b", "start:b_go"), ("b", "start:b_wait")]
+    scale = seq.predictor.feature_scale
+    assert torch.all(scale[n:] == 1.0)  # start heads keep the isotropic kernel
+    assert not torch.all(scale[:n] == 1.0)  # the nodes' own heads are path-weighted
+    x0 = train_demos[1].features[0]
+    assert seq.progress(x0).shape == (n,)  # the nodes only; the start heads are internal
+    assert seq.predictor(torch.as_tensor(x0)).shape == (n + 3,)
+    assert set(seq.predict_progress(x0)["b"]) == {"b_go", "b_wait", "b_back"}
+    assert seq.reset(0.0, x0) == {"a": "a_go", "b": "b_go"}  # demo 1 is a parallel demo
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    assert np.array_equal(loaded.progress(x0), seq.progress(x0))
+    assert loaded.reset(0.0, x0) == seq.reset(0.0, x0)
+
+
+def test_synthetic_evaluate_classifies_outcomes(fitted_klr):
+    from cpmp.worlds.two_point import evaluate
+
+    class Frozen:
+        def __init__(self, start):
+            self.start = start
+
+        def reset(self, t, x):
+            return dict(self.start)
+
+        def step(self, t, x):
+            return dict(self.start)
+
+    task = SyntheticTask(max_time=1.0)
+    assert evaluate(Frozen({"a": "a_back", "b": "b_back"}), task, 4, seed=0) == {
+        "complete": 0,
+        "wrong_start": 4,
+        "incomplete": 0,
+    }
+    parallel = evaluate(Frozen({"a": "a_go", "b": "b_go"}), task, 6, seed=0)
+    assert parallel["complete"] == 0 and parallel["incomplete"] >= 1
+    assert parallel["incomplete"] + parallel["wrong_start"] == 6
+    counts = evaluate(fitted_klr, None, 10, seed=5)
+    assert sum(counts.values()) == 10 and counts["complete"] >= 8
+
+
+def test_with_config_shares_the_fit_and_changes_only_the_rule(fitted_klr, test_demos):
+    """``with_config`` is the way to try other transition-rule options without refitting."""
+    paper = fitted_klr.with_config(threshold=0.9, coupling="none")
+    assert paper.predictor is fitted_klr.predictor and paper.graphs == fitted_klr.graphs
+    assert paper.config == dataclasses.replace(fitted_klr.config, threshold=0.9, coupling="none")
+    assert fitted_klr.config.threshold != 0.9  # the original is untouched
+    x = test_demos[0].features
+    np.testing.assert_array_equal(paper.progress(x), fitted_klr.progress(x))
+    with pytest.raises(ConfigError, match="threshold must be in"):
+        fitted_klr.with_config(threshold=1.5)

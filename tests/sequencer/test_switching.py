@@ -1,0 +1,285 @@
+"""Switching rules, learned coupling between graphs, stall recovery and non-finite progress."""
+
+import math
+from typing import ClassVar
+
+import numpy as np
+import pytest
+import torch
+
+from cpmp.config import SequencerConfig
+from cpmp.data.demonstration import Demonstration
+from cpmp.errors import DataError
+from cpmp.graph import SequenceGraph
+from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sequencer.switching import Coupling, PaperRule, PlateauRule, recovery_choice
+
+DT = 0.01
+
+
+class FeatureIsProgress(ProgressPredictor):
+    """Test double: node k's progress is feature k; a feature above 1.5 gives a NaN φ."""
+
+    kind: ClassVar[str] = "feature_is_progress"
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        out = torch.logit(z.clamp(1e-9, 1 - 1e-9))
+        return torch.where(z > 1.5, torch.full_like(z, math.nan), out)
+
+
+def _run(rule, stream):
+    """Feed ``stream`` (one p per tick, one successor) to ``rule``; index of the firing tick."""
+    for k, p in enumerate(stream, start=1):
+        if rule.update(round(k * DT, 10), [p], [True]) is not None:
+            return k
+    return None
+
+
+def _paper():
+    return PaperRule(threshold=0.65, patience=0.05, min_improvement=1e-3)
+
+
+def test_paper_rule_fires_after_a_peak_that_declines():
+    rise = list(np.linspace(0.5, 0.8, 31))  # 0.01 per tick up to 0.8
+    stream = rise + [0.8 - 0.004 * k for k in range(1, 40)]  # then falls back, slowly
+    k = _run(_paper(), stream)
+    # first tick whose p is not above p 50 ms (5 ticks) earlier + 1e-3, and above 0.65
+    want = next(
+        i + 1
+        for i in range(5, len(stream))
+        if stream[i] > 0.65 and stream[i] <= stream[i - 5] + 1e-3
+    )
+    assert k == want
+    assert stream[k - 1] < max(stream)  # it fired on the way down, after the peak
+    # the earlier rule never fires there: p never stays 50 ms without a new maximum above 0.65
+    # before falling below the threshold... unless the decline is slow; a fast one:
+    fast = rise + [0.8 - 0.03 * k for k in range(1, 10)]
+    assert _run(PlateauRule(0.65, 0.05, 1e-3), fast) is None
+    assert _run(_paper(), fast) is not None
+
+
+def test_paper_rule_fires_on_a_creep_below_tolerance():
+    creep = [0.7 + 1e-4 * k for k in range(30)]  # +5e-4 per 50 ms < 1e-3
+    assert _run(_paper(), creep) == 6  # the first tick with a reference 50 ms back
+
+
+def test_paper_rule_waits_while_rising_and_before_patience():
+    rising = [0.66 + 0.003 * k for k in range(60)]  # +0.015 per 50 ms
+    assert _run(_paper(), rising) is None
+    below = [0.6] * 30
+    assert _run(_paper(), below) is None
+    rule = _paper()
+    for k in range(1, 5):  # constant 0.9 but the node is younger than 50 ms
+        assert rule.update(k * DT, [0.9], [True]) is None
+    assert rule.update(5 * DT, [0.9], [True]) is None  # reference would be t = 0
+    assert rule.update(6 * DT, [0.9], [True]) == 0
+
+
+def test_rules_only_fire_allowed_successors():
+    rule = _paper()
+    for k in range(1, 10):
+        fired = rule.update(k * DT, [0.9, 0.7], [False, True])
+        assert fired in (None, 1)
+    assert fired == 1  # the allowed one, although the other is more probable
+
+
+def _labels_demo(labels, n_features=1):
+    n = len(next(iter(labels.values())))
+    return Demonstration(
+        time=np.arange(n) * DT,
+        features=np.zeros((n, n_features)),
+        labels={v: np.array(list(seq)) for v, seq in labels.items()},
+        feature_names=[f"f{i}" for i in range(n_features)],
+    )
+
+
+def test_coupling_learns_contexts_of_switches():
+    # w switches W1 -> W2 one tick after u switched U1 -> U2; at the end both switch together
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+    )
+    coupling = Coupling.learn([demo], ["u", "w"])
+    assert coupling.contexts[("w", "W1", "W2")] == {"u": frozenset({"U2"})}
+    assert coupling.contexts[("u", "U1", "U2")] == {"w": frozenset({"W1"})}
+    # simultaneous switches: either order is allowed
+    assert coupling.contexts[("u", "U2", "U3")] == {"w": frozenset({"W2", "W3"})}
+    assert coupling.inconsistent(("w", "W1", "W2"), {"u": "U1", "w": "W1"}) == ["u runs U1"]
+    assert coupling.inconsistent(("w", "W1", "W2"), {"u": "U2", "w": "W1"}) == []
+    assert coupling.inconsistent(("w", "W9", "W2"), {"u": "U1"}) == []  # never seen: no rule
+    assert Coupling.from_dict(coupling.to_dict()) == coupling
+
+
+def test_coupling_progress_is_in_the_predictors_label_units():
+    """The thresholds use the predictor's label kind: with time labels, w switched when U2 had
+    run 1 of its 3 intervals, whatever distance u's feature had covered by then."""
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+    )
+    demo.features[3:7, 0] = [0.0, 2.5, 2.8, 3.0]  # most of the distance in the first step
+    demo.features[7:, 0] = 3.0
+    path = Coupling.learn([demo], ["u", "w"])
+    timed = Coupling.learn([demo], ["u", "w"], labels="time")
+    assert path.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(2.5 / 3)}}
+    assert timed.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(1 / 3)}}
+
+
+def test_coupling_learns_how_far_the_others_had_progressed():
+    # u's feature moves 0 -> 1 during U2 (4 samples); w switched when U2 was 1/3 done, so a
+    # w switch needs U2 at >= 1/3 - margin; U1 -> U2 and the simultaneous end carry no progress
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+    )
+    demo.features[3:7, 0] = [0.0, 1.0, 2.0, 3.0]
+    demo.features[7:, 0] = 3.0
+    coupling = Coupling.learn([demo], ["u", "w"])
+    assert coupling.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(1 / 3)}}
+    assert ("u", "U2", "U3") not in coupling.progress  # w switched in the same tick
+    edge, active = ("w", "W1", "W2"), {"u": "U2", "w": "W1"}
+    assert coupling.inconsistent(edge, active, {"u": 0.05}, margin=0.2) == [
+        "u has U2 at progress 0.05 (demonstrated >= 0.33)"
+    ]
+    assert coupling.inconsistent(edge, active, {"u": 0.2}, margin=0.2) == []
+    assert coupling.inconsistent(edge, active, {"u": 0.05}, margin=None) == []
+    assert "u in {U2} (U2 >= 0.33)" in "\n".join(coupling.describe("w"))
+    assert Coupling.from_dict(coupling.to_dict()) == coupling
+    # checkpoints written before progress was learned hold a plain list of switches
+    old = [
+        {k: r[k] for k in ("variable", "source", "target", "context")}
+        for r in coupling.to_dict()["switches"]
+    ]
+    assert Coupling.from_dict(old).contexts == coupling.contexts
+
+
+def _two_chains(**config):
+    """Variables u: U1 -> U2 and w: W1 -> W2; features are (φ_U1, φ_U2, φ_W1, φ_W2); w's switch
+    was demonstrated only while u ran U2."""
+    graphs = {}
+    for v, (a, b) in {"u": ("U1", "U2"), "w": ("W1", "W2")}.items():
+        g = SequenceGraph(v)
+        g.add_node(a)
+        g.add_node(b)
+        g.initial_nodes = {a}
+        g.edges = {(a, b)}
+        graphs[v] = g
+    keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2")]
+    model = FeatureIsProgress(keys, 4, PredictorConfig())
+    demo = _labels_demo({"u": ["U1"] * 3 + ["U2"] * 4, "w": ["W1"] * 4 + ["W2"] * 3})
+    coupling = Coupling.learn([demo], ["u", "w"])
+    return ConcurrentSequencer(
+        graphs, model, ["a", "b", "c", "d"], SequencerConfig(**config), None, None, coupling
+    )
+
+
+def test_coupling_holds_a_transition_until_its_context_is_demonstrated():
+    coupled = _two_chains(patience=0.0)
+    free = _two_chains(patience=0.0, coupling="none")
+    for seq in (coupled, free):
+        seq.reset(0.0, [0.0, 0.0, 0.0, 0.0])
+    # w is ready (p = 0.9) while u is still in U1 (p_u = 0.3): only the free sequencer switches
+    for k in range(1, 6):
+        free.step(k * DT, [0.3, 0.0, 0.9, 0.0])
+        coupled.step(k * DT, [0.3, 0.0, 0.9, 0.0])
+    assert free.active == {"u": "U1", "w": "W2"}
+    assert coupled.active == {"u": "U1", "w": "W1"}
+    assert coupled.last_tick.held == {"w": "W2"}
+    (note,) = coupled.notes  # logged once per hold, not every tick
+    assert note.kind == "hold" and "u runs U1" in note.text
+    coupled.step(6 * DT, [0.9, 0.0, 0.9, 0.0])  # u switches to U2 ...
+    assert coupled.active == {"u": "U2", "w": "W1"}  # ... w decides on the tick's context
+    coupled.step(7 * DT, [0.9, 0.0, 0.9, 0.0])  # U2 at φ = 0: less than demonstrated (1/3)
+    assert coupled.active == {"u": "U2", "w": "W1"}
+    assert coupled.last_tick.held == {"w": "W2"}  # the same hold: no second note
+    assert len(coupled.notes) == 1
+    coupled.step(8 * DT, [0.9, 0.5, 0.9, 0.0])
+    assert coupled.active == {"u": "U2", "w": "W2"}
+    assert [e.variable for e in coupled.events] == ["u", "w"]
+
+
+def test_describe_shows_the_coupling_and_checkpoint_keeps_it(tmp_path, train_demos):
+    seq = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None)
+    text = seq.describe()
+    # b starts moving in the sequential strategy only once a waits
+    assert "b_wait -> b_go when a in {a_wait}" in text
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
+    assert loaded.coupling == seq.coupling
+    np.testing.assert_array_equal(loaded.feature_range, seq.feature_range)
+    assert text.split("b: switch contexts")[1] == loaded.describe().split("b: switch contexts")[1]
+
+
+def _stalled_chain(**config):
+    g = SequenceGraph("v")
+    for mp in "AB":
+        g.add_node(mp)
+    g.initial_nodes = {"A"}
+    g.edges = {("A", "B")}
+    model = FeatureIsProgress([("v", "A"), ("v", "B")], 2, PredictorConfig())
+    return ConcurrentSequencer({"v": g}, model, ["a", "b"], SequencerConfig(**config))
+
+
+def test_recovery_resolves_a_constructed_stall():
+    # p = 0.5 (1 - 0) stays below the threshold: the paper's rule deadlocks
+    on = _stalled_chain(stall_time=0.5, recovery_threshold=0.3)
+    off = _stalled_chain(recovery=False)
+    for seq in (on, off):
+        seq.reset(0.0, [0.5, 0.0])
+        for k in range(1, 100):
+            seq.step(k * DT, [0.5, 0.0])
+    assert off.active == {"v": "A"} and not off.events
+    (event,) = on.events
+    assert event.kind == "recovery" and event.target == "B"
+    assert event.t == pytest.approx(0.5)  # no switch and no motion for stall_time
+    assert [n.kind for n in on.notes] == ["recovery"]
+
+
+def test_no_recovery_while_moving_or_below_the_relaxed_threshold():
+    moving = _stalled_chain(stall_time=0.5)
+    low = _stalled_chain(stall_time=0.5, recovery_threshold=0.6)
+    moving.reset(0.0, [0.5, 0.0])
+    low.reset(0.0, [0.5, 0.0])
+    for k in range(1, 100):
+        moving.step(k * DT, [0.5, 0.1 * (k % 2)])  # φ_B oscillates: the state is not at rest
+        low.step(k * DT, [0.5, 0.0])
+    assert moving.active == {"v": "A"} and low.active == {"v": "A"}
+
+
+def test_recovery_prefers_consistent_then_probable():
+    cands = [("u", "A", "B", 0.6, 1), ("w", "C", "D", 0.4, 0), ("w", "C", "E", 0.5, 0)]
+    assert recovery_choice(cands, 0.3) == ("w", "C", "E", 0.5)
+    assert recovery_choice(cands, 0.55) == ("u", "A", "B", 0.6)
+    assert recovery_choice(cands, 0.7) is None
+
+
+def test_nonfinite_progress_never_switches():
+    hold = _stalled_chain(patience=0.0)
+    hold.reset(0.0, [0.0, 0.0])
+    for k in range(1, 5):
+        assert hold.step(k * DT, [2.0, 0.0]) == {"v": "A"}  # φ_A is NaN
+    assert not hold.events
+    assert [n.kind for n in hold.notes] == ["nonfinite"]
+    strict = _stalled_chain(nonfinite="raise")
+    strict.reset(0.0, [0.0, 0.0])
+    with pytest.raises(DataError, match="non-finite"):
+        strict.step(DT, [2.0, 0.0])
+    with pytest.raises(DataError, match="finite"):
+        hold.step(math.nan, [0.0, 0.0])
+    with pytest.raises(DataError, match="finite"):
+        hold.reset(math.inf, [0.0, 0.0])
+
+
+def test_indicator_features_and_jitter_are_not_motion():
+    from cpmp.sequencer.switching import StallDetector, indicator_features
+
+    x = np.array([[0.0, 0.1, 5.0], [1.0, 0.4, 5.0], [0.0, 0.2, 5.0]])
+    assert indicator_features(x).tolist() == [True, False, True]
+    # range 1 per feature; band = rest_speed * stall_time = 0.01
+    det = StallDetector(np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01)
+    det.reset(0.0, np.zeros(2))
+    for k in range(1, 301):  # 3 s of contact jitter of +-0.004: never motion
+        det.observe(k * DT, np.array([0.004 * (-1) ** k, 0.0]))
+    assert det.last_motion == 0.0 and det.stalled(3.0)
+    drift = StallDetector(np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01)
+    drift.reset(0.0, np.zeros(2))
+    for k in range(1, 301):  # a slow drift of 0.02 range/s is motion
+        drift.observe(k * DT, np.array([0.0002 * k, 0.0]))
+    assert drift.last_motion > 2.4 and not drift.stalled(3.0)

@@ -1,0 +1,55 @@
+"""The relay task's world (cpmp.worlds.relay.world): episodes, options, features."""
+
+import numpy as np
+import pytest
+
+from cpmp.errors import ConfigError
+from cpmp.worlds.relay.world import CONTEXT_SCALE, STRATEGIES, RelayTask
+
+
+def test_sample_episode_contexts():
+    task = RelayTask()
+    rng = np.random.default_rng(0)
+    for strategy in STRATEGIES:
+        for _ in range(20):
+            episode = task.sample_episode(rng, strategy)
+            assert episode.strategy == strategy and abs(episode.context - 0.5) >= 0.05
+    assert task.sample_episode(rng, context=0.7).strategy == "fetch"
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"dt": 0.0},
+        {"gain_carrier": -1.0},
+        {"dt": 0.5},  # unstable Euler step
+        {"max_time": float("nan")},
+        {"tolerance": 0.2},  # wider than the contact radius
+        {"contact_force": 0.5},  # above the force `close` settles at
+        {"start_jitter": -0.1},
+        {"context_gap": 1.0},
+        {"object_width": "wide"},
+    ],
+)
+def test_bad_task_options_raise(options):
+    with pytest.raises(ConfigError):
+        RelayTask(**options)
+
+
+def test_bad_episode_arguments_raise():
+    task = RelayTask()
+    rng = np.random.default_rng(0)
+    with pytest.raises(ConfigError, match="strategy"):
+        task.sample_episode(rng, "juggle")
+    with pytest.raises(ConfigError, match="context"):
+        task.sample_episode(rng, context=1.5)
+
+
+def test_initial_features_are_the_homes_and_the_scaled_context():
+    task = RelayTask()
+    episode = task.sample_episode(np.random.default_rng(5), "fetch")
+    state = task.initial_state(episode)
+    want = [*episode.carrier_home, *episode.receiver_home, 0.0, CONTEXT_SCALE * episode.context]
+    np.testing.assert_array_equal(task.features(state, episode), want)
+    assert np.array_equal(state.obj, episode.carrier_home) and state.holder == "carrier"
+    assert not task.at_goal(state, episode)
