@@ -30,7 +30,8 @@ class CpmpFileError(CpmpError, OSError):
 
 class CheckpointFormatError(CpmpFileError):
     """A readable checkpoint of another format; ``found`` is its ``"format"`` entry (``None``
-    where it has none)."""
+    where it has none).
+    """
 
     def __init__(self, message: str, found: object = None) -> None:
         super().__init__(message)

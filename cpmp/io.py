@@ -1,5 +1,6 @@
 """Atomic file writing (a failed write never leaves a partial file behind) and the checkpoint
-files of the sequencers: one writer, one loader that checks format, version and trust."""
+files of the sequencers: one writer, one loader that checks format, version and trust.
+"""
 
 from __future__ import annotations
 
@@ -76,7 +77,8 @@ def _fsync_directory(directory: Path) -> None:
 
 def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
     """Remove the temporary files that interrupted saves to ``path`` left behind (those whose
-    writing process no longer exists); returns the removed paths."""
+    writing process no longer exists); returns the removed paths.
+    """
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
     removed = []
@@ -125,7 +127,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
 
 def to_builtin(obj: Any) -> Any:
     """Recursively convert numpy arrays/scalars, tuples and mappings to plain Python (JSON and
-    ``torch.load(weights_only=True)`` safe); non-finite floats become ``None``."""
+    ``torch.load(weights_only=True)`` safe); non-finite floats become ``None``.
+    """
     if isinstance(obj, Mapping):
         return {str(k): to_builtin(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
@@ -142,7 +145,8 @@ def to_builtin(obj: Any) -> Any:
 def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) -> Path:
     """Write a checkpoint ``payload`` (tensors and plain Python only, so that
     :func:`load_checkpoint` reads it with ``weights_only=True``) atomically to ``path`` with
-    ``torch.save``; returns the path."""
+    ``torch.save``; returns the path.
+    """
     import torch
 
     path = Path(path)
@@ -218,7 +222,8 @@ def load_checkpoint(
 
 def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
     """What ``torch.load(path, weights_only=True)`` returns; :class:`CpmpFileError` for a
-    missing, unreadable or untrusted file (see :func:`load_checkpoint`)."""
+    missing, unreadable or untrusted file (see :func:`load_checkpoint`).
+    """
     import pickle
 
     import torch

@@ -55,7 +55,8 @@ def _check_noise(noise: str) -> str:
 
 def _robust_power(u: np.ndarray) -> np.ndarray:
     """Mean square about zero ``(d,)`` of zero-mean samples ``u (m, d)``, from their median
-    absolute value (robust to the few large values of jumps and contact events)."""
+    absolute value (robust to the few large values of jumps and contact events).
+    """
     return (_MAD_TO_STD * np.median(np.abs(u), axis=0)) ** 2
 
 
@@ -168,14 +169,16 @@ def path_trajectory(features: np.ndarray, noise: str) -> np.ndarray:
 
 def feature_path_lengths(features: np.ndarray, noise: str = "none") -> np.ndarray:
     """L1 path length of each feature ``(d,)`` of a trajectory ``(n, d)``: the terms eq. 1's
-    integral splits into (they sum to :func:`path_length`)."""
+    integral splits into (they sum to :func:`path_length`).
+    """
     x = path_trajectory(features, noise)
     return np.abs(np.diff(x, axis=0)).sum(axis=0)
 
 
 def cumulative_path_length(features: np.ndarray, noise: str = "none") -> np.ndarray:
     """Unnormalised eq. 1: ``(n,)`` running L1 path length, starting at 0; with
-    ``noise="auto"`` along :func:`denoise_trajectory` (see :data:`PATH_NOISE`)."""
+    ``noise="auto"`` along :func:`denoise_trajectory` (see :data:`PATH_NOISE`).
+    """
     x = path_trajectory(features, noise)
     steps = np.abs(np.diff(x, axis=0)).sum(axis=1)
     return np.concatenate([[0.0], np.cumsum(steps)])
@@ -244,7 +247,8 @@ def support_point_count(
     features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: str
 ) -> int:
     """How many points :func:`support_points` places along ``features (n, d)``, without
-    placing them."""
+    placing them.
+    """
     return _count_for_length(path_length(features, noise), scale, min_support, max_support)
 
 
@@ -308,7 +312,8 @@ def time_labels(time: np.ndarray) -> np.ndarray:
 def progress_labels(features: np.ndarray, time: np.ndarray, kind: str = "path") -> np.ndarray:
     """Training labels ``(n,)`` of one activation ``features (n, d)``, ``time (n,)`` [s]:
     :func:`expected_progress` for ``kind="path"`` (``noise="auto"`` for ``"path_denoised"``),
-    :func:`time_labels` for ``kind="time"``."""
+    :func:`time_labels` for ``kind="time"``.
+    """
     if kind in ("path", "path_denoised"):
         return expected_progress(features, time, "auto" if kind == "path_denoised" else "none")
     if kind == "time":
@@ -329,7 +334,8 @@ def demo_labels(
     labels: str,
 ) -> dict[str, np.ndarray]:
     """Progress labels ``(n,)`` of each variable along ``demo``: each activation labelled on
-    its own (:func:`progress_labels` of ``labels`` kind on ``transform`` of its features)."""
+    its own (:func:`progress_labels` of ``labels`` kind on ``transform`` of its features).
+    """
     x = demo.features if transform is None else transform(demo.features)
     done = {}
     for u in variables:

@@ -91,7 +91,8 @@ class TickInfo:
 class Policy(Protocol):
     """What a closed loop drives, one episode: ``reset`` at the start, then ``step`` every
     control tick, each with the time ``t`` [s] and the features ``x`` (d,); both return
-    variable -> active MP. A fitted :class:`~cpmp.sequencer.ConcurrentSequencer` is one."""
+    variable -> active MP. A fitted :class:`~cpmp.sequencer.ConcurrentSequencer` is one.
+    """
 
     def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
 
@@ -101,7 +102,8 @@ class Policy(Protocol):
 class BatchedPolicy(Protocol):
     """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.sequencer.batch.BatchedSequencer`.
     ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool marks the episodes still running (the others'
-    rows are to be ignored); the result holds one mapping variable -> MP per episode."""
+    rows are to be ignored); the result holds one mapping variable -> MP per episode.
+    """
 
     def __len__(self) -> int: ...
 

@@ -210,7 +210,8 @@ def plot_axes(table: SweepTable) -> tuple[str, str | None, int | None]:
     """``(x, hue, only_d)`` of the sweep plot: x is the first swept override (else D); hue a
     second swept override, else D when several training sizes were run, else none. When D is
     neither x nor hue but several D were run, only the rows of the largest D (``only_d``) are
-    plotted."""
+    plotted.
+    """
     sizes = sorted({row["D"] for row in table.rows})
     if not table.swept:
         return "D", None, None
@@ -306,7 +307,8 @@ def render_csv(table: SweepTable) -> str:
 
 def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Path:
     """Write :data:`OUTPUT_FILES` atomically into ``out_dir`` (default: the sweep directory);
-    returns the ``aggregate.json`` path. The plot shows C against :func:`plot_axes`."""
+    returns the ``aggregate.json`` path. The plot shows C against :func:`plot_axes`.
+    """
     from cpmp.experiment.plots import plot_sweep
 
     out = Path(out_dir) if out_dir is not None else table.sweep_dir
@@ -328,7 +330,8 @@ def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Pat
 
 def aggregate_sweep(cfg: Any, run_dir: str | Path) -> Path:
     """Job of ``scripts/aggregate.py``: aggregate ``cfg.sweep_dir`` and write the files into
-    it (``run_dir``, the aggregate job's own directory, is not used). Returns aggregate.json."""
+    it (``run_dir``, the aggregate job's own directory, is not used). Returns aggregate.json.
+    """
     sweep_dir = cfg.get("sweep_dir")
     if not sweep_dir:
         raise ConfigError(

@@ -143,7 +143,8 @@ class GoalNearestSequencer:
 
     def batched(self, n: int) -> GoalNearestBatch:
         """``n`` independent episodes of this sequencer (:class:`GoalNearestBatch`, the
-        batched policy :func:`cpmp.sim.run_episodes` drives)."""
+        batched policy :func:`cpmp.sim.run_episodes` drives).
+        """
         episodes = []
         for _ in range(GoalNearestBatch.checked_count(n)):
             episode = copy.copy(self)
@@ -163,7 +164,8 @@ class GoalNearestSequencer:
     ) -> GoalNearestSequencer:
         """Build the graphs and collect each node's moving features and entry states from
         labelled demonstrations. ``options``: :class:`GoalNearestConfig` fields; ``seed`` is
-        accepted for a uniform interface (the fit is deterministic and draws nothing)."""
+        accepted for a uniform interface (the fit is deterministic and draws nothing).
+        """
         import time
 
         started = time.perf_counter()
@@ -225,7 +227,8 @@ class GoalNearestSequencer:
 
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
         """Nearest-neighbour progress of every node for features ``x (..., d)``: ``(..., K)``
-        (offline evaluation; the switching rule does not use it)."""
+        (offline evaluation; the switching rule does not use it).
+        """
         xn = self._features(x)
         with torch.no_grad():
             return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
@@ -236,7 +239,8 @@ class GoalNearestSequencer:
     @staticmethod
     def _nearest(z: np.ndarray, candidates: Sequence[np.ndarray]) -> int:
         """Index of the candidate state set ``(n, d)`` with a state nearest to ``z (d,)``
-        (the first one on ties)."""
+        (the first one on ties).
+        """
         best = [float(np.min(np.linalg.norm(c - z, axis=1))) for c in candidates]
         return int(np.argmin(best))
 
@@ -303,7 +307,8 @@ class GoalNearestSequencer:
         self, time: np.ndarray, features: np.ndarray
     ) -> tuple[dict[str, list[str]], list[TransitionEvent]]:
         """Run open-loop over a recorded feature stream ``(n,), (n, d)``: the MP sequence per
-        variable and the transition events."""
+        variable and the transition events.
+        """
         seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
         for t, x in zip(time[1:], features[1:], strict=True):
             for v, mp in self.step(t, x).items():

@@ -67,7 +67,8 @@ class NearestProgress(nn.Module):
 
     def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
         """``x (..., d)`` raw features -> ``(..., K)`` nearest-neighbour progress in [0, 1]
-        (``heads``: only the first ``heads`` nodes)."""
+        (``heads``: only the first ``heads`` nodes).
+        """
         lead = x.shape[:-1]
         z = self.scaler.transform(x.detach().cpu().numpy().reshape(-1, self.n_features))
         trees = self._lookup()[: len(self.node_keys) if heads is None else heads]

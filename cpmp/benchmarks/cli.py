@@ -21,7 +21,8 @@ from cpmp.errors import CpmpError
 
 def _print_json(name: str, measure: Callable[[], Any]) -> int:
     """Print ``measure()`` as indented JSON and return 0, or print ``<name>: error: ...`` to
-    stderr and return 2 when it raises a :class:`CpmpError`."""
+    stderr and return 2 when it raises a :class:`CpmpError`.
+    """
     try:
         result = measure()
     except CpmpError as err:
@@ -43,7 +44,8 @@ def _ints(text: str) -> list[int]:
 def bench_main(argv: list[str] | None = None) -> int:
     """``scripts/bench.py``: benchmark cpmp: convex fit vs scikit-learn, sequencer cost,
     real-time factor, main-job stages, scaling, gradient-trained predictors. Writes bench.json,
-    bench.md and bench_scaling.png; prints the path of bench.json."""
+    bench.md and bench_scaling.png; prints the path of bench.json.
+    """
     from cpmp.benchmarks.suite import run_bench
 
     parser = argparse.ArgumentParser(
@@ -113,7 +115,8 @@ def bench_main(argv: list[str] | None = None) -> int:
 def bench_sequencer_main(argv: list[str] | None = None) -> int:
     """``scripts/bench_sequencer.py``: benchmark fitting and per-tick cost of the sequencer for
     each predictor, on 6 synthetic demos or ``--data`` (your own or collected demos); prints
-    JSON."""
+    JSON.
+    """
     import torch
 
     from cpmp.benchmarks.sequencer import bench_sequencer
@@ -149,7 +152,8 @@ def bench_sim_main(argv: list[str] | None = None) -> int:
     """``scripts/bench_sim.py``: print a JSON speed report of the simulation with IK control and
     a policy in the loop: ``replay`` times physics + IK + features (the demonstration's labels
     replayed); ``learned`` times the full loop with a sequencer fitted on ``--demos``
-    demonstrations (0 skips it)."""
+    demonstrations (0 skips it).
+    """
     from cpmp.benchmarks.sim_speed import benchmark
     from cpmp.config import TaskConfig
     from cpmp.sim import Box
@@ -178,7 +182,8 @@ def bench_start_main(argv: list[str] | None = None) -> int:
     """``scripts/bench_start.py``: wrong starts of cpmp's start rules against classifiers
     handed the true box size, scored on many fresh boxes (the start depends only on the first
     feature vector). Prints the JSON (the Markdown table on stderr); ``--out`` also writes
-    both."""
+    both.
+    """
     import torch
 
     from cpmp.benchmarks.start import analyse_starts, markdown
@@ -210,7 +215,8 @@ def bench_start_main(argv: list[str] | None = None) -> int:
 def bench_synthetic_main(argv: list[str] | None = None) -> int:
     """``scripts/bench_synthetic.py``: closed-loop outcomes on the two synthetic tasks (no
     simulator): cpmp's defaults, the paper's method and single options switched off, over
-    training sizes and seeds. Prints JSON (each row on stderr as it is done)."""
+    training sizes and seeds. Prints JSON (each row on stderr as it is done).
+    """
     import torch
 
     from cpmp.benchmarks.sequencer import synthetic_configs, synthetic_outcomes

@@ -28,7 +28,8 @@ if TYPE_CHECKING:
 def node_kernels(seq: ConcurrentSequencer, demos: Sequence[Demonstration]) -> dict[str, Any]:
     """The convex problems of a fitted kernel predictor (``klr``, ``klr_full``): per node the
     kernel matrix ``(n_i, S_i)`` of its training samples against its real supports, the soft
-    labels ``(n_i,)``, and the shared ``l2`` and ``bias`` options."""
+    labels ``(n_i,)``, and the shared ``l2`` and ``bias`` options.
+    """
     import torch
 
     from cpmp.sequencer.fit_data import node_training_data
@@ -52,7 +53,8 @@ def node_kernels(seq: ConcurrentSequencer, demos: Sequence[Demonstration]) -> di
 
 def problem_loss(problems: Mapping[str, Any], solutions: Sequence[tuple[Any, float]]) -> float:
     """Sum over nodes of the mean soft-label BCE plus ``½ l2 ||w||²`` at ``solutions``
-    (per node ``(w (S_i,), b)``): the loss both solvers minimise."""
+    (per node ``(w (S_i,), b)``): the loss both solvers minimise.
+    """
     import torch
 
     from cpmp.predictors.newton import penalised_loss
@@ -72,8 +74,9 @@ def problem_loss(problems: Mapping[str, Any], solutions: Sequence[tuple[Any, flo
 def newton_solve_all(
     problems: Mapping[str, Any], tol: float | None = None
 ) -> tuple[list[tuple[Any, float]], float]:
-    """cpmp's Newton solver (:func:`~cpmp.predictors.newton.newton_fit`) on every node from
-    zero; returns the solutions and the wall time [s]."""
+    """Cpmp's Newton solver (:func:`~cpmp.predictors.newton.newton_fit`) on every node from
+    zero; returns the solutions and the wall time [s].
+    """
     from cpmp.predictors.newton import NEWTON_TOL, newton_fit
 
     start = time.perf_counter()
@@ -216,7 +219,8 @@ def timing_stats(values: Sequence[float]) -> dict[str, float]:
 def pad_features(demos: Sequence[Demonstration], d: int) -> list[Demonstration]:
     """``demos`` with constant zero columns appended up to ``d`` features. Path lengths, and
     so the support points, stay the same; the kernel's feature dimension grows (with
-    ``feature_weighting=path`` the moving features' weights ``d · share`` grow with it)."""
+    ``feature_weighting=path`` the moving features' weights ``d · share`` grow with it).
+    """
     from cpmp.data.demonstration import Demonstration
 
     out = []
@@ -250,7 +254,8 @@ def bench_scaling(
     (``demo_counts`` demonstrations of the synthetic relay task, padded to the smallest
     feature count) and as features grow (``feature_counts``, at the middle demonstration
     count). Each point: one fit, support count, samples, Newton solve and peer times [s],
-    single and batched tick cost [ms per episode-tick]."""
+    single and batched tick cost [ms per episode-tick].
+    """
     from cpmp.worlds.relay.demonstrator import make_demonstrations
 
     base_d = min(feature_counts)

@@ -33,7 +33,8 @@ def load_average() -> list[float] | None:
 
 def machine_facts(threads: int) -> dict[str, Any]:
     """Cores, ``threads`` (torch and BLAS), Python, torch and scikit-learn versions, platform
-    and the load average at the start, for ``bench.json``."""
+    and the load average at the start, for ``bench.json``.
+    """
     import torch
 
     try:
@@ -56,7 +57,8 @@ def machine_facts(threads: int) -> dict[str, Any]:
 # ------------------------------------------------------------------------ plot, markdown
 def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
     """Log-log plot of the ``scaling`` section: fit time (klr fit, Newton solve, scikit-learn
-    peer) [s] and tick cost (single, batched) [ms] against demonstrations and features."""
+    peer) [s] and tick cost (single, batched) [ms] against demonstrations and features.
+    """
     from cpmp.experiment.plots import new_figure, save_figure
 
     figure = new_figure(10, 7)

@@ -134,7 +134,8 @@ def bench_ticks(
 
 def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
     """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations
-    (:func:`bench_sequencer`): fit time, epochs run, loss, step cost."""
+    (:func:`bench_sequencer`): fit time, epochs run, loss, step cost.
+    """
     from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(settings.gradient_demos, seed=settings.seed)
@@ -151,7 +152,8 @@ def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
 def synthetic_configs() -> dict[str, dict[str, Any]]:
     """The sequencer options :func:`synthetic_outcomes` compares, by name: cpmp's defaults,
     single options switched off, and the paper's method (as :meth:`ConcurrentSequencer.fit`
-    options)."""
+    options).
+    """
     from cpmp.sequencer.sequencer import PAPER_OPTIONS
 
     return {

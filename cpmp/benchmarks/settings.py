@@ -1,5 +1,6 @@
 """The sizes of ``scripts/bench.py`` (:class:`BenchSettings`) and the benchmark's sections
-(:data:`SECTIONS`), checked on construction; nothing here runs a measurement."""
+(:data:`SECTIONS`), checked on construction; nothing here runs a measurement.
+"""
 
 from __future__ import annotations
 
@@ -90,7 +91,8 @@ class BenchSettings:
     @classmethod
     def quick(cls, **overrides: Any) -> BenchSettings:
         """Small sizes: 3 demonstrations, 4 episodes, ``experiment=tiny`` (run time: see
-        docs/benchmarks.md)."""
+        docs/benchmarks.md).
+        """
         small = {
             "fit_demos": 3,
             "repeats": 1,
@@ -109,6 +111,7 @@ class BenchSettings:
 
 def check_count(name: str, value: Any) -> None:
     """Raise :class:`ConfigError` unless ``value`` is a whole number >= 1 (``name``: the
-    option, for the message)."""
+    option, for the message).
+    """
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}")

@@ -31,7 +31,8 @@ ROOT = Path(__file__).resolve().parents[2]
 class SimData:
     """The simulated data the ``fit``, ``sequencer`` and ``realtime`` sections share, made
     once on first use: training demonstrations, the fitted sequencer, reproduction boxes and
-    their expected demonstrations."""
+    their expected demonstrations.
+    """
 
     def __init__(self, settings: BenchSettings) -> None:
         from cpmp.config import TaskConfig
@@ -73,7 +74,8 @@ class SimData:
     @property
     def boxes(self) -> tuple[list[Any], list[Demonstration]]:
         """``batch`` reproduction boxes (the main job's, seed ``seed``) and the demonstrator's
-        recording of each."""
+        recording of each.
+        """
         if self._boxes is None:
             from cpmp.sim import record_demonstration, sample_box
 
@@ -85,7 +87,8 @@ class SimData:
 
 def bench_realtime(sim: SimData) -> dict[str, Any]:
     """Real-time factor of ``batch`` closed-loop episodes with the fitted sequencer, one at a
-    time and batched (:func:`cpmp.benchmarks.sim_speed.time_rollouts`)."""
+    time and batched (:func:`cpmp.benchmarks.sim_speed.time_rollouts`).
+    """
     from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, time_rollouts
 
     boxes, expected = sim.boxes
@@ -108,7 +111,8 @@ def bench_stages(
     """Run the main job ``scripts/experiment.py experiment=<experiment> [overrides]`` in a
     fresh process (as a user does) and report its wall time and its ``timings.json``: seconds
     per stage (kinematics set-up, collect, expected, train, evaluate, reproduce, strategy map,
-    plots)."""
+    plots).
+    """
     script = ROOT / "scripts" / "experiment.py"
     if not script.is_file():
         raise CpmpFileError(f"{script} not found: the stages section needs the repository")

@@ -46,7 +46,8 @@ log = logging.getLogger(__name__)
 
 def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
     """Run the sections of ``settings`` and write ``bench.json``, ``bench.md`` and (with the
-    ``scaling`` section) ``bench_scaling.png`` into ``out_dir``; returns ``bench.json``."""
+    ``scaling`` section) ``bench_scaling.png`` into ``out_dir``; returns ``bench.json``.
+    """
     import torch
     from threadpoolctl import threadpool_limits
 
@@ -108,7 +109,8 @@ def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
 
 def _warm_up(seed: int) -> float:
     """One small untimed fit, so that no section pays for importing Lightning and
-    scikit-learn; returns its wall time [s]."""
+    scikit-learn; returns its wall time [s].
+    """
     import sklearn.linear_model  # noqa: F401
 
     from cpmp.sequencer.sequencer import ConcurrentSequencer

@@ -71,7 +71,8 @@ _ACCEPTS = {
 
 def _kind(value: Any) -> str | None:
     """The kind of a config value (``None`` for null): a YAML default written as an integer is
-    an integer option, one written with a decimal point a number."""
+    an integer option, one written with a decimal point a number.
+    """
     from omegaconf import DictConfig, ListConfig
 
     if value is None:
@@ -86,7 +87,8 @@ def _kind(value: Any) -> str | None:
 def _check_type(key: str, value: Any, default: Any) -> None:
     """``value`` (set on the command line) must be of the kind of ``default``: an integer
     where the default is an integer, a number where it is a float, and so on; null is always
-    accepted (the job's own checks say whether null is allowed)."""
+    accepted (the job's own checks say whether null is allowed).
+    """
     want, got = _kind(default), _kind(value)
     if want is None or got is None:
         return
@@ -117,7 +119,8 @@ def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
     """The overridden values, as written on the command line, against the kinds of the
     defaults (``base``: the config composed with the same group options and no value
     override; ``parsed``: the value overrides); an interpolation is checked once resolved, by
-    the schema."""
+    the schema.
+    """
     for override in parsed:
         if override.is_delete() or override.is_hydra_override():
             continue
@@ -132,7 +135,8 @@ def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
 
 def _check_values(command: Command, job: dict[str, Any]) -> None:
     """The seed and counts of the composed job, then the command's required paths, files and
-    directories."""
+    directories.
+    """
     if "seed" in job:
         seed = job["seed"]
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -240,7 +244,8 @@ def _in_job(err: CpmpError, overrides: list[str], n_jobs: int) -> CpmpError:
 def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
     """Run ``command``'s own value checks on every job (imports torch; MuJoCo for the
     task); raises the job's :class:`CpmpError`, naming the override it is about and the job
-    of a sweep."""
+    of a sweep.
+    """
     from omegaconf.errors import OmegaConfBaseException
 
     check = command.check
@@ -263,7 +268,8 @@ def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
 
 def _with_override(err: CpmpError, overrides: Sequence[str]) -> CpmpError:
     """``err`` prefixed with the one override whose key it names by its last part only
-    (``task.max_time=-1: max_time must be ...``)."""
+    (``task.max_time=-1: max_time must be ...``).
+    """
     text = str(err)
     named = []
     for line in overrides:

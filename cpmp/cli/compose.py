@@ -24,7 +24,8 @@ CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
     """``argv`` parsed by Hydra's own command-line parser; a bad flag is a :class:`ConfigError`
-    (argparse would print its usage and exit)."""
+    (argparse would print its usage and exit).
+    """
     from hydra._internal.utils import get_args_parser
 
     def error(message: str) -> None:
@@ -37,7 +38,8 @@ def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
 
 def one_line(text: str) -> str:
     """A Hydra/OmegaConf message as one line: search paths, documentation links and
-    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined."""
+    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined.
+    """
     lines: list[str] = []
     options: list[str] = []
     for raw in str(text).splitlines():
@@ -60,7 +62,8 @@ def one_line(text: str) -> str:
 
 def parse_overrides(overrides: Sequence[str]) -> list[Any]:
     """``overrides`` parsed by Hydra's override parser (one ``Override`` each); an override it
-    cannot parse is a :class:`ConfigError` that shows the syntax."""
+    cannot parse is a :class:`ConfigError` that shows the syntax.
+    """
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
 
@@ -133,7 +136,8 @@ def _composition_error(
 
 def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
     """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it in the config
-    composed with ``groups`` (the overrides of groups and top-level keys)."""
+    composed with ``groups`` (the overrides of groups and top-level keys).
+    """
     from omegaconf import DictConfig, OmegaConf
 
     parent, _, leaf = key.rpartition(".")
@@ -149,7 +153,8 @@ def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | N
 
 def compose_config(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
     """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``, raising
-    :class:`ConfigError` for anything Hydra cannot compose."""
+    :class:`ConfigError` for anything Hydra cannot compose.
+    """
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException

@@ -173,7 +173,8 @@ COMMANDS: dict[str, Command] = {
 def check_command(name: str, argv: Sequence[str]) -> list[CheckedJob]:
     """Compose and check the configuration of command ``name`` for the command line ``argv``
     with light imports only (no torch, Lightning or MuJoCo); see
-    :func:`~cpmp.cli.checks.check_command_line`."""
+    :func:`~cpmp.cli.checks.check_command_line`.
+    """
     return check_command_line(COMMANDS[name], argv)
 
 
@@ -185,7 +186,8 @@ def _fail(err: CpmpError) -> None:
 
 def run_job(job: Callable[[Any, Path], Path], cfg: Any, run_dir: str | Path) -> Path:
     """Run ``job(cfg, run_dir)``; print its output path last. A user error (:class:`CpmpError`)
-    is logged as one line and exits with status 2 instead of a traceback."""
+    is logged as one line and exits with status 2 instead of a traceback.
+    """
     import torch
 
     torch.set_num_threads(max(1, int(cfg.get("threads", 1) or 1)))
@@ -202,7 +204,8 @@ class _Task:
     """Hydra's task function of a command (picklable, for the joblib and SLURM launchers).
 
     Hydra names the job, and so the run directory ``logs/<job>/...``, after the task function's
-    module: the instance carries the command's name there."""
+    module: the instance carries the command's name there.
+    """
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -216,7 +219,8 @@ class _Task:
 
 def run_command(name: str) -> None:
     """Run Hydra command ``name`` on ``sys.argv``: check, then run the job(s) under
-    ``hydra.main``. Exits with status 2 and one ``error:`` line on a bad configuration."""
+    ``hydra.main``. Exits with status 2 and one ``error:`` line on a bad configuration.
+    """
     import hydra
 
     try:
@@ -250,7 +254,8 @@ def inspect_rrd_main(argv: Sequence[str] | None = None) -> int:
     """``cpmp-inspect-rrd FILE.rrd [...] [--json]``: summarise episode recordings (episode,
     ticks, duration, transitions, notes, outcome). Returns the exit status: 2 if any file could
     not be read (one ``error:`` line per bad file on stderr; the other files are still
-    summarised)."""
+    summarised).
+    """
     import json
 
     from cpmp.recordings import format_summary, read_recording

@@ -77,7 +77,8 @@ class RowSpec:
 
     def fit_key(self, seed: int, d: int) -> str:
         """Identifies the fit and evaluation this row needs at ``(seed, d)``: rows with equal
-        keys (the sweep's point at the default scale) share one job."""
+        keys (the sweep's point at the default scale) share one job.
+        """
         options = {
             "predictor": dict(self.predictor_cfg) if self.predictor != NO_PREDICTOR else None,
             "sequencer": dict(self.sequencer_cfg),
@@ -92,7 +93,8 @@ class RowSpec:
 # --------------------------------------------------------------------------- config groups
 def group_options(group: str) -> dict[str, dict[str, Any]]:
     """Every option of config group ``group`` (``predictor``, ``sequencer``) composed with its
-    defaults, by name, from the running Hydra app's search path (or ``conf/`` outside one)."""
+    defaults, by name, from the running Hydra app's search path (or ``conf/`` outside one).
+    """
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
@@ -186,7 +188,8 @@ def row_specs(cfg: Any, settings: ExperimentSettings, compare: CompareSettings) 
 def run_compare(cfg: Any, run_dir: str | Path) -> Path:
     """Run the comparison (see the module doc); writes ``compare.json``, ``compare.md``,
     ``compare_c_vs_d.png``, ``compare_supports.png``, ``episodes.json`` and ``timings.json``
-    into ``run_dir`` (plus ``seed_<s>/demos.h5``). Returns the path of ``compare.json``."""
+    into ``run_dir`` (plus ``seed_<s>/demos.h5``). Returns the path of ``compare.json``.
+    """
     from omegaconf import DictConfig, ListConfig, OmegaConf
 
     from cpmp.compare.report import (

@@ -38,7 +38,8 @@ def aggregate_rows(
 ) -> list[dict[str, Any]]:
     """One row per spec and D: the :data:`ROW_FIELDS` as means over the seeds whose fit
     succeeded (W/I/C: boxes of ``n_boxes``; mae in [0, 1]; fit_s [s]; tick_ms [ms]), their
-    population std (``*_std``), the per-seed values and any refused fits (``errors``)."""
+    population std (``*_std``), the per-seed values and any refused fits (``errors``).
+    """
     rows = []
     for spec in specs:
         for d in spec.train_sizes:
@@ -73,7 +74,8 @@ def job_episodes(
     results: Mapping[str, dict[str, Any]], jobs: Mapping[str, tuple[RowSpec, int, int]]
 ) -> list[dict[str, Any]]:
     """Every reproduction episode of every job, labelled with its row, seed and D (a fit
-    shared by two rows is listed once, under the first)."""
+    shared by two rows is listed once, under the first).
+    """
     out = []
     for key, (spec, seed, d) in jobs.items():
         label = {
@@ -95,7 +97,8 @@ def job_timings(
     workers: int,
 ) -> dict[str, Any]:
     """Wall time of the run; wall and CPU seconds of every stage of every job (to scale the
-    run's cost to other box or seed counts)."""
+    run's cost to other box or seed counts).
+    """
     tasks = []
     for key, (spec, seed, d) in jobs.items():
         r = results[key]
@@ -138,7 +141,8 @@ def render_compare(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, seconds: float, workers: int
 ) -> str:
     """``compare.md``: the rows by predictor with W / I / C per D beside the paper's Table I,
-    progress MAE, fit and tick time, support points; then the support sweep."""
+    progress MAE, fit and tick time, support points; then the support sweep.
+    """
     sizes = list(settings.train_sizes)
     largest = max(sizes)
     lines = [
@@ -237,7 +241,8 @@ def plot_c_vs_d(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
 ) -> Path:
     """Complete episodes [% of boxes] against D, one line per predictor/sequencer (error bars:
-    std over seeds), the paper's Table I dashed."""
+    std over seeds), the paper's Table I dashed.
+    """
     figure, (ax,) = _figure(8.5, 4.5)
     table = [r for r in rows if r["group"] != "support_sweep"]
     keys = list(dict.fromkeys((r["predictor"], r["sequencer"]) for r in table))
@@ -284,7 +289,8 @@ def plot_supports(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
 ) -> Path:
     """The support sweep: complete episodes [% of boxes] and progress MAE against the number
-    of support points (log scale), one line per D."""
+    of support points (log scale), one line per D.
+    """
     figure, (left, right) = _figure(9.0, 3.8, ncols=2)
     sweep = [r for r in rows if r["group"] == "support_sweep" and r["supports"] is not None]
     for d in sorted({r["D"] for r in sweep}):

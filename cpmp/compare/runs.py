@@ -40,7 +40,8 @@ def _collect(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
 
 def tick_ms(seq: Any, demo: Any) -> float:
     """Mean wall time [ms] of one ``step()`` over ``demo``'s feature stream replayed open
-    loop (after a ``reset`` on its first sample)."""
+    loop (after a ``reset`` on its first sample).
+    """
     seq.reset(float(demo.time[0]), demo.features[0])
     elapsed = 0.0
     for t, x in zip(demo.time[1:], demo.features[1:], strict=True):

@@ -1,5 +1,6 @@
 """Everything :meth:`cpmp.sequencer.ConcurrentSequencer.fit` takes besides the demonstrations,
-typed: the predictor's kind and options, the transition rule, the trainer, the seed."""
+typed: the predictor's kind and options, the transition rule, the trainer, the seed.
+"""
 
 from __future__ import annotations
 

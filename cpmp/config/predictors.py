@@ -220,13 +220,15 @@ class SklearnKLRConfig(KLRConfig):
 class RegressionClipConfig(KLRConfig):
     """Options of ``regression_clip``: those of :class:`KLRConfig`, with ``l2`` the ridge
     penalty: each node minimises ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (the intercept ``b``
-    unpenalised)."""
+    unpenalised).
+    """
 
 
 @dataclass
 class TimePhaseConfig(KLRConfig):
     """Options of ``time_phase``: exactly those of :class:`KLRConfig`; only the labels differ
-    (normalised elapsed time)."""
+    (normalised elapsed time).
+    """
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """The options of the Lightning fit of the progress predictors (``conf/trainer/``); every
-solver tolerance and epoch default is written here."""
+solver tolerance and epoch default is written here.
+"""
 
 from __future__ import annotations
 

@@ -115,7 +115,8 @@ class Demonstration:
 
     def segments(self, variable: str) -> list[Activation]:
         """Consecutive activations of ``variable``'s MPs, in time order (their ``time`` and
-        ``features`` are views into this demonstration's arrays)."""
+        ``features`` are views into this demonstration's arrays).
+        """
         labels = self._variable_labels(variable)
         bounds = [0, *self.switch_indices(variable).tolist(), len(labels)]
         return [
@@ -127,7 +128,8 @@ class Demonstration:
         """The demonstrated switches of ``variable`` (of every variable if ``None``) in time
         order, variables in :attr:`variables` order at equal times. Each is at the time of
         the first sample under the new MP, with that sample's features as ``state`` (d,) and
-        no ``probability`` (``nan``: a label is not a prediction)."""
+        no ``probability`` (``nan``: a label is not a prediction).
+        """
         variables = self.variables if variable is None else [variable]
         events = []
         for v in variables:
@@ -334,7 +336,8 @@ def mp_sequences(demo: Demonstration) -> dict[str, list[str]]:
 
 class DemonstrationLog:
     """A demonstration being recorded by a scripted demonstrator, one sample per control tick;
-    :meth:`to_demonstration` validates it into a :class:`Demonstration`."""
+    :meth:`to_demonstration` validates it into a :class:`Demonstration`.
+    """
 
     def __init__(self, variables: Sequence[str]) -> None:
         self.variables = list(variables)

@@ -102,7 +102,8 @@ def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:
 
 def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) -> dict[str, Any]:
     """Mean absolute progress error: overall, in the first and last ``edge`` fraction of each
-    activation (by normalised time), and per node (``"variable/mp"``)."""
+    activation (by normalised time), and per node (``"variable/mp"``).
+    """
     if not records:
         raise DataError("no activations to evaluate: the demonstrations share no MP with the model")
     errs, first, last = [], [], []
@@ -196,7 +197,8 @@ def switch_distances(
     """Distances between triggered and demonstrated switch states of ``variable``; ``None`` if
     the triggered switches (``events``, each with its ``state``) do not match the demonstrated
     ones (:meth:`~cpmp.data.Demonstration.transitions`) one to one. ``columns`` (d,) bool
-    restricts the distance to those features (e.g. :func:`continuous_features`)."""
+    restricts the distance to those features (e.g. :func:`continuous_features`).
+    """
     fired = [e for e in events if e.variable == variable]
     shown = demo.transitions(variable)
     if [(e.source, e.target) for e in fired] != [(s.source, s.target) for s in shown]:
@@ -209,7 +211,8 @@ def switch_distances(
 
 def continuous_features(demos: Sequence[Demonstration]) -> np.ndarray:
     """``(d,)`` bool: features that take more than two distinct values in ``demos`` (binary
-    signals, such as touch, flip by 1 when a switch comes one tick early or late)."""
+    signals, such as touch, flip by 1 when a switch comes one tick early or late).
+    """
     from cpmp.sequencer.switching import indicator_features
 
     return ~indicator_features(np.concatenate([d.features for d in demos], axis=0))

@@ -1,6 +1,7 @@
 """The jobs for your own demonstrations (no simulator): ``cpmp-train`` trains a sequencer from
 an HDF5 file of demonstrations, ``cpmp-evaluate`` evaluates a checkpoint offline on one and
-writes ``evaluation.json`` and ``evaluation.md``."""
+writes ``evaluation.json`` and ``evaluation.md``.
+"""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ log = logging.getLogger(__name__)
 
 def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
     """The ``data`` group's file (checked to exist) and split; ``split: auto`` means
-    ``auto_split`` when the file has that mask, else every demonstration."""
+    ``auto_split`` when the file has that mask, else every demonstration.
+    """
     from cpmp.data.datafile import list_splits
 
     if not cfg.data.get("path"):
@@ -36,7 +38,8 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
 
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
-    save ``model.pt`` into ``run_dir``; returns the checkpoint path."""
+    save ``model.pt`` into ``run_dir``; returns the checkpoint path.
+    """
     settings = job_fit_settings(cfg)
     from cpmp.data.datafile import load_demonstrations
 
@@ -56,7 +59,8 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
 
 def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     """Evaluate a checkpoint offline on a file's test split: progress MAE per node, replay of the
-    recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON."""
+    recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON.
+    """
     from cpmp.data.datafile import load_demonstrations
     from cpmp.evaluation.checkpoints import load_sequencer
     from cpmp.experiment.plots import plot_progress_curves
@@ -104,7 +108,8 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
 
 def _model_entry(seq: Any) -> dict[str, Any]:
     """What an evaluated checkpoint is: ``sequencer`` (``learned`` or ``goal_nearest``) and
-    ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is)."""
+    ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is).
+    """
     from cpmp.baselines.goal_nearest import GoalNearestSequencer
     from cpmp.config.goal_nearest import KIND
 
@@ -117,7 +122,8 @@ def _model_entry(seq: Any) -> dict[str, Any]:
 def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
     """MPs labelled in ``demos`` (demonstrations) that ``seq`` (a sequencer) has no node for:
     a renamed MP, or every MP of a variable the model was not trained on. Returns
-    ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by variable, MP."""
+    ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by variable, MP.
+    """
     found: dict[tuple[str, str], dict[str, Any]] = {}
     for m, demo in enumerate(demos):
         for v in demo.variables:

@@ -1,5 +1,6 @@
 """Stage 1 of the main job, per seed: the scripted demonstrations (train/test split, saved with
-the split) and the demonstrator's run on every reproduction box."""
+the split) and the demonstrator's run on every reproduction box.
+"""
 
 from __future__ import annotations
 
@@ -43,7 +44,8 @@ class SeedData:
 def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> SeedData:
     """Stage 1 of one seed: record its demonstrations (saved as ``seed_<s>/demos.h5`` with the
     train/test split) and the demonstrator's run on every reproduction box. ``job``: the
-    typed job (or its composed config, converted here)."""
+    typed job (or its composed config, converted here).
+    """
     from cpmp.data.datafile import save_demonstrations
     from cpmp.sim import sample_box
     from cpmp.sim.collect import sample_boxes
@@ -93,7 +95,8 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
 def _record_together(boxes: list[Any], task: Any, names: list[str] | None, desc: str) -> list[Any]:
     """The scripted demonstrations of ``boxes``, all boxes run together
     (:func:`cpmp.sim.record_demonstrations`, the same data as one at a time), with a progress
-    bar."""
+    bar.
+    """
     from cpmp.sim import record_demonstrations
 
     bar = progress_bar(boxes, desc)

@@ -48,7 +48,8 @@ from cpmp.experiment.settings import ExperimentJob, ExperimentSettings, FitSetti
 def _schema(cls: type, **first: Any) -> type:
     """A plain dataclass with the fields (types, defaults) of ``cls``, after the fields
     ``first`` (name -> default string), as Hydra's schema of ``cls``: no validation of its own
-    (``cls`` validates at the job boundary) and never frozen (Hydra merges into it)."""
+    (``cls`` validates at the job boundary) and never frozen (Hydra merges into it).
+    """
     hints = typing.get_type_hints(cls)
     fields: list[tuple[str, Any, Any]] = [(k, str, field(default=v)) for k, v in first.items()]
     for f in dataclasses.fields(cls):
@@ -96,7 +97,8 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
 def predictor_from_cfg(cfg: Any) -> tuple[str, PredictorConfig]:
     """``(kind, options)`` of a ``predictor`` group entry (``kind`` plus the kind's options),
-    validated."""
+    validated.
+    """
     options = to_dict(cfg)
     kind = options.pop("kind", None)
     if kind not in PREDICTOR_CONFIGS:
@@ -109,7 +111,8 @@ def predictor_from_cfg(cfg: Any) -> tuple[str, PredictorConfig]:
 
 def predictor_options(cfg: Any) -> tuple[str, dict[str, Any]]:
     """``(kind, options)`` of a ``predictor`` group entry as a dict of every option, validated
-    (:func:`predictor_from_cfg`)."""
+    (:func:`predictor_from_cfg`).
+    """
     kind, config = predictor_from_cfg(cfg)
     return kind, dataclasses.asdict(config)
 
@@ -121,7 +124,8 @@ def fit_settings(
     (nodes or mappings; ``None``: the defaults), validated; the ``goal_nearest`` baseline
     needs no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a predictor that has
     one (the Adam-trained ones), so that the saved model says which rate it was trained
-    with."""
+    with.
+    """
     sequencer = to_dict(sequencer_cfg)
     goal_nearest = None
     if sequencer.get("kind") is not None:
@@ -153,14 +157,16 @@ def job_fit_settings(cfg: Any) -> FitSettings:
 
 def validate_common(cfg: Any) -> tuple[str, dict[str, Any]]:
     """Check the predictor, sequencer and trainer groups of a composed config
-    (:func:`job_fit_settings`); returns the predictor's kind and all its options."""
+    (:func:`job_fit_settings`); returns the predictor's kind and all its options.
+    """
     settings = job_fit_settings(cfg)
     return settings.predictor, dataclasses.asdict(settings.fit.predictor_config)
 
 
 def experiment_job(cfg: Any) -> ExperimentJob:
     """The main job's composed config as an :class:`ExperimentJob` (an :class:`ExperimentJob`
-    is returned as it is); every group validated, the settings first."""
+    is returned as it is); every group validated, the settings first.
+    """
     if isinstance(cfg, ExperimentJob):
         return cfg
     settings = ExperimentSettings.from_cfg(cfg.experiment)

@@ -1,5 +1,6 @@
 """Fitting a sequencer: the learned one (a progress predictor per node, Lightning) or the
-``goal_nearest`` baseline, from typed settings or from config groups."""
+``goal_nearest`` baseline, from typed settings or from config groups.
+"""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ def train_sequencer(
 ) -> Any:
     """Fit the sequencer ``settings`` describe on ``demos`` with ``seed`` (Lightning logs into
     ``log_dir`` when set): a :class:`~cpmp.sequencer.ConcurrentSequencer`, or the
-    :class:`~cpmp.baselines.GoalNearestSequencer` baseline (no predictor, no trainer)."""
+    :class:`~cpmp.baselines.GoalNearestSequencer` baseline (no predictor, no trainer).
+    """
     if settings.goal_nearest is not None:
         from cpmp.baselines.goal_nearest import GoalNearestSequencer
 
@@ -48,6 +50,7 @@ def fit_sequencer(
     log_dir: str | Path | None = None,
 ) -> Any:
     """:func:`train_sequencer` from config groups (``predictor``, ``sequencer``, ``trainer``:
-    nodes or mappings), converted by :func:`~cpmp.experiment.config.fit_settings`."""
+    nodes or mappings), converted by :func:`~cpmp.experiment.config.fit_settings`.
+    """
     settings = fit_settings(predictor_cfg, sequencer_cfg, trainer_cfg)
     return train_sequencer(demos, settings, seed, log_dir)

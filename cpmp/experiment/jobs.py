@@ -5,7 +5,8 @@
 (:mod:`~cpmp.experiment.reproduction`) and draw the strategy map
 (:mod:`~cpmp.experiment.strategies`); pool the seeds and write the report
 (:mod:`~cpmp.experiment.report`). With ``experiment.workers > 1`` the seeds and training sizes run
-on a process pool (:mod:`~cpmp.experiment.workers`)."""
+on a process pool (:mod:`~cpmp.experiment.workers`).
+"""
 
 from __future__ import annotations
 
@@ -163,7 +164,8 @@ def _gather(
     dict[str, float],
 ]:
     """The jobs' results in seed and D order: the per-seed rows, the Fig. 6 pairs by D, every
-    episode, and the wall seconds per stage summed over seeds and training sizes."""
+    episode, and the wall seconds per stage summed over seeds and training sizes.
+    """
     per_seed: list[dict[str, Any]] = []
     pairs_by_d: dict[int, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     episodes: list[dict[str, Any]] = []

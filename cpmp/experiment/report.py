@@ -1,5 +1,6 @@
 """The main job's report: its seeds pooled (mean ± std), ``report.json`` (machine-readable),
-``report.md``, the figures, ``timings.json``, and the helpers other reports share."""
+``report.md``, the figures, ``timings.json``, and the helpers other reports share.
+"""
 
 from __future__ import annotations
 
@@ -65,7 +66,8 @@ NEAREST_PROGRESS_NOTE = (
 
 def is_goal_nearest(sequencer: Mapping[str, Any] | None) -> bool:
     """Whether a ``sequencer`` config (a mapping, possibly empty) selects the goal-nearest
-    baseline."""
+    baseline.
+    """
     return bool(sequencer) and sequencer.get("kind") == GOAL_NEAREST
 
 
@@ -74,7 +76,8 @@ def predictor_entry(
 ) -> dict[str, Any]:
     """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran, or
     for ``sequencer=goal_nearest`` (which runs none) ``kind: "none"``, the progress estimate it
-    reports instead (``nearest_sample``) and a note saying so."""
+    reports instead (``nearest_sample``) and a note saying so.
+    """
     if is_goal_nearest(sequencer):
         return {
             "kind": "none",
@@ -241,7 +244,8 @@ def write_timings(
     run_dir: Path, seconds: float, workers: int, stage_seconds: Mapping[str, float]
 ) -> Path:
     """``timings.json``: the run's wall time [s], its worker count and the wall seconds of
-    every stage, summed over seeds and training sizes."""
+    every stage, summed over seeds and training sizes.
+    """
     return write_json(
         run_dir / "timings.json",
         {
@@ -283,7 +287,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     """The human-readable report: Table I beside the paper's, progress errors, strategy map.
     The header names what ran: the predictor and the learned sequencer's rules, or the
     ``goal_nearest`` baseline's options (whose progress numbers are labelled as a
-    nearest-sample lookup it does not switch on)."""
+    nearest-sample lookup it does not switch on).
+    """
     exp = report["experiment"]
     goal_nearest = is_goal_nearest(report.get("sequencer"))
     lines = [

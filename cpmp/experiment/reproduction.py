@@ -1,6 +1,7 @@
 """Reproduction (Table I): a fitted sequencer closed-loop on the reproduction boxes, each
 episode classified (wrong start, incomplete, complete) with its switch-state distances, rerun
-recordings of the episodes worth looking at, and the counts of one set of episodes."""
+recordings of the episodes worth looking at, and the counts of one set of episodes.
+"""
 
 from __future__ import annotations
 
@@ -185,13 +186,15 @@ def reproduce_seed(
 ) -> list[EpisodeRecord]:
     """:func:`reproduce` on one seed's reproduction boxes: ``data.boxes`` against the
     demonstrator's runs ``data.expected``, the chosen strategies told apart by
-    ``data.signatures``. ``options``: the keywords of :func:`reproduce`."""
+    ``data.signatures``. ``options``: the keywords of :func:`reproduce`.
+    """
     return reproduce(seq, data.boxes, data.expected, task, data.signatures, **options)
 
 
 def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """Table I for one set of episodes: counts W/I/C (diverged counted apart, also in I) and
-    the mean/std switch-state distance over all complete episodes."""
+    the mean/std switch-state distance over all complete episodes.
+    """
     counts = {k: 0 for k in ("W", "I", "C", "diverged")}
     for e in episodes:
         if e.outcome == "wrong_start":

@@ -1,6 +1,7 @@
 """The task's strategies: which one a demonstration used, train/test splits and training
 subsets balanced over them, the initial MPs of each (its signature), which one a sequencer
-chose at the start of an episode, and the strategy map (Fig. 7)."""
+chose at the start of an episode, and the strategy map (Fig. 7).
+"""
 
 from __future__ import annotations
 

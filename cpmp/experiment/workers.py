@@ -1,7 +1,8 @@
 """The main job's worker processes: a spawned process pool running each seed's collection and
 then each of its training sizes, one torch thread per worker, every worker's log records sent to
 the main process (prefixed with their job) and handed to its handlers. :func:`spawned_pool`
-is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.compare.runs`)."""
+is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.compare.runs`).
+"""
 
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ class _JobPrefix(logging.Filter):
 
 class _Dispatch(logging.Handler):
     """Hands a worker's record to the main process's logger of the same name (and so to the
-    handlers Hydra configured: console and job log)."""
+    handlers Hydra configured: console and job log).
+    """
 
     def emit(self, record: logging.LogRecord) -> None:
         logger = logging.getLogger(record.name)
@@ -81,7 +83,8 @@ def spawned_pool(
 
 def one_thread() -> None:
     """Worker start-up: one torch thread (a second busy thread per process on a machine of few
-    cores slows every process down)."""
+    cores slows every process down).
+    """
     import torch
 
     torch.set_num_threads(1)

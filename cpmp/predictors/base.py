@@ -85,7 +85,8 @@ class FeatureScaler(nn.Module):
 
     def fit(self, x: np.ndarray, mode: str) -> None:
         """Fit on training samples ``x`` (N, d), in recording order (demonstrations one after
-        the other)."""
+        the other).
+        """
         if mode == "none":
             return
         if self.noise == "auto":
@@ -175,12 +176,14 @@ class ProgressPredictor(nn.Module):
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
         """Logits of the first ``heads`` nodes ``(B, heads)``; banks override this to skip the
-        other nodes' work."""
+        other nodes' work.
+        """
         return self.logits(z)[:, :heads]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
         """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``; banks override
-        this to skip the other nodes' work (e.g. to score each node on its own samples)."""
+        this to skip the other nodes' work (e.g. to score each node on its own samples).
+        """
         return self.logits(z)[:, i]
 
     def reset_state(self, n_streams: int) -> None:
@@ -195,7 +198,8 @@ class ProgressPredictor(nn.Module):
 
     def solve_convex(self, data: list[NodeData], solver: SolverOptions) -> list[NewtonInfo]:
         """Set the trainable parameters to the minimiser of :meth:`training_loss` by Newton's
-        method (convex banks only); returns each node's solver outcome."""
+        method (convex banks only); returns each node's solver outcome.
+        """
         raise NotImplementedError(f"predictor {self.kind!r} is not convex")
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:

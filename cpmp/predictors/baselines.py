@@ -50,7 +50,8 @@ class SklearnKLRPredictor(KLRPredictor):
     ) -> list[NewtonInfo]:
         """Fit each node's weights and bias with ``LogisticRegression`` on its kernel features
         ``(P, S)`` (two weighted copies per sample); report scikit-learn's iterations and the
-        max-norm of the gradient of ``klr``'s loss at the result."""
+        max-norm of the gradient of ``klr``'s loss at the result.
+        """
         from sklearn.linear_model import LogisticRegression
 
         c = self.config
@@ -129,7 +130,8 @@ class RegressionClipPredictor(KLRPredictor):
     ) -> list[NewtonInfo]:
         """Closed-form ridge solution per node: ``(XᵀX / n + R) θ = Xᵀ φ / n`` with
         ``X = [K, 1]`` and ``R = diag(l2, ..., l2, 0)``; one Cholesky solve (least squares if
-        the system is singular, e.g. for ``l2 = 0`` with repeated supports)."""
+        the system is singular, e.g. for ``l2 = 0`` with repeated supports).
+        """
 
         def solve(i: int, k: torch.Tensor, y: torch.Tensor) -> tuple:
             n = k.shape[0]
@@ -165,7 +167,8 @@ def _solve_nodes(
 ) -> list[NewtonInfo]:
     """Fit every node of a kernel bank by ``solve(i, K_i (P, S_i), target (P,))`` -> (weights
     ``(S_i,)``, bias, outcome) on its real supports (default kernels: the cached ones), then
-    write all weights and biases into the bank; returns the outcomes."""
+    write all weights and biases into the bank; returns the outcomes.
+    """
     kernels = bank.node_kernels(data) if kernels is None else kernels
     weight = torch.zeros_like(bank.weight, requires_grad=False)
     bias = bank.bias.detach().clone()
@@ -190,7 +193,8 @@ def _clipped_logit(raw: torch.Tensor) -> torch.Tensor:
 
 class TimePhasePredictor(KLRPredictor):
     """``time_phase``: ``klr`` trained on normalised elapsed time (:func:`cpmp.progress.
-    time_labels`) instead of the L1 line integral of eq. 1."""
+    time_labels`) instead of the L1 line integral of eq. 1.
+    """
 
     kind: ClassVar[str] = "time_phase"
     config_class = TimePhaseConfig

@@ -58,7 +58,8 @@ step pattern skips at most one)."""
 
 def window_ticks(newest: int, window: int, stride: int) -> np.ndarray:
     """Ticks of the window points at tick ``newest``, oldest first: ``newest`` and every
-    ``stride``-th tick before it, within the last ``window`` ticks and not before tick 0."""
+    ``stride``-th tick before it, within the last ``window`` ticks and not before tick 0.
+    """
     return np.arange(newest, max(newest - window, -1), -stride)[::-1]
 
 
@@ -99,7 +100,8 @@ def interpolate_progress(
 
 class _Streams:
     """Distances of the last ``span`` ticks of ``n`` streams to every reference sample, in a
-    ring buffer ``(n, span, R)``."""
+    ring buffer ``(n, span, R)``.
+    """
 
     def __init__(self, n: int, span: int, n_reference: int) -> None:
         self.rows = np.zeros((n, span, n_reference))
@@ -156,7 +158,8 @@ class DTWPredictor(ProgressPredictor):
     # ----------------------------------------------------------------------------- fitting
     def _thin(self, n: int) -> np.ndarray:
         """Indices of the kept samples of an activation of ``n`` samples: every ``stride``-th
-        and the last, at most ``max_reference`` (evenly thinned)."""
+        and the last, at most ``max_reference`` (evenly thinned).
+        """
         c = self.config
         idx = np.arange(0, n, c.stride)
         if idx[-1] != n - 1:
@@ -167,7 +170,8 @@ class DTWPredictor(ProgressPredictor):
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Store every node's thinned activations (scaled features) and their expected
-        progress; start heads share their node's reference."""
+        progress; start heads share their node's reference.
+        """
         refs, progress, columns, ranges = [], [], [], []
         seen: dict[NodeKey, tuple[int, int]] = {}
         count = column = 0
@@ -204,7 +208,8 @@ class DTWPredictor(ProgressPredictor):
         """Sum over nodes of the mean soft BCE (eq. 5) of φ against expected progress when each
         training activation is replayed (as a fresh stream) against the node's own references,
         scored at every ``stride``-th tick and the last one (:meth:`replay`). Cached for the
-        same ``data`` list (the fit asks twice)."""
+        same ``data`` list (the fit asks twice).
+        """
         if self._loss_cache is not None and self._loss_cache[0] is data:
             return self._loss_cache[1]
         total = torch.zeros((), dtype=self.dtype_)
@@ -238,7 +243,8 @@ class DTWPredictor(ProgressPredictor):
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
         """One tick of every stream: scaled features ``z (n_streams, d)`` -> ``(n_streams, K)``
-        logits ``logit(φ)``."""
+        logits ``logit(φ)``.
+        """
         if self._streams is None:
             self.reset_state(int(z.shape[0]))
         streams = self._streams
@@ -268,7 +274,8 @@ class DTWPredictor(ProgressPredictor):
     def _layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The heads' reference ranges as segments: first sample of each distinct range
         ``(U,)``, segment of each reference sample ``(R,)`` and of each head ``(K,)`` (start
-        heads share their node's). Cached until ``head_range`` changes."""
+        heads share their node's). Cached until ``head_range`` changes.
+        """
         key = (id(self.head_range), self.head_range._version)
         if self._layout_cache is None or self._layout_cache[0] != key:
             ranges = self.head_range.numpy()
@@ -280,7 +287,8 @@ class DTWPredictor(ProgressPredictor):
     def _steps(self) -> np.ndarray:
         """``(R,)`` distance from each kept reference sample to the next kept sample of the same
         activation (scaled feature units); ``nan`` at an activation's last sample. Cached until
-        ``reference`` or ``column`` changes."""
+        ``reference`` or ``column`` changes.
+        """
         key = (id(self.reference), self.reference._version, id(self.column), self.column._version)
         if self._steps_cache is None or self._steps_cache[0] != key:
             reference, column = self.reference.numpy(), self.column.numpy()
@@ -295,7 +303,8 @@ class DTWPredictor(ProgressPredictor):
         """Logits ``(B,)`` of node ``i`` when the rows of ``z (B, d)`` are the consecutive
         ticks of one fresh stream (the live streams are left alone). A self-check for long
         training sets, so aligned only at every ``stride``-th tick and the last one, each
-        value held until the next aligned tick."""
+        value held until the next aligned tick.
+        """
         ticks = self._scored_ticks(int(z.shape[0])) if z.shape[0] else np.zeros(0, np.int64)
         phi = self.replay(z, i, ticks)
         held = np.searchsorted(ticks, np.arange(z.shape[0]), side="right") - 1
@@ -313,7 +322,8 @@ class DTWPredictor(ProgressPredictor):
     def replay(self, z: torch.Tensor, i: int, ticks: np.ndarray | None = None) -> np.ndarray:
         """φ of node ``i`` at ``ticks`` (default: every tick) of one fresh stream whose
         consecutive ticks are the rows of ``z (B, d)`` (scaled features), aligned against node
-        ``i``'s references only; the live streams are left alone. Returns ``(len(ticks),)``."""
+        ``i``'s references only; the live streams are left alone. Returns ``(len(ticks),)``.
+        """
         lo, hi = self.head_range[i].tolist()
         columns = self.column[lo:hi].numpy()
         columns = columns - columns[0]
@@ -362,7 +372,8 @@ class DTWPredictor(ProgressPredictor):
         (distances of the window points, oldest first, to the reference samples laid out at
         ``columns (R,)`` of a ``width``-column cost matrix) ends within that segment,
         interpolated towards its neighbours (:func:`interpolate_progress`, ``steps (R,)`` as
-        :meth:`_steps`)."""
+        :meth:`_steps`).
+        """
         from dtw import asymmetric, dtw
 
         local = np.full((dist.shape[0], width), np.inf)

@@ -57,12 +57,14 @@ class KLRPredictor(ProgressPredictor):
 
     def feature_weights(self) -> torch.Tensor:
         """Per-node, per-feature kernel weights ``(K, d)``: γ times the feature scale (all ones
-        for the isotropic kernel)."""
+        for the isotropic kernel).
+        """
         return self.gamma * self.feature_scale
 
     def kernel(self, z: torch.Tensor) -> torch.Tensor:
         """RBF kernel of scaled features ``z (B, d)`` with every node's supports: ``(B, K, S)``
-        (padded slots are 0)."""
+        (padded slots are 0).
+        """
         a = self.feature_weights()
         s = self.support
         x_term = (z * z) @ a.T
@@ -96,7 +98,8 @@ class KLRPredictor(ProgressPredictor):
         """The real (unpadded) supports of the first ``heads`` nodes, grouped by node: kernel
         weights ``a[:heads]ᵀ (d, heads)``, node index ``(N,)``, ``a_n s_n (N, d)``,
         ``a_n · s_n² (N,)`` and weights ``(N,)``. Cached per ``heads`` while no gradient is
-        needed, keyed on the identity and version counter of every tensor they derive from."""
+        needed, keyed on the identity and version counter of every tensor they derive from.
+        """
         tensors = (self.gamma, self.feature_scale, self.support, self.support_mask, self.weight)
         extra = getattr(self, "log_feature_scale", None)
         if extra is not None:
@@ -196,7 +199,8 @@ class KLRPredictor(ProgressPredictor):
     def node_kernel(self, i: int, x: torch.Tensor) -> torch.Tensor:
         """Kernel ``(P, S)`` of samples ``x (P, d)`` against node ``i``'s supports (padded slots
         0), with ``Σ_j a_j (x_j - s_j)² = a · x² - 2 x · (a s) + a · s²``: one matrix product
-        instead of a ``(P, S, d)`` difference tensor."""
+        instead of a ``(P, S, d)`` difference tensor.
+        """
         a = self.feature_weights()[i]
         weighted = a * self.support[i]
         sq = torch.addmm(((weighted * self.support[i]).sum(-1)), x, weighted.T, alpha=-2.0)
@@ -213,7 +217,8 @@ class KLRPredictor(ProgressPredictor):
         self, data: list[NodeData], kernels: list[torch.Tensor], l1: float = 0.0
     ) -> torch.Tensor:
         """Sum over nodes of the mean soft BCE (eq. 5) given each node's kernel matrix
-        ``(P_i, S)``, plus ``½ l2 ||w||²`` and, if ``l1 > 0``, ``l1 · mean |w|`` per node."""
+        ``(P_i, S)``, plus ``½ l2 ||w||²`` and, if ``l1 > 0``, ``l1 · mean |w|`` per node.
+        """
         total = torch.zeros((), dtype=self.dtype_)
         for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
             w = self.weight[i] * self.support_mask[i]
@@ -227,7 +232,8 @@ class KLRPredictor(ProgressPredictor):
         self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
     ) -> list[NewtonInfo]:
         """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias with the kernel
-        fixed; ``kernels``: each node's ``(P_i, S)`` kernel (default: the cached ones)."""
+        fixed; ``kernels``: each node's ``(P_i, S)`` kernel (default: the cached ones).
+        """
         kernels = self.node_kernels(data) if kernels is None else kernels
         masks = list(self.support_mask)
         with torch.no_grad():
@@ -322,7 +328,8 @@ class SparseKLRPredictor(KLRPredictor):
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
         """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights
-        by ``solver`` (default: Newton)."""
+        by ``solver`` (default: Newton).
+        """
         with torch.no_grad():
             w = (self.weight * self.support_mask).abs()
             keep = (w >= self.config.prune_tol * w.max(dim=1, keepdim=True).values) & (w > 0)
@@ -350,7 +357,8 @@ class SparseKLRPredictor(KLRPredictor):
 
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
         """Convex re-fit of weights and bias on the surviving (fixed) supports, without the L1
-        shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``."""
+        shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``.
+        """
         kernels = self.node_kernels(data)
         if solver.method == "newton":
             self.refit_info = self.solve_convex(data, solver, kernels)

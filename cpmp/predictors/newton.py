@@ -69,7 +69,8 @@ class NewtonInfo:
 
 def bce_terms(z: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     """Per-sample soft-label BCE from logits ``z (n,)`` and labels ``y (n,)``, computed as
-    :func:`torch.nn.functional.binary_cross_entropy_with_logits` does (no softplus cut-off)."""
+    :func:`torch.nn.functional.binary_cross_entropy_with_logits` does (no softplus cut-off).
+    """
     return z.clamp_min(0.0) - z * y + torch.log1p(torch.exp(-z.abs()))
 
 
@@ -88,7 +89,8 @@ def penalised_loss(
 
 def _newton_direction(hessian: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
     """``-H⁻¹ g`` by Cholesky; if ``H`` is not numerically positive definite, with growing
-    diagonal jitter, and as a last resort by least squares."""
+    diagonal jitter, and as a last resort by least squares.
+    """
     chol, info = torch.linalg.cholesky_ex(hessian)
     if int(info) == 0:
         return -torch.cholesky_solve(grad[:, None], chol)[:, 0]

@@ -76,7 +76,8 @@ def _lightning_module(
     rate: float | None,
 ):
     """The Lightning module of one fit; ``plateau``: the early-stopping rule (``None``: run
-    every epoch); ``rate``: Adam's learning rate (``None`` for convex predictors)."""
+    every epoch); ``rate``: Adam's learning rate (``None`` for convex predictors).
+    """
     import lightning as L
 
     newton = _solver(predictor, cfg) == "newton"
@@ -139,7 +140,8 @@ def _lightning_module(
 
 def _solver(predictor: ProgressPredictor, cfg: TrainerConfig) -> str:
     """``adam`` for gradient-trained banks; for convex ones ``cfg.solver``, except that a bank
-    without trainable parameters (e.g. ``dtw``) always uses its own :meth:`solve_convex`."""
+    without trainable parameters (e.g. ``dtw``) always uses its own :meth:`solve_convex`.
+    """
     if not predictor.convex:
         return "adam"
     if not any(p.requires_grad for p in predictor.parameters()):
@@ -149,7 +151,8 @@ def _solver(predictor: ProgressPredictor, cfg: TrainerConfig) -> str:
 
 def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
     """Option ``name`` of the predictor's config, which its solver needs (Adam: ``epochs``,
-    ``lr``; LBFGS: ``max_iter``)."""
+    ``lr``; LBFGS: ``max_iter``).
+    """
     if not hasattr(predictor.config, name):
         raise ConfigError(
             f"predictor {predictor.kind!r} has no option {name!r}, which its solver needs; "

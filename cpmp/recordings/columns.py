@@ -88,7 +88,8 @@ class ColumnBuffer:
     ) -> None:
         """Check the (variable, MP or ``None``) pairs ``checks``, then make the entity path of
         each of ``series`` (path parts, series name or ``None``), name its series and keep the
-        paths as layout ``key``."""
+        paths as layout ``key``.
+        """
         for variable, mp in checks:
             check_mp(self._mp_names, variable, mp)
         paths = tuple(entity(*parts) for parts, _ in series)
@@ -122,7 +123,8 @@ class ColumnBuffer:
     def send(self) -> None:
         """Send every buffered column to the recording stream (scalars to their
         entity, poses as ``Transform3D`` to ``world/<body>``, on the ``time`` and ``tick``
-        timelines) and empty the buffers."""
+        timelines) and empty the buffers.
+        """
         import rerun as rr
 
         def indexes(ticks: list[int], times: list[float]) -> list[Any]:

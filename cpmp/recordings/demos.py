@@ -32,7 +32,8 @@ on the ``control_dt`` grid, so only float round-off needs absorbing."""
 def label_switches(demo: Demonstration) -> list[TransitionEvent]:
     """Every label change of ``demo`` (:meth:`~cpmp.data.Demonstration.transitions`) with
     probability :data:`DEMO_TRANSITION_PROBABILITY`; in time order (variables in
-    ``demo.variables`` order at equal times)."""
+    ``demo.variables`` order at equal times).
+    """
     from dataclasses import replace
 
     return [replace(e, probability=DEMO_TRANSITION_PROBABILITY) for e in demo.transitions()]

@@ -55,7 +55,8 @@ def entity(*parts: str) -> str:
 
 def check_mp(mp_names: Mapping[str, Sequence[str]], variable: str, mp: str | None = None) -> None:
     """Raise :class:`UnknownMPError` unless ``variable`` is a control variable of ``mp_names``
-    and ``mp`` (when given) one of its MPs."""
+    and ``mp`` (when given) one of its MPs.
+    """
     if variable not in mp_names:
         raise UnknownMPError(f"unknown control variable {variable!r}; known: {sorted(mp_names)}")
     if mp is not None and mp not in mp_names[variable]:
@@ -85,7 +86,8 @@ def status_markdown(
     outcome: str = "",
 ) -> str:
     """The ``status`` document at ``t`` [s]: the active MP of each of ``variables`` (``-``
-    when none yet), the last transition and the outcome text, as markdown."""
+    when none yet), the last transition and the outcome text, as markdown.
+    """
     lines = [f"**{episode}** · t = {t:.2f} s", "", "| variable | active MP |", "|---|---|"]
     lines += [f"| {var} | {active.get(var, '-')} |" for var in variables]
     if last_transition:
@@ -207,7 +209,8 @@ def blueprint(feature_groups: Mapping[str, Sequence[str]], variables: Sequence[s
     """The viewer's default layout (an ``rrb.Blueprint``): scene and status | feature panels
     (one per group of ``feature_groups``) and per-variable probabilities (a tab per control
     variable of ``variables``) | active MPs and events. Every plot has few series (rerun's
-    legend sits in its bottom-right corner)."""
+    legend sits in its bottom-right corner).
+    """
     import rerun.blueprint as rrb
 
     unit = rrb.ScalarAxis(range=(0.0, 1.0))
@@ -302,7 +305,8 @@ def _wxyz_to_xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
 def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
     """Geom ``index`` of the recorder's ``geoms`` validated and completed with its defaults:
     ``body``, ``name``, ``type``, ``size`` (list), ``pos`` (3,) [m], ``quat`` (4,) wxyz and
-    ``rgba`` (4,) uint8."""
+    ``rgba`` (4,) uint8.
+    """
     where = f"geoms[{index}]"
     kind = geom.get("type")
     if kind not in GEOM_TYPES:
@@ -331,7 +335,8 @@ def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
 
 def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:
     """The static ``Transform3D`` (pose in the body frame) and shape of a :func:`parse_geom`
-    geom, logged at ``world/<body>/<name>``."""
+    geom, logged at ``world/<body>/<name>``.
+    """
     import rerun as rr
 
     size, color = geom["size"], geom["rgba"]
@@ -361,7 +366,8 @@ def pose_rows(
     body_poses: Mapping[str, tuple[Any, Any]],
 ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """Body names, positions (B, 3) [m] and xyzw quaternions (B, 4) of wxyz ``body_poses``;
-    a malformed pose raises :class:`DataError` naming its body."""
+    a malformed pose raises :class:`DataError` naming its body.
+    """
     bodies = tuple(str(body) for body in body_poses)
     try:
         positions = np.array([pos for pos, _ in body_poses.values()], dtype=float)

@@ -32,7 +32,8 @@ if TYPE_CHECKING:
 class ViewInfo(NamedTuple):
     """One view of a recording's blueprint: ``kind`` (rerun's view class, e.g. ``TimeSeries``,
     ``TextLog``, ``StateTimeline``), display ``name``, ``origin`` entity path and the
-    ``contents`` query lines (``+ features/box_x``)."""
+    ``contents`` query lines (``+ features/box_x``).
+    """
 
     kind: str
     name: str
@@ -66,7 +67,8 @@ class RecordingSummary:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields
-        (transitions without ``state``, which a recording does not hold)."""
+        (transitions without ``state``, which a recording does not hold).
+        """
         data = asdict(self)
         data["transitions"] = [
             {k: v for k, v in asdict(event).items() if k != "state"} for event in self.transitions

@@ -263,7 +263,8 @@ class EpisodeRecorder:
         kind: str = "switch",
     ) -> None:
         """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s]
-        (``kind``: ``switch`` or ``recovery``)."""
+        (``kind``: ``switch`` or ``recovery``).
+        """
         self._check_open()
         t = checked_time(t)
         check_mp(self.mp_names, variable, source)
@@ -288,7 +289,8 @@ class EpisodeRecorder:
 
     def log_note(self, t: float, kind: str, variable: str, text: str) -> None:
         """Record a sequencer note at ``t`` [s]: a held transition, a stall recovery or a
-        non-finite φ (``kind``), about ``variable`` (may be empty), as readable ``text``."""
+        non-finite φ (``kind``), about ``variable`` (may be empty), as readable ``text``.
+        """
         self._check_open()
         t = checked_time(t)
         record = self._rr.DynamicArchetype(

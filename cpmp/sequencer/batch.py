@@ -33,7 +33,8 @@ LiveMask = np.ndarray | Sequence[bool] | None
 
 class EpisodeBatch:
     """What every batched policy shares: ``episodes``, one object per episode with its
-    ``active`` MPs, ``events`` and ``notes``, and per-episode views of them."""
+    ``active`` MPs, ``events`` and ``notes``, and per-episode views of them.
+    """
 
     episodes: list[Any]
 
@@ -126,7 +127,8 @@ class BatchedSequencer(EpisodeBatch):
 
     def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Start the ``live`` episodes (default: all) at time ``t`` [s] (scalar or ``(N,)``)
-        with features ``x (N, d)``; returns every episode's active MPs."""
+        with features ``x (N, d)``; returns every episode's active MPs.
+        """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
         stateful = getattr(seq.predictor, "stateful", False)
@@ -140,7 +142,8 @@ class BatchedSequencer(EpisodeBatch):
 
     def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Advance the ``live`` episodes (default: all) one tick at time ``t`` [s] (scalar or
-        ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs."""
+        ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs.
+        """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
         for i in rows:

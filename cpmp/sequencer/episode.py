@@ -129,7 +129,8 @@ class SequencerEpisode:
 
     def start(self, t: float, x: np.ndarray, phi: np.ndarray) -> dict[str, str]:
         """Begin the episode at time ``t`` [s] with features ``x (d,)`` and every head's φ
-        ``(H,)``; returns the initial MPs."""
+        ``(H,)``; returns the initial MPs.
+        """
         if not np.isfinite(phi).all():
             raise DataError(
                 "the progress predictor gave a non-finite φ at reset; the model is broken "
@@ -153,7 +154,8 @@ class SequencerEpisode:
 
     def check_time(self, t: float) -> float:
         """``t`` [s] as a float; raises unless the episode was started and ``t`` is finite and
-        does not go back in time."""
+        does not go back in time.
+        """
         if not self.active:
             raise NotFittedError("call reset(t, x) before step(t, x)")
         t = checked_time(t)
@@ -165,7 +167,8 @@ class SequencerEpisode:
         self, t: float, state: np.ndarray, phi: list[float], finite: bool
     ) -> dict[str, str]:
         """One tick at time ``t`` [s]: features ``state (d,)``, the nodes' φ ``(K,)`` as a list
-        and whether all of them are finite. Returns the active MPs after the tick."""
+        and whether all of them are finite. Returns the active MPs after the tick.
+        """
         seq = self.seq
         c = seq.config
         self._last_t = t
@@ -240,7 +243,8 @@ class SequencerEpisode:
 
     def _initial_mps(self, phi: np.ndarray) -> dict[str, str]:
         """The start rule (see :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`) on every
-        head's φ ``(H,)``: variable -> MP."""
+        head's φ ``(H,)``: variable -> MP.
+        """
         seq = self.seq
         if seq.config.start_rule == "joint" and seq.initial_combinations:
             entry = np.clip(1.0 - phi, 1e-12, 1.0)
@@ -262,7 +266,8 @@ class SequencerEpisode:
         MP's φ column, unseen, checks)`` (:meth:`~cpmp.sequencer.switching.Coupling.gates`): per
         successor the number of other variables running an MP never seen at that switch, and
         ``(successor, φ column, bound)`` for every φ that adds one inconsistency while below
-        its bound."""
+        its bound.
+        """
         seq = self.seq
         margin = seq.config.progress_margin
         plan = []

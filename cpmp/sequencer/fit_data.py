@@ -36,7 +36,8 @@ def initial_combinations(
     demos: Sequence[Demonstration], variables: Sequence[str]
 ) -> list[dict[str, str]]:
     """The distinct initial MP per variable of the demonstrations (variable -> MP), in order of
-    first appearance (what ``start_rule="joint"`` chooses among)."""
+    first appearance (what ``start_rule="joint"`` chooses among).
+    """
     combos: list[dict[str, str]] = []
     for demo in demos:
         combo = {v: str(demo.labels[v][0]) for v in variables}
@@ -93,7 +94,8 @@ def demo_progress(
     """The fit's progress labels laid out along the demonstrations the ``graphs`` were built
     from: per demonstration (``n_samples`` each), per variable, ``(n,)``, every activation
     labelled as its node trained on it (what :meth:`cpmp.sequencer.switching.Coupling.learn`
-    measures the demonstrated switches with, so that it need not label them again)."""
+    measures the demonstrated switches with, so that it need not label them again).
+    """
     out = [{v: np.zeros(n) for v in graphs} for n in n_samples]
     for node in data:
         v, mp = node.key
@@ -129,7 +131,8 @@ def glitch_warnings(
 ) -> list[str]:
     """One message per node with an activation of at most :data:`GLITCH_SAMPLES` samples in
     the middle of a demonstration (A...A, B, C...C): such a node can hardly ever be entered in
-    closed loop, and the sequencer would wait there."""
+    closed loop, and the sequencer would wait there.
+    """
     out = []
     for v in sorted(graphs):
         for mp, acts in sorted(graphs[v].activations.items()):
@@ -154,7 +157,8 @@ def glitch_warnings(
 def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:
     """Degenerate nodes, one message each: activations without feature change (their progress
     falls back to normalised time, which the features cannot show) and nodes whose fitted φ
-    misses their own targets by more than :data:`UNSEPARATED_MAE` on average."""
+    misses their own targets by more than :data:`UNSEPARATED_MAE` on average.
+    """
     out = []
     with torch.no_grad():
         for i, node in enumerate(data):

@@ -31,7 +31,8 @@ def checked_time(t: float) -> float:
 
 def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:
     """Features ``x (..., d)`` as a float64 array, checked against ``feature_names`` (d of them)
-    and for finiteness; :class:`~cpmp.errors.DataError` says what is wrong."""
+    and for finiteness; :class:`~cpmp.errors.DataError` says what is wrong.
+    """
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
     xn = np.asarray(x, dtype=np.float64)

@@ -155,7 +155,8 @@ class ConcurrentSequencer:
     ) -> ConcurrentSequencer:
         """Build the sequence graphs and fit every node's progress predictor as ``config``
         says (``None``: cpmp's defaults, the main job's ``predictor=klr_path
-        sequencer=coupled``)."""
+        sequencer=coupled``).
+        """
         config = config or FitConfig()
         predictor = config.predictor
         demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
@@ -193,7 +194,8 @@ class ConcurrentSequencer:
 
     def heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
         """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
-        ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others)."""
+        ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others).
+        """
         xn = checked_features(x, self.feature_names)
         with torch.no_grad():
             return self.predictor(torch.from_numpy(np.ascontiguousarray(xn)), heads).numpy()
@@ -211,7 +213,8 @@ class ConcurrentSequencer:
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
         """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
         demonstrated combination of initial nodes with the highest summed log entry probability
-        when ``start_rule="joint"``)."""
+        when ``start_rule="joint"``).
+        """
         t = checked_time(t)
         self.predictor.reset_state(1)
         phi = self.heads(np.asarray(x, dtype=np.float64).reshape(-1))
@@ -226,7 +229,8 @@ class ConcurrentSequencer:
 
     def batched(self, n: int) -> BatchedSequencer:
         """``n`` independent episodes of this sequencer, stepped together (see
-        :class:`~cpmp.sequencer.batch.BatchedSequencer`)."""
+        :class:`~cpmp.sequencer.batch.BatchedSequencer`).
+        """
         return BatchedSequencer(self, n)
 
     @property

@@ -57,7 +57,8 @@ class SwitchRule(Protocol):
 
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
         """Record the successors' ``p`` at time ``t`` [s]; return the index of the successor
-        to switch to now (only one with ``allowed[i]``), or ``None``."""
+        to switch to now (only one with ``allowed[i]``), or ``None``.
+        """
 
 
 def _best(p: Sequence[float], allowed: Sequence[bool]) -> int | None:
@@ -168,7 +169,8 @@ class Coupling:
         in the units of the φ they are compared with (e.g. eq. 1 on the denoised trajectory of
         noisy demonstrations). ``progress``: each demonstration's labels per variable ``(n,)``
         when the caller has them already (a fit: :func:`cpmp.sequencer.fit_data.demo_progress`);
-        ``transform`` and ``labels`` are then not used."""
+        ``transform`` and ``labels`` are then not used.
+        """
         contexts: dict[Edge, dict[str, set[str]]] = {}
         progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
         variables = list(variables)
@@ -208,7 +210,8 @@ class Coupling:
         entry per other variable that runs an MP never seen at this switch, or (with ``phi``,
         each variable's predicted progress of its active MP, and a ``margin``) whose MP is
         more than ``margin`` less advanced than at any demonstrated switch. Empty: consistent
-        (also for an edge that was never demonstrated)."""
+        (also for an edge that was never demonstrated).
+        """
         unseen, bounds = self.gates(edge, active, None if phi is None else margin)
         out = [f"{u} runs {active[u]}" for u in unseen]
         for u, least, bound in bounds:
@@ -245,7 +248,8 @@ class Coupling:
 
     def describe(self, variable: str) -> list[str]:
         """One line per switch of ``variable``: the other variables' demonstrated MPs (and
-        the least progress at which they were seen)."""
+        the least progress at which they were seen).
+        """
         lines = []
         for (v, source, target), ctx in sorted(self.contexts.items()):
             if v != variable:
@@ -301,7 +305,8 @@ class Coupling:
 
 def indicator_features(x: np.ndarray) -> np.ndarray:
     """``(d,)`` bool: features of ``x (N, d)`` that take at most two distinct values (binary
-    signals such as touch; they flicker while a contact is made or broken)."""
+    signals such as touch; they flicker while a contact is made or broken).
+    """
     x = np.asarray(x, dtype=np.float64)
     lo, hi = x.min(axis=0), x.max(axis=0)
     return np.all((x == lo) | (x == hi), axis=0)
@@ -335,7 +340,8 @@ class StallDetector:
 
         Motion is a displacement of any feature by more than ``rest_speed * stall_time`` of
         its range from where the features were when motion was last seen (a dead band: contact
-        jitter that goes back and forth never adds up to motion, a slow drift does)."""
+        jitter that goes back and forth never adds up to motion, a slow drift does).
+        """
         if self._x is None:
             self._x = np.array(x, dtype=np.float64)
             return

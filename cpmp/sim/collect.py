@@ -1,6 +1,7 @@
 """Recording scripted demonstrations: one box (:func:`record_demonstration`) or many together
 (:func:`record_demonstrations`, one batched IK call per tick, the same data as one box at a
-time), and collecting seeded sets of them into the project's HDF5 format."""
+time), and collecting seeded sets of them into the project's HDF5 format.
+"""
 
 from __future__ import annotations
 
@@ -90,7 +91,8 @@ def record_demonstrations(
 
 class _Recording:
     """One box of :func:`record_demonstrations`: its simulation, the scripted demonstrator and
-    the samples so far (the loop of :func:`record_demonstration`, one tick at a time)."""
+    the samples so far (the loop of :func:`record_demonstration`, one tick at a time).
+    """
 
     def __init__(self, box: Box, cfg: TaskConfig) -> None:
         self.box = box
@@ -111,7 +113,8 @@ class _Recording:
 
     def observe(self, t: float) -> None:
         """After a tick of physics at time ``t`` [s]: the new features and the
-        demonstrator's MPs for them."""
+        demonstrator's MPs for them.
+        """
         self.x = self.sim.features()
         self.active = self.policy.step(t, self.x)
 
@@ -147,7 +150,8 @@ MAX_DRAWS_PER_BOX = 10_000
 
 def sample_boxes(rng: np.random.Generator, cfg: TaskConfig, n: int, balanced: bool) -> list[Box]:
     """``n`` boxes from the configured ranges; with ``balanced``, strategies cycle round-robin
-    over :data:`STRATEGIES` (rejection sampling, deterministic given ``rng``)."""
+    over :data:`STRATEGIES` (rejection sampling, deterministic given ``rng``).
+    """
     if n < 0:
         raise ConfigError(f"n_demos must be >= 0, got {n}")
     boxes = []

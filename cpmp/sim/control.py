@@ -115,7 +115,8 @@ class MPController:
         self, active: Mapping[str, MP], pos: np.ndarray, rot: np.ndarray, box_pos: np.ndarray
     ) -> np.ndarray:
         """Commanded twists (2, 6) [m/s; rad/s] of both hands, rows (left, right), from the
-        reference poses ``pos`` (2, 3) [m] and ``rot`` (2, 3, 3) and the box centre (3,) [m]."""
+        reference poses ``pos`` (2, 3) [m] and ``rot`` (2, 3, 3) and the box centre (3,) [m].
+        """
         self.ref_pos, self.ref_rot = pos, rot
         twist = np.empty((2, 6))
         right = self._velocity(active["right_pos"], RIGHT, pos, box_pos, None)

@@ -19,7 +19,8 @@ from cpmp.records import BatchedPolicy, Policy
 
 class PolicyList:
     """N single :class:`Policy` objects as one :class:`BatchedPolicy`: each live episode's
-    policy is called in turn with its own row of ``x``."""
+    policy is called in turn with its own row of ``x``.
+    """
 
     def __init__(self, policies: Sequence[Policy]) -> None:
         self.policies = list(policies)
@@ -48,7 +49,8 @@ class PolicyList:
 
 class ReplayPolicy:
     """Replays a demonstration's labels by time (open-loop); a reference policy for tests and
-    benchmarks. ``reset``/``step`` return the labels of the sample at or before ``t``."""
+    benchmarks. ``reset``/``step`` return the labels of the sample at or before ``t``.
+    """
 
     def __init__(self, demo: Demonstration) -> None:
         self.time = np.asarray(demo.time)

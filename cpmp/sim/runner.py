@@ -1,6 +1,7 @@
 """Running policies closed-loop on the simulator: one episode (:func:`run_episode`) or many
 boxes together (:func:`run_episodes`, one batched IK and one batched policy call per tick, the
-same results as one box at a time), and the checks that decide each episode's outcome."""
+same results as one box at a time), and the checks that decide each episode's outcome.
+"""
 
 from __future__ import annotations
 
@@ -168,7 +169,8 @@ def run_episodes(
 
 class _Rollout:
     """One episode of :func:`run_episodes`: its simulation, the MP sequences so far and the
-    checks that end it (the closed loop of :func:`run_episode`, one tick at a time)."""
+    checks that end it (the closed loop of :func:`run_episode`, one tick at a time).
+    """
 
     def __init__(
         self,
@@ -249,7 +251,8 @@ class _Rollout:
 
     def after_tick(self, t: float, active: Mapping[str, str]) -> None:
         """Record the policy's MPs at time ``t`` [s]; end the episode on a wrong transition,
-        on completion or on a deadlock."""
+        on completion or on a deadlock.
+        """
         sim, want, old = self.sim, self.want, self.active
         new = _normalise(active, sim.variables)
         for variable in sim.variables:

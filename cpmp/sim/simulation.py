@@ -49,7 +49,8 @@ _INSTABILITY_WARNINGS = np.array(
 @functools.lru_cache(maxsize=2)
 def shared_kinematics(compile: bool = True) -> ArmKinematics:
     """The arm kinematics (independent of the box), built once per process and ``compile``
-    setting (see :class:`~cpmp.sim.kinematics.ArmKinematics`)."""
+    setting (see :class:`~cpmp.sim.kinematics.ArmKinematics`).
+    """
     xml = scene_xml_text()
     model = mujoco.MjModel.from_xml_string(xml)
     mounts = {h: model.body(f"{h}_mount").pos.copy() for h in HANDS}
@@ -134,7 +135,8 @@ class Simulation:
         self, arm_posture: np.ndarray | None = None, fingers: dict[str, np.ndarray] | None = None
     ) -> None:
         """Start posture (default: home) and finger angles (default: ``relax`` goal), box at rest
-        on the plate, ``t = 0``. arm_posture: (2, 7) [rad], rows (left, right)."""
+        on the plate, ``t = 0``. arm_posture: (2, 7) [rad], rows (left, right).
+        """
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         relax = self.cfg.finger_goals["relax"]
@@ -269,7 +271,8 @@ class Simulation:
     def goal(self, variable: str, name: str | None = None) -> np.ndarray:
         """Current world goal of an MP (default: the active one) - position (3,), rotation
         (3, 3) or finger angles (k,). Held/relative goals use the controller's latched offset
-        (or the current offset if the MP has not run yet)."""
+        (or the current offset if the MP has not run yet).
+        """
         mp = self.library[variable][name or self.active[variable]]
         hand = HANDS.index(variable.split("_")[0])
         if mp.kind != "position" or mp.frame == "world":
@@ -342,7 +345,8 @@ def prepare_steps(sims: Sequence[Simulation]) -> None:
     pose/Jacobian call and one batched IK step for all of them (see
     :func:`~cpmp.sim.control.update_controllers`); each :meth:`Simulation.step` then applies its
     own, exactly what it would have computed alone. The wall time counts as ``kinematics``,
-    shared equally. ``sims`` must share one task config (any boxes)."""
+    shared equally. ``sims`` must share one task config (any boxes).
+    """
     start = time.perf_counter()
     for sim in sims:
         if not sim.active:

@@ -134,7 +134,8 @@ def evaluate(
 ) -> dict[str, int]:
     """Closed-loop outcomes of ``seq`` on ``n_episodes`` random episodes (seeded): ``wrong_start``
     (the initial MPs differ from the demonstrator's for the episode's context), ``incomplete``
-    (both points not home within ``max_time``) or ``complete``."""
+    (both points not home within ``max_time``) or ``complete``.
+    """
     if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
         raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
     task = task or SyntheticTask()

@@ -74,7 +74,8 @@ def script(
 
 def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None) -> Demonstration:
     """The scripted demonstrator's labelled demonstration of ``episode``, recorded every
-    ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``)."""
+    ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``).
+    """
     state = task.initial_state(episode)
     active = task.initial_mps(episode)
     log = DemonstrationLog(VARIABLES)
@@ -98,7 +99,8 @@ def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None)
 
 class ScriptedPolicy:
     """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy`
-    interface (it knows the episode's goals, as the demonstrator does)."""
+    interface (it knows the episode's goals, as the demonstrator does).
+    """
 
     def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
         self.task = task
@@ -118,7 +120,8 @@ def make_demonstrations(
     n: int, seed: int = 0, task: RelayTask | None = None
 ) -> list[Demonstration]:
     """``n`` demonstrations alternating meet and fetch (``demo_0`` meet), reproducible from
-    ``seed``."""
+    ``seed``.
+    """
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ConfigError(f"n must be a positive integer, got {n!r}")
     task = task or RelayTask()

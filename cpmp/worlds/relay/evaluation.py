@@ -1,6 +1,7 @@
 """Closed-loop runs of the relay task (:mod:`cpmp.worlds.relay.world`): one episode under a
 policy (:func:`rollout`), its outcome, and the outcome counts over seeded random episodes
-(:func:`evaluate`)."""
+(:func:`evaluate`).
+"""
 
 from __future__ import annotations
 
