@@ -1,0 +1,451 @@
+"""Small recordings of one synthetic task, written with the real libraries of each format.
+
+The task: the right arm reaches (``hand_x`` to the box), grasps (``gripper`` closes) and lifts
+(``hand_z`` rises); the left arm holds, then pushes (``left_y`` moves) while the right arm
+grasps. Every recording of an :class:`Episode` samples the same continuous trajectories, so
+the imported demonstrations of every source must show the same MP sequences.
+
+Writers: :func:`write_bag` (``rosbags``' writer, sqlite3 or MCAP, topics at 100/30/10 Hz,
+optional glitches), :func:`write_lerobot` (pyarrow, the LeRobot v3 layout as documented for
+lerobot v0.4.4 - v0.5.1, the releases with ``meta/subtasks.parquet``; the ``lerobot`` package
+itself pins ``torch<2.12`` and cannot be installed beside cpmp's torch 2.13), and
+:func:`write_mimicgen` (h5py, MimicGen's robomimic layout with
+``datagen_info/subtask_term_signals``).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
+JOINTS = ["right_x", "right_z", "left_y", "wrist"]
+BAG_START_NS = 1_700_000_000_000_000_000  # an absolute ROS time, as real bags have
+
+
+def _smooth(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One execution of the task; times [s] from its start, positions [m]."""
+
+    t_grasp: float
+    t_lift: float
+    t_push: float
+    t_end: float
+    x_goal: float
+
+    def hand_x(self, t: np.ndarray) -> np.ndarray:
+        return self.x_goal * _smooth(t / self.t_grasp)
+
+    def gripper(self, t: np.ndarray) -> np.ndarray:
+        return _smooth((t - self.t_grasp) / (self.t_lift - self.t_grasp))
+
+    def hand_z(self, t: np.ndarray) -> np.ndarray:
+        return 0.3 * _smooth((t - self.t_lift) / (self.t_end - self.t_lift))
+
+    def left_y(self, t: np.ndarray) -> np.ndarray:
+        return 0.2 * _smooth((t - self.t_push) / 0.8)
+
+    def right_mp(self, t: np.ndarray) -> np.ndarray:
+        return np.where(t < self.t_grasp, "reach", np.where(t < self.t_lift, "grasp", "lift"))
+
+    def left_mp(self, t: np.ndarray) -> np.ndarray:
+        return np.where(t < self.t_push, "hold", "push")
+
+    def state(self, t: np.ndarray) -> np.ndarray:
+        """(n, 4): hand_x, hand_z, gripper, left_y."""
+        return np.column_stack([self.hand_x(t), self.hand_z(t), self.gripper(t), self.left_y(t)])
+
+
+def make_episodes(n: int, seed: int) -> list[Episode]:
+    rng = np.random.default_rng(seed)
+    episodes = []
+    for _ in range(n):
+        t_grasp = rng.uniform(0.8, 1.2)
+        t_lift = t_grasp + rng.uniform(0.4, 0.6)
+        t_end = t_lift + rng.uniform(0.6, 0.9)
+        t_push = t_grasp + rng.uniform(0.1, 0.3)
+        episodes.append(Episode(t_grasp, t_lift, t_push, t_end, rng.uniform(0.3, 0.5)))
+    return episodes
+
+
+# ----------------------------------------------------------------------------------- bags
+def _ticks(rate: float, t_end: float, offset: float = 0.0) -> np.ndarray:
+    return offset + np.arange(int(np.floor((t_end - offset) * rate)) + 1) / rate
+
+
+def write_bag(
+    path: Path,
+    episode: Episode,
+    *,
+    storage: str = "sqlite3",
+    glitch: bool = False,
+    drop_topics: Sequence[str] = (),
+    label_offset: float = 0.0,
+) -> Path:
+    """A rosbag2 recording of ``episode``.
+
+    Topics: ``/joint_states`` (JointState, 100 Hz, header stamps), ``/gripper`` (Float64,
+    30 Hz), ``/box_pose`` (PoseStamped, 10 Hz, header stamps), ``/right_arm/mp`` (String,
+    the active MP, 20 Hz) and ``/left_arm/switch`` (Empty, one message when the push starts).
+    With ``glitch``: ``/right_arm/mp`` says ``grasp`` for one message (50 ms) during the
+    reach and repeats one message with the same stamp, and two ``/joint_states`` messages
+    arrive with their header stamps swapped.
+    """
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    types = TYPESTORE.types
+    JointState, Header, Time = (
+        types["sensor_msgs/msg/JointState"],
+        types["std_msgs/msg/Header"],
+        types["builtin_interfaces/msg/Time"],
+    )
+    Float64, String, Empty = (
+        types["std_msgs/msg/Float64"],
+        types["std_msgs/msg/String"],
+        types["std_msgs/msg/Empty"],
+    )
+    PoseStamped, Pose, Point, Quaternion = (
+        types["geometry_msgs/msg/PoseStamped"],
+        types["geometry_msgs/msg/Pose"],
+        types["geometry_msgs/msg/Point"],
+        types["geometry_msgs/msg/Quaternion"],
+    )
+
+    def ns(t: float) -> int:
+        return BAG_START_NS + round(t * 1e9)
+
+    def header(t: float) -> object:
+        stamp = ns(t)
+        return Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id="world")
+
+    records: list[tuple[int, str, object, str]] = []  # (receive ns, topic, msg, type)
+    e = episode
+    js = _ticks(100.0, e.t_end)
+    stamps = js.copy()
+    if glitch:  # two header stamps swapped: they arrive out of order
+        stamps[40], stamps[41] = stamps[41], stamps[40]
+    for t, stamp in zip(js, stamps, strict=True):
+        s = float(stamp)
+        position = np.array([e.hand_x(s), e.hand_z(s), e.left_y(s), 0.1])
+        msg = JointState(
+            header=header(s),
+            name=list(JOINTS),
+            position=position,
+            velocity=np.zeros(0),
+            effort=np.zeros(0),
+        )
+        records.append((ns(t + 0.002), "/joint_states", msg, JointState.__msgtype__))
+    for t in _ticks(30.0, e.t_end, 0.004):
+        records.append((ns(t), "/gripper", Float64(data=float(e.gripper(t))), Float64.__msgtype__))
+    for t in _ticks(10.0, e.t_end):
+        pose = Pose(
+            position=Point(x=e.x_goal + 0.05, y=0.0, z=float(e.hand_z(t))),
+            orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        msg = PoseStamped(header=header(t), pose=pose)
+        records.append((ns(t + 0.01), "/box_pose", msg, PoseStamped.__msgtype__))
+    label_ticks = _ticks(20.0, e.t_end, label_offset)
+    for k, t in enumerate(label_ticks):
+        mp = str(e.right_mp(np.array(t)))
+        if glitch and k == 8:  # 0.4 s, inside the reach
+            mp = "grasp"
+        records.append((ns(t), "/right_arm/mp", String(data=mp), String.__msgtype__))
+        if glitch and k == 3:
+            records.append((ns(t), "/right_arm/mp", String(data=mp), String.__msgtype__))
+    records.append((ns(e.t_push), "/left_arm/switch", Empty(), Empty.__msgtype__))
+    records = [r for r in records if r[1] not in drop_topics]
+    records.sort(key=lambda r: r[0])
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        connections = {}
+        for _, topic, _, msgtype in records:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=TYPESTORE)
+        for when, topic, msg, msgtype in records:
+            writer.write(connections[topic], when, TYPESTORE.serialize_cdr(msg, msgtype))
+    return path
+
+
+BAG_MAPPING = {
+    "source": "rosbag",
+    "rate": 50.0,
+    "max_gap": 0.25,
+    "features": [
+        {"topic": "/joint_states", "field": "position", "joints": ["right_x", "right_z", "left_y"]},
+        {"topic": "/gripper", "field": "data", "name": "gripper"},
+        {"topic": "/box_pose", "field": "pose.position", "name": "box"},
+    ],
+    "labels": {
+        "right_arm": {"topic": "/right_arm/mp", "mps": ["reach", "grasp", "lift"]},
+        "left_arm": {"topic": "/left_arm/switch", "kind": "events", "sequence": ["hold", "push"]},
+    },
+}
+
+
+# ------------------------------------------------------------------------------- LeRobot
+LEROBOT_SUBTASKS = ["Reach for the box", "Grasp the box", "Lift the box"]
+STATE_NAMES = ["hand_x", "hand_z", "gripper", "left_y"]
+
+
+def write_lerobot(root: Path, episodes: Sequence[Episode], fps: int = 30) -> Path:
+    """A LeRobot v3 dataset (``codebase_version`` v3.0) of ``episodes`` at ``fps``.
+
+    Layout as documented for lerobot v0.4.4 - v0.5.1 (``docs/source/lerobot-dataset-v3.mdx``,
+    ``docs/source/dataset_subtask.mdx``): ``meta/info.json``, ``meta/tasks.parquet``,
+    ``meta/subtasks.parquet`` (``subtask_index`` and the ``subtask`` string, pandas' index
+    column), ``meta/episodes/chunk-000/file-000.parquet`` and frames in
+    ``data/chunk-000/file-00{0,1}.parquet`` (several episodes per file). Frame columns:
+    ``observation.state`` and ``action`` (fixed-size float32 lists), ``timestamp``,
+    ``frame_index``, ``episode_index``, ``index``, ``task_index``, ``subtask_index``, and two
+    custom per-frame label columns, ``right_arm_mp`` (int ids) and ``left_arm_mp`` (strings).
+    """
+    (root / "meta" / "episodes" / "chunk-000").mkdir(parents=True)
+    (root / "data" / "chunk-000").mkdir(parents=True)
+    vector = pa.list_(pa.float32(), 4)
+    schema = pa.schema(
+        [
+            ("observation.state", vector),
+            ("action", vector),
+            ("timestamp", pa.float32()),
+            ("frame_index", pa.int64()),
+            ("episode_index", pa.int64()),
+            ("index", pa.int64()),
+            ("task_index", pa.int64()),
+            ("subtask_index", pa.int64()),
+            ("right_arm_mp", pa.int64()),
+            ("left_arm_mp", pa.string()),
+        ]
+    )
+    rows: list[dict] = []
+    episode_rows = []
+    index = 0
+    half = (len(episodes) + 1) // 2
+    for k, e in enumerate(episodes):
+        t = np.arange(int(np.floor(e.t_end * fps)) + 1) / fps
+        state = e.state(t).astype(np.float32)
+        right = e.right_mp(t)
+        ids = np.searchsorted(["grasp", "lift", "reach"], right)  # right_arm_mp: sorted ids
+        subtask = np.array([["reach", "grasp", "lift"].index(m) for m in right])
+        file_index = 0 if k < half else 1
+        episode_rows.append(
+            {
+                "episode_index": k,
+                "tasks": ["Pick up the box"],
+                "length": len(t),
+                "data/chunk_index": 0,
+                "data/file_index": file_index,
+                "dataset_from_index": index,
+                "dataset_to_index": index + len(t),
+            }
+        )
+        for i in range(len(t)):
+            rows.append(
+                {
+                    "observation.state": state[i].tolist(),
+                    "action": state[min(i + 1, len(t) - 1)].tolist(),
+                    "timestamp": float(t[i]),
+                    "frame_index": i,
+                    "episode_index": k,
+                    "index": index,
+                    "task_index": 0,
+                    "subtask_index": int(subtask[i]),
+                    "right_arm_mp": int(ids[i]),
+                    "left_arm_mp": str(e.left_mp(t[i])),
+                    "_file": file_index,
+                }
+            )
+            index += 1
+    for file_index in (0, 1):
+        part = [
+            {k: v for k, v in r.items() if k != "_file"} for r in rows if r["_file"] == file_index
+        ]
+        table = pa.Table.from_pylist(part, schema=schema)
+        pq.write_table(table, root / "data" / "chunk-000" / f"file-{file_index:03d}.parquet")
+    pq.write_table(
+        pa.Table.from_pylist(episode_rows),
+        root / "meta" / "episodes" / "chunk-000" / "file-000.parquet",
+    )
+    pq.write_table(_pandas_indexed("task", ["Pick up the box"]), root / "meta" / "tasks.parquet")
+    pq.write_table(_pandas_indexed("subtask", LEROBOT_SUBTASKS), root / "meta" / "subtasks.parquet")
+    scalar = {"shape": [1], "names": None}
+    info = {
+        "codebase_version": "v3.0",
+        "robot_type": "synthetic_bimanual",
+        "total_episodes": len(episodes),
+        "total_frames": index,
+        "total_tasks": 1,
+        "chunks_size": 1000,
+        "data_files_size_in_mb": 100,
+        "video_files_size_in_mb": 200,
+        "fps": fps,
+        "splits": {"train": f"0:{len(episodes)}"},
+        "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
+        "video_path": None,
+        "features": {
+            "observation.state": {"dtype": "float32", "shape": [4], "names": STATE_NAMES},
+            "action": {"dtype": "float32", "shape": [4], "names": STATE_NAMES},
+            "timestamp": {"dtype": "float32", **scalar},
+            "frame_index": {"dtype": "int64", **scalar},
+            "episode_index": {"dtype": "int64", **scalar},
+            "index": {"dtype": "int64", **scalar},
+            "task_index": {"dtype": "int64", **scalar},
+            "subtask_index": {"dtype": "int64", **scalar},
+            "right_arm_mp": {"dtype": "int64", **scalar},
+            "left_arm_mp": {"dtype": "string", **scalar},
+        },
+    }
+    (root / "meta" / "info.json").write_text(json.dumps(info, indent=4))
+    return root
+
+
+def _pandas_indexed(name: str, values: Sequence[str]) -> pa.Table:
+    """``pandas.DataFrame({f"{name}_index": ...}, index=Index(values, name=name))`` as
+    ``DataFrame.to_parquet`` writes it (the index as a column named ``name``)."""
+    table = pa.table(
+        {f"{name}_index": pa.array(range(len(values)), pa.int64()), name: list(values)}
+    )
+    pandas_meta = {
+        "index_columns": [name],
+        "column_indexes": [],
+        "columns": [
+            {
+                "name": f"{name}_index",
+                "field_name": f"{name}_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": name,
+                "field_name": name,
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
+        ],
+        "creator": {"library": "pyarrow", "version": pa.__version__},
+        "pandas_version": "2.2.3",
+    }
+    return table.replace_schema_metadata({"pandas": json.dumps(pandas_meta)})
+
+
+LEROBOT_MAPPING = {
+    "source": "lerobot",
+    "features": [{"column": "observation.state", "name": "state"}],
+    "labels": {
+        "right_arm": {"column": "right_arm_mp", "names": ["grasp", "lift", "reach"]},
+        "left_arm": {"column": "left_arm_mp"},
+    },
+}
+
+
+# ------------------------------------------------------------------------------ MimicGen
+def write_mimicgen(path: Path, episodes: Sequence[Episode], rate: float = 20.0) -> Path:
+    """A MimicGen-style robomimic HDF5 file of ``episodes`` stepped at ``rate`` Hz.
+
+    Per ``/data/demo_<i>``: ``obs/robot0_eef_pos`` (T, 3), ``obs/robot0_gripper_qpos`` (T, 2),
+    ``obs/robot1_eef_pos`` (T, 3), ``obs/agentview_image`` (T, 8, 8, 3) uint8, ``actions``,
+    ``states``, ``datagen_info/eef_pose`` (T, 4, 4) and
+    ``datagen_info/subtask_term_signals/{reached,grasped,push_started}`` (T,) 0/1 flags that
+    switch to 1 when the subtask is done (MimicGen uses each one's first 0 -> 1 transition),
+    plus a per-step label dataset ``labels/left_arm`` (strings) and ``mask/{train,valid}``.
+    """
+    with h5py.File(path, "w") as f:
+        data = f.create_group("data")
+        data.attrs["env_args"] = json.dumps({"env_name": "SyntheticPickLift", "type": 1})
+        total = 0
+        for k, e in enumerate(episodes):
+            t = np.arange(int(np.floor(e.t_end * rate)) + 1) / rate
+            n = len(t)
+            total += n
+            g = data.create_group(f"demo_{k}")
+            g.attrs["num_samples"] = n
+            zeros = np.zeros(n)
+            g.create_dataset(
+                "obs/robot0_eef_pos", data=np.column_stack([e.hand_x(t), zeros, e.hand_z(t)])
+            )
+            opening = 0.04 * (1.0 - e.gripper(t))
+            g.create_dataset("obs/robot0_gripper_qpos", data=np.column_stack([opening, -opening]))
+            g.create_dataset(
+                "obs/robot1_eef_pos", data=np.column_stack([zeros, e.left_y(t), zeros])
+            )
+            g.create_dataset("obs/agentview_image", data=np.zeros((n, 8, 8, 3), dtype=np.uint8))
+            g.create_dataset("actions", data=np.zeros((n, 7)))
+            g.create_dataset("states", data=np.zeros((n, 10)))
+            pose = np.tile(np.eye(4), (n, 1, 1))
+            pose[:, 0, 3], pose[:, 2, 3] = e.hand_x(t), e.hand_z(t)
+            g.create_dataset("datagen_info/eef_pose", data=pose)
+            signals = g.create_group("datagen_info/subtask_term_signals")
+            signals.create_dataset("reached", data=(t >= e.t_grasp).astype(np.int64))
+            signals.create_dataset("grasped", data=(t >= e.t_lift).astype(np.int64))
+            signals.create_dataset("push_started", data=(t >= e.t_push).astype(np.int64))
+            g.create_dataset("labels/left_arm", data=e.left_mp(t).astype("S"))
+        data.attrs["total"] = total
+        names = [f"demo_{k}" for k in range(len(episodes))]
+        f.create_dataset("mask/train", data=np.array(names[:-1], dtype="S"))
+        f.create_dataset("mask/valid", data=np.array(names[-1:], dtype="S"))
+    return path
+
+
+MIMICGEN_MAPPING = {
+    "source": "mimicgen",
+    "rate": 20.0,
+    "features": [
+        {"key": "obs/robot0_eef_pos", "index": [0, 2], "names": ["hand_x", "hand_z"]},
+        {"key": "obs/robot0_gripper_qpos", "index": [0], "names": ["finger"]},
+        {"key": "obs/robot1_eef_pos", "index": [1], "names": ["left_y"]},
+    ],
+    "labels": {
+        "right_arm": {
+            "subtasks": [
+                {"mp": "reach", "signal": "reached"},
+                {"mp": "grasp", "signal": "grasped"},
+                {"mp": "lift"},
+            ]
+        },
+        "left_arm": {"subtasks": [{"mp": "hold", "signal": "push_started"}, {"mp": "push"}]},
+    },
+}
+
+
+# ------------------------------------------------------------------------------ fixtures
+@pytest.fixture(scope="session")
+def episodes() -> list[Episode]:
+    """Five executions of the task."""
+    return make_episodes(5, seed=3)
+
+
+@pytest.fixture(scope="session")
+def bag_dir(tmp_path_factory, episodes) -> Path:
+    """A folder of five bags: three sqlite3, two MCAP; the second has glitches."""
+    root = tmp_path_factory.mktemp("bags")
+    for k, e in enumerate(episodes):
+        write_bag(root / f"run_{k}", e, storage="mcap" if k >= 3 else "sqlite3", glitch=k == 1)
+    return root
+
+
+@pytest.fixture(scope="session")
+def lerobot_root(tmp_path_factory, episodes) -> Path:
+    return write_lerobot(tmp_path_factory.mktemp("lerobot") / "pick_lift", episodes)
+
+
+@pytest.fixture(scope="session")
+def mimicgen_file(tmp_path_factory, episodes) -> Path:
+    return write_mimicgen(tmp_path_factory.mktemp("mimicgen") / "pick_lift.hdf5", episodes)
+
+
+def expected_sequences(episode: Episode) -> dict[str, list[str]]:
+    return {"right_arm": ["reach", "grasp", "lift"], "left_arm": ["hold", "push"]}
