@@ -73,3 +73,18 @@ def test_data_format_examples_run_and_load(tmp_path, monkeypatch):
     (loaded,) = ns["train"]
     np.testing.assert_array_equal(loaded.features, demo.features)
     assert loaded.metadata == demo.metadata
+
+
+def test_imports_documented_before_the_package_split_still_work():
+    """The README's and data_format.md's imports of cpmp 0.1 name the same objects today."""
+    import cpmp.data
+    import cpmp.worlds.two_point
+    from cpmp.datafile import list_splits, load_demonstrations, save_demonstrations
+    from cpmp.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+    from cpmp.synthetic import make_demonstrations
+
+    assert load_demonstrations is cpmp.data.load_demonstrations
+    assert save_demonstrations is cpmp.data.save_demonstrations
+    assert list_splits is cpmp.data.list_splits
+    assert make_demonstrations is cpmp.worlds.two_point.make_demonstrations
+    assert callable(ConcurrentSequencer.fit) and {"coupling", "recovery"} <= set(PAPER_OPTIONS)
