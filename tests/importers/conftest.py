@@ -28,6 +28,10 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from cpmp.data import list_splits, load_demonstrations
+from cpmp.evaluation import replay_demonstrations
+from cpmp.sequencer import ConcurrentSequencer
+
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 JOINTS = ["right_x", "right_z", "left_y", "wrist"]
 BAG_START_NS = 1_700_000_000_000_000_000  # an absolute ROS time, as real bags have
@@ -96,12 +100,15 @@ def write_bag(
     glitch: bool = False,
     drop_topics: Sequence[str] = (),
     label_offset: float = 0.0,
+    silence: tuple[str, float, float] | None = None,
 ) -> Path:
     """A rosbag2 recording of ``episode``.
 
     Topics: ``/joint_states`` (JointState, 100 Hz, header stamps), ``/gripper`` (Float64,
     30 Hz), ``/box_pose`` (PoseStamped, 10 Hz, header stamps), ``/right_arm/mp`` (String,
     the active MP, 20 Hz) and ``/left_arm/switch`` (Empty, one message when the push starts).
+    ``drop_topics`` are left out; ``silence = (topic, start, stop)`` drops that topic's
+    messages received between ``start`` and ``stop`` [s].
     With ``glitch``: ``/right_arm/mp`` says ``grasp`` for one message (50 ms) during the
     reach and repeats one message with the same stamp, and two ``/joint_states`` messages
     arrive with their header stamps swapped.
@@ -168,6 +175,9 @@ def write_bag(
             records.append((ns(t), "/right_arm/mp", String(data=mp), String.__msgtype__))
     records.append((ns(e.t_push), "/left_arm/switch", Empty(), Empty.__msgtype__))
     records = [r for r in records if r[1] not in drop_topics]
+    if silence is not None:
+        topic, quiet_from, quiet_to = silence
+        records = [r for r in records if r[1] != topic or not ns(quiet_from) <= r[0] < ns(quiet_to)]
     records.sort(key=lambda r: r[0])
     with Writer(path, version=9, storage_plugin=plugin) as writer:
         connections = {}
@@ -447,5 +457,15 @@ def mimicgen_file(tmp_path_factory, episodes) -> Path:
     return write_mimicgen(tmp_path_factory.mktemp("mimicgen") / "pick_lift.hdf5", episodes)
 
 
-def expected_sequences(episode: Episode) -> dict[str, list[str]]:
-    return {"right_arm": ["reach", "grasp", "lift"], "left_arm": ["hold", "push"]}
+EXPECTED = {"left_arm": ["hold", "push"], "right_arm": ["reach", "grasp", "lift"]}
+"""The MP sequences of every episode."""
+
+
+def fit_and_replay(path: Path) -> dict:
+    """Fit cpmp's default sequencer on the file's ``mask/train`` demonstrations and replay
+    every demonstration of the file through it (:func:`replay_demonstrations`'s result)."""
+    train = load_demonstrations(path, split="train")
+    seq = ConcurrentSequencer.fit(train, seed=0, logger=None)
+    everything = load_demonstrations(path)
+    assert len(everything) == sum(len(v) for v in list_splits(path).values())
+    return replay_demonstrations(seq, everything)
