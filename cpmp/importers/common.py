@@ -88,14 +88,23 @@ def pick_columns(selection: Selection, width: int, where: str) -> np.ndarray:
 
 
 def column_names(
-    selection: Selection, prefix: str, elements: Sequence[str], picked: np.ndarray
+    selection: Selection, prefix: str, elements: Sequence[str], picked: np.ndarray, where: str
 ) -> list[str]:
     """Feature names of the picked elements.
 
     The mapping's ``names``, else ``<name or prefix>.<element>``, or just the prefix for a
     scalar (``elements == [""]``).
+
+    Raises:
+        DataError: ``names`` has another length than the picked elements (``where`` names the
+            source).
     """
     if selection.names is not None:
+        if len(selection.names) != len(picked):
+            raise DataError(
+                f"{where}: the mapping gives {len(selection.names)} names but {len(picked)} "
+                "element(s) are selected; give one name per element (or pick with index/slice)"
+            )
         return list(selection.names)
     base = selection.name or prefix
     if len(elements) == 1 and elements[0] == "":

@@ -237,7 +237,7 @@ def _feature_block(table: pa.Table, feature: ColumnFeature, info: LeRobotInfo) -
     width = values.shape[1]
     picked = pick_columns(feature, width, where)
     elements = _element_names(info.features.get(feature.column, {}), width)
-    names = column_names(feature, feature.default_prefix, elements, picked)
+    names = column_names(feature, feature.default_prefix, elements, picked, where)
     return FeatureBlock(values[:, picked], names)
 
 

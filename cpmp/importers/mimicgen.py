@@ -171,7 +171,7 @@ def _feature(group: h5py.Group, feature: KeyFeature, demo: str) -> FeatureBlock:
         raise DataError(f"{where} is NaN/inf at step {int(bad[0][0])}; repair or drop the demo")
     picked = pick_columns(feature, values.shape[1], where)
     return FeatureBlock(
-        values[:, picked], column_names(feature, feature.default_prefix, elements, picked)
+        values[:, picked], column_names(feature, feature.default_prefix, elements, picked, where)
     )
 
 

@@ -307,7 +307,7 @@ def _feature_stream(
         )
     times = np.array([m.time for m in messages])
     stream = clean_stream(f"topic {feature.topic}", times, values, spec.max_gap)
-    names = column_names(feature, feature.default_prefix, elements, picked)
+    names = column_names(feature, feature.default_prefix, elements, picked, f"{demo}: {where}")
     return stream, names
 
 
