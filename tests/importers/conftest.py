@@ -465,7 +465,7 @@ def fit_and_replay(path: Path) -> dict:
     """Fit cpmp's default sequencer on the file's ``mask/train`` demonstrations and replay
     every demonstration of the file through it (:func:`replay_demonstrations`'s result)."""
     train = load_demonstrations(path, split="train")
-    seq = ConcurrentSequencer.fit(train, seed=0, logger=None)
+    seq = ConcurrentSequencer.fit(train, seed=0)
     everything = load_demonstrations(path)
     assert len(everything) == sum(len(v) for v in list_splits(path).values())
     return replay_demonstrations(seq, everything)

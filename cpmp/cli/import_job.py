@@ -1,0 +1,122 @@
+"""``cpmp-import``: robot recordings in, one cpmp demonstration file out (a Hydra job).
+
+Recordings: ROS 2 bags, LeRobot datasets, MimicGen-style HDF5; config ``conf/import.yaml``.
+
+The command is checked like the other Hydra commands (:mod:`cpmp.cli.checks`): the config is
+composed with light imports, ``mapping`` and ``input`` must be set, the mapping file must exist
+and parse (:func:`cpmp.importers.load_mapping`), the split must be valid; a failed check prints
+one ``error:`` line and exits with status 2. The job then calls
+:func:`cpmp.importers.import_recordings`, prints :func:`cpmp.importers.summary_text` (also
+written to ``summary.txt`` in the run directory) and prints the written file's path last. A
+failed import leaves no output file.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from cpmp.cli.checks import Command, check_command_line, check_jobs
+from cpmp.cli.compose import CONF_DIR
+from cpmp.cli.main import run_job
+from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+from cpmp.importers import SplitSpec, import_recordings, load_mapping, summary_text
+from cpmp.io import atomic_write_text
+
+NAME = "import"
+"""The config (``conf/import.yaml``) and job name (runs go to ``logs/import/<timestamp>/``)."""
+
+
+def _inputs(cfg: Any) -> list[str]:
+    """``input`` as a list of paths (one path, or a list of bags)."""
+    value = cfg.get("input")
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, Sequence):
+        return [str(v) for v in value]
+    raise ConfigError(f"input={value!r}: give a path (or a list of bag paths)")
+
+
+def split_from_cfg(cfg: Any) -> SplitSpec:
+    """The job's ``test_fraction``, ``seed`` and ``test`` as a :class:`SplitSpec`."""
+    test = cfg.get("test") or ()
+    return SplitSpec(
+        test_fraction=cfg.get("test_fraction", 0.0),
+        seed=cfg.get("seed", 0),
+        test=tuple(str(name) for name in test),
+    )
+
+
+def check_import(cfg: Any) -> None:
+    """The mapping parses, every input exists and the split is valid.
+
+    Raises:
+        ConfigError: an invalid mapping or split.
+        CpmpFileError: the mapping file or an input is missing.
+    """
+    load_mapping(str(cfg.mapping))
+    for path in _inputs(cfg):
+        if not Path(path).exists():
+            raise CpmpFileError(
+                f"input={path}: no such file or directory (relative to {Path.cwd()})"
+            )
+    split_from_cfg(cfg)
+
+
+def import_job(cfg: Any, run_dir: Path) -> Path:
+    """Import ``cfg.input`` with ``cfg.mapping`` into ``run_dir / cfg.output``.
+
+    Returns:
+        The written demonstration file.
+    """
+    output = Path(str(cfg.output))
+    output = output if output.is_absolute() else run_dir / output
+    result = import_recordings(str(cfg.mapping), _inputs(cfg), output, split_from_cfg(cfg))
+    text = summary_text(result)
+    atomic_write_text(run_dir / "summary.txt", text + "\n")
+    print(text)
+    return output
+
+
+IMPORT_COMMAND = Command(
+    NAME,
+    "import robot recordings (ROS 2 bags, LeRobot datasets, MimicGen HDF5) as demonstrations",
+    import_job,
+    check_import,
+    required=("mapping", "input"),
+    files=("mapping",),
+)
+"""The ``cpmp-import`` command, as :data:`cpmp.cli.main.COMMANDS` describes the others."""
+
+
+class _ImportTask:
+    """Hydra's task function of ``cpmp-import`` (picklable; its module names the job)."""
+
+    def __init__(self) -> None:
+        self.__module__ = NAME
+
+    def __call__(self, cfg: Any) -> Path:
+        from hydra.core.hydra_config import HydraConfig
+
+        return run_job(import_job, cfg, HydraConfig.get().runtime.output_dir)
+
+
+def import_main() -> None:
+    """``cpmp-import``: check the command line, then run the import under ``hydra.main``.
+
+    Exits with status 2 and one ``error:`` line on a bad configuration or a failed import.
+    """
+    import hydra
+
+    try:
+        jobs = check_command_line(IMPORT_COMMAND, sys.argv[1:])
+        check_jobs(IMPORT_COMMAND, jobs)
+    except CpmpError as err:
+        print(f"error: {' '.join(str(err).split())}", file=sys.stderr)
+        sys.exit(2)
+    hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name=NAME)(_ImportTask())()
+
+
+__all__ = ["IMPORT_COMMAND", "check_import", "import_job", "import_main", "split_from_cfg"]

@@ -1,0 +1,137 @@
+"""``cpmp-import`` (scripts/import_demos.py): one command turns a recording into a
+demonstration file and prints the summary and the file's path last; a bad configuration or a
+failed import ends with exit status 2, one ``error:`` line and no output file."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from omegaconf import OmegaConf
+
+from cpmp.cli.checks import check_command_line, check_jobs
+from cpmp.cli.import_job import IMPORT_COMMAND, import_job
+from cpmp.data import list_splits, load_demonstrations, mp_sequences
+from cpmp.errors import ConfigError, CpmpFileError, DataError
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "scripts" / "import_demos.py"
+
+MAPPING = {
+    "source": "mimicgen",
+    "rate": 20.0,
+    "features": [{"key": "obs/eef_pos", "names": ["x", "z"]}],
+    "labels": {"arm": {"subtasks": [{"mp": "reach", "signal": "reached"}, {"mp": "lift"}]}},
+}
+
+
+def write_recording(path: Path, n_demos: int = 4) -> Path:
+    """A MimicGen-style file: the arm reaches along x, then lifts along z; ``reached`` turns
+    1 when the reach is done."""
+    with h5py.File(path, "w") as f:
+        for k in range(n_demos):
+            t_reach = 0.8 + 0.1 * k
+            t = np.arange(0.0, t_reach + 1.0, 0.05)
+            x = np.clip(t / t_reach, 0, 1)
+            z = np.clip((t - t_reach) / 1.0, 0, 1)
+            g = f.create_group(f"data/demo_{k}")
+            g.create_dataset("obs/eef_pos", data=np.column_stack([x, z]))
+            g.create_dataset("datagen_info/subtask_term_signals/reached", data=(t >= t_reach) * 1)
+    return path
+
+
+@pytest.fixture
+def inputs(tmp_path):
+    mapping = tmp_path / "mapping.yaml"
+    mapping.write_text(yaml.safe_dump(MAPPING))
+    return mapping, write_recording(tmp_path / "recording.hdf5")
+
+
+def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    argv = [sys.executable, str(SCRIPT), *args, f"hydra.run.dir={cwd / 'run'}"]
+    return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_one_command_imports_prints_the_summary_and_the_path_last(inputs, tmp_path):
+    mapping, recording = inputs
+    out = tmp_path / "demos.hdf5"
+    proc = run(
+        [f"mapping={mapping}", f"input={recording}", f"output={out}", "test=[demo_1]"], tmp_path
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = proc.stdout.strip().splitlines()
+    assert lines[-1] == str(out)
+    assert "demo_1 [test]" in proc.stdout and "reach -> lift" in proc.stdout
+    assert "sequence graphs" in proc.stdout and "* reach [4 activations] -> lift" in proc.stdout
+    assert list_splits(out) == {"train": ["demo_0", "demo_2", "demo_3"], "test": ["demo_1"]}
+    demos = load_demonstrations(out)
+    assert [mp_sequences(d) for d in demos] == [{"arm": ["reach", "lift"]}] * 4
+    assert (tmp_path / "run" / "summary.txt").read_text().startswith("imported 4 demonstration(s)")
+
+
+def test_a_failed_import_is_one_error_line_and_no_file(inputs, tmp_path):
+    mapping, recording = inputs
+    with h5py.File(recording, "a") as f:
+        del f["data/demo_2/datagen_info/subtask_term_signals/reached"]
+    proc = run([f"mapping={mapping}", f"input={recording}", "output=demos.hdf5"], tmp_path)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "demo_2: no termination signal reached" in errors[0]
+    assert not (tmp_path / "run" / "demos.hdf5").exists()
+    assert not list((tmp_path / "run").glob("*.hdf5*"))  # no temporary left either
+
+
+def _check(argv: list[str]) -> None:
+    check_jobs(IMPORT_COMMAND, check_command_line(IMPORT_COMMAND, argv))
+
+
+def test_the_command_line_is_checked_before_the_import(inputs, tmp_path):
+    mapping, recording = inputs
+    with pytest.raises(ConfigError, match="mapping is required: add mapping=<path>"):
+        _check([f"input={recording}"])
+    with pytest.raises(CpmpFileError, match=r"input=.*nope.hdf5: no such file or directory"):
+        _check([f"mapping={mapping}", f"input={tmp_path / 'nope.hdf5'}"])
+    with pytest.raises(ConfigError, match=r"test_fraction=.*expected a number"):
+        _check([f"mapping={mapping}", f"input={recording}", "test_fraction=half"])
+    with pytest.raises(ConfigError, match="test_fraction must be < 1"):
+        _check([f"mapping={mapping}", f"input={recording}", "test_fraction=1.0"])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({**MAPPING, "rates": 20}))
+    with pytest.raises(ConfigError, match=r"unknown key.* rates"):
+        _check([f"mapping={bad}", f"input={recording}"])
+    _check([f"mapping={mapping}", f"input={recording}", "test_fraction=0.25", "seed=3"])
+
+
+def test_the_job_writes_relative_outputs_into_the_run_directory(inputs, tmp_path, capsys):
+    mapping, recording = inputs
+    cfg = OmegaConf.create(
+        {
+            "mapping": str(mapping),
+            "input": str(recording),
+            "output": "out.hdf5",
+            "test_fraction": 0.5,
+            "seed": 1,
+            "test": [],
+        }
+    )
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    path = import_job(cfg, run_dir)
+    assert path == run_dir / "out.hdf5" and len(list_splits(path)["test"]) == 2
+    assert "splits: train: 2, test: 2" in capsys.readouterr().out
+    cfg.input = str(tmp_path / "mapping.yaml")  # not HDF5
+    with pytest.raises(CpmpFileError, match=r"cannot open .* as HDF5"):
+        import_job(cfg, tmp_path)
+    cfg.input = str(recording)
+    cfg.mapping = str(tmp_path / "wrong.yaml")
+    (tmp_path / "wrong.yaml").write_text(
+        yaml.safe_dump({**MAPPING, "features": [{"key": "obs/eef_pos", "index": [5]}]})
+    )
+    with pytest.raises(DataError, match=r"obs/eef_pos has 2 element\(s\)"):
+        import_job(cfg, tmp_path)
+    assert not (tmp_path / "out.hdf5").exists()
