@@ -28,7 +28,9 @@ from typing import Any
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
+from rosbags.rosbag2 import ReaderError
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_typestore
 
 from cpmp.data import Demonstration
 from cpmp.errors import CpmpError, CpmpFileError, DataError
@@ -57,6 +59,17 @@ FALLBACK_TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 """Message types for bags that do not embed their definitions."""
 
 _BAG_FILES = (".mcap", ".db3")
+_READ_ERRORS = (
+    AnyReaderError,
+    ReaderError,
+    SerdeError,
+    TypesysError,
+    OSError,
+    ValueError,
+    KeyError,
+    IndexError,
+)
+"""What reading a damaged bag raises from inside rosbags and its storage plugins."""
 
 
 @dataclass(frozen=True)
@@ -211,7 +224,7 @@ def _read_messages(bag: Path, spec: RosbagSpec, name: str) -> tuple[dict[str, li
     try:
         reader = AnyReader([bag], default_typestore=FALLBACK_TYPESTORE)
         reader.open()
-    except (AnyReaderError, OSError, ValueError, KeyError) as err:
+    except _READ_ERRORS as err:
         raise CpmpFileError(
             f"cannot read {bag} as a ROS 2 bag ({err}); give a rosbag2 directory with "
             "metadata.yaml, or its .mcap / .db3 file"
@@ -238,7 +251,7 @@ def _read_messages(bag: Path, spec: RosbagSpec, name: str) -> tuple[dict[str, li
         for connection, received_ns, raw in reader.messages(connections=connections):
             try:
                 msg = reader.deserialize(raw, connection.msgtype)
-            except AnyReaderError as err:
+            except _READ_ERRORS as err:
                 raise CpmpFileError(
                     f"{name}: cannot decode a {connection.msgtype} message on {connection.topic} "
                     f"in {bag} ({err}); the bag may be damaged"
@@ -248,7 +261,7 @@ def _read_messages(bag: Path, spec: RosbagSpec, name: str) -> tuple[dict[str, li
             messages[connection.topic].append(_Message((when - start_ns) / 1e9, msg))
     except CpmpError:
         raise
-    except Exception as err:  # rosbags raises its own errors from deep inside storage plugins
+    except _READ_ERRORS as err:
         raise CpmpFileError(f"cannot read {bag} as a ROS 2 bag: {err}") from None
     finally:
         reader.close()

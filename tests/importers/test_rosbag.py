@@ -199,3 +199,13 @@ def test_not_a_bag_is_a_file_error(tmp_path):
     (broken / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 9}\n")
     with pytest.raises(CpmpFileError, match=r"cannot read .*broken as a ROS 2 bag"):
         read_recordings(mapping(), broken)
+
+
+def test_a_damaged_bag_is_a_file_error_and_no_file(tmp_path, episodes):
+    bag = write_bag(tmp_path / "run_0", episodes[0])
+    (db3,) = bag.glob("*.db3")
+    db3.write_bytes(db3.read_bytes()[:4096])  # cut short, as by a full disk
+    out = tmp_path / "out.hdf5"
+    with pytest.raises(CpmpFileError, match=r"cannot read .*run_0 as a ROS 2 bag .*malformed"):
+        import_recordings(mapping(), bag, out)
+    assert not out.exists()
