@@ -13,6 +13,7 @@ failed import leaves no output file.
 
 from __future__ import annotations
 
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,13 +21,14 @@ from typing import Any
 
 from cpmp.cli.checks import Command, check_command_line, check_jobs
 from cpmp.cli.compose import CONF_DIR
-from cpmp.cli.main import run_job
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.importers import SplitSpec, import_recordings, load_mapping, summary_text
 from cpmp.io import atomic_write_text
 
 NAME = "import"
 """The config (``conf/import.yaml``) and job name (runs go to ``logs/import/<timestamp>/``)."""
+
+log = logging.getLogger("cpmp")
 
 
 def _inputs(cfg: Any) -> list[str]:
@@ -88,11 +90,22 @@ IMPORT_COMMAND = Command(
     required=("mapping", "input"),
     files=("mapping",),
 )
-"""The ``cpmp-import`` command, as :data:`cpmp.cli.main.COMMANDS` describes the others."""
+"""The ``cpmp-import`` command, as :data:`cpmp.cli.main.COMMANDS` describes the others (this
+module does not import :mod:`cpmp.cli.main`, so ``COMMANDS`` can list it)."""
+
+
+def _fail(err: CpmpError) -> None:
+    """Print ``err`` as one ``error:`` line and exit with status 2."""
+    print(f"error: {' '.join(str(err).split())}", file=sys.stderr)
+    sys.exit(2)
 
 
 class _ImportTask:
-    """Hydra's task function of ``cpmp-import`` (picklable; its module names the job)."""
+    """Hydra's task function of ``cpmp-import`` (picklable; its module names the job).
+
+    Runs :func:`import_job` and prints the written file's path last; a :class:`CpmpError`
+    is logged and ends the command with one ``error:`` line and status 2.
+    """
 
     def __init__(self) -> None:
         self.__module__ = NAME
@@ -100,7 +113,13 @@ class _ImportTask:
     def __call__(self, cfg: Any) -> Path:
         from hydra.core.hydra_config import HydraConfig
 
-        return run_job(import_job, cfg, HydraConfig.get().runtime.output_dir)
+        try:
+            out = import_job(cfg, Path(HydraConfig.get().runtime.output_dir))
+        except CpmpError as err:
+            log.error("%s: %s", type(err).__name__, err)
+            _fail(err)
+        print(out)
+        return out
 
 
 def import_main() -> None:
@@ -114,8 +133,7 @@ def import_main() -> None:
         jobs = check_command_line(IMPORT_COMMAND, sys.argv[1:])
         check_jobs(IMPORT_COMMAND, jobs)
     except CpmpError as err:
-        print(f"error: {' '.join(str(err).split())}", file=sys.stderr)
-        sys.exit(2)
+        _fail(err)
     hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name=NAME)(_ImportTask())()
 
 
