@@ -8,12 +8,14 @@ import contextlib
 import glob
 import math
 import os
+import pickle
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
+import torch
 
 from cpmp.errors import CheckpointFormatError, CpmpError, CpmpFileError
 
@@ -147,8 +149,6 @@ def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) ->
     :func:`load_checkpoint` reads it with ``weights_only=True``) atomically to ``path`` with
     ``torch.save``; returns the path.
     """
-    import torch
-
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(dict(payload), tmp)
@@ -224,10 +224,6 @@ def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
     """What ``torch.load(path, weights_only=True)`` returns; :class:`CpmpFileError` for a
     missing, unreadable or untrusted file (see :func:`load_checkpoint`).
     """
-    import pickle
-
-    import torch
-
     if not path.is_file():
         raise CpmpFileError(f"checkpoint {path} does not exist; {spec.remedy}")
     try:

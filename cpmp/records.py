@@ -13,9 +13,19 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Literal, NamedTuple, Protocol, get_args
 
 import numpy as np
+
+from cpmp.errors import DataError
+
+SwitchKind = Literal["switch", "recovery"]
+"""Why a transition fired: ``switch`` (the switching rule) or ``recovery`` (a stall resolved)."""
+SWITCH_KINDS: tuple[SwitchKind, ...] = get_args(SwitchKind)
+
+NoteKind = Literal["hold", "recovery", "nonfinite"]
+"""What a :class:`SequencerNote` is about (see there)."""
+NOTE_KINDS: tuple[NoteKind, ...] = get_args(NoteKind)
 
 
 @dataclass(frozen=True)
@@ -44,7 +54,13 @@ class TransitionEvent:
     target: str
     probability: float = math.nan
     state: np.ndarray | None = field(default=None, repr=False, compare=False)
-    kind: str = "switch"
+    kind: SwitchKind = "switch"
+
+    def __post_init__(self) -> None:
+        if self.kind not in SWITCH_KINDS:
+            raise DataError(
+                f"a transition's kind is one of {', '.join(SWITCH_KINDS)}, got {self.kind!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -57,9 +73,15 @@ class SequencerNote:
     """
 
     t: float
-    kind: str
+    kind: NoteKind
     variable: str
     text: str
+
+    def __post_init__(self) -> None:
+        if self.kind not in NOTE_KINDS:
+            raise DataError(
+                f"a sequencer note's kind is one of {', '.join(NOTE_KINDS)}, got {self.kind!r}"
+            )
 
 
 @dataclass
@@ -86,6 +108,18 @@ class TickInfo:
     held: dict[str, str] = field(default_factory=dict)
     features: np.ndarray | None = None
     body_poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+
+class ReplayResult(NamedTuple):
+    """A policy run open-loop over a recorded feature stream (``replay``).
+
+    Attributes:
+        sequences: variable -> the MPs it ran, in order.
+        events: the transitions, in order.
+    """
+
+    sequences: dict[str, list[str]]
+    events: list[TransitionEvent]
 
 
 class Policy(Protocol):
@@ -116,4 +150,15 @@ class BatchedPolicy(Protocol):
     ) -> Sequence[Mapping[str, str]]: ...
 
 
-__all__ = ["BatchedPolicy", "Policy", "SequencerNote", "TickInfo", "TransitionEvent"]
+__all__ = [
+    "NOTE_KINDS",
+    "SWITCH_KINDS",
+    "BatchedPolicy",
+    "NoteKind",
+    "Policy",
+    "ReplayResult",
+    "SequencerNote",
+    "SwitchKind",
+    "TickInfo",
+    "TransitionEvent",
+]

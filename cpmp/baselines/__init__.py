@@ -2,11 +2,14 @@
 
 :class:`GoalNearestSequencer` (``goal_nearest``) switches a variable once its MP has converged
 and picks the successor whose demonstrated entry states lie nearest the current features
-(Pastor et al. / Niekum et al. style); ``nearest_progress`` holds its nearest-neighbour progress.
-They share the sequencer's ``reset`` / ``step`` / ``save`` / ``load`` surface.
+(Pastor et al. / Niekum et al. style); :class:`GoalNearestBatch` (``batch``) runs ``N`` of its
+episodes with the batched interface of the learned sequencer; :class:`NearestProgress`
+(``nearest_progress``) is its nearest-neighbour progress, for offline evaluation. They share the
+sequencer's ``reset`` / ``step`` / ``save`` / ``load`` surface.
 """
 
+from cpmp.baselines.batch import GoalNearestBatch, SingleEpisodePolicy
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.baselines.nearest_progress import NearestProgress
 
-__all__ = ["GoalNearestSequencer", "NearestProgress"]
+__all__ = ["GoalNearestBatch", "GoalNearestSequencer", "NearestProgress", "SingleEpisodePolicy"]

@@ -35,24 +35,28 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from time import perf_counter
+from typing import Any
 
 import numpy as np
 import torch
 
+from cpmp.baselines.batch import GoalNearestBatch
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.goal_nearest import KIND, GoalNearestConfig, goal_nearest_options
+from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
 from cpmp.progress import expected_progress
-from cpmp.records import TickInfo, TransitionEvent
-from cpmp.sequencer.batch import GoalNearestBatch
-from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
-from cpmp.sequencer.switching import indicator_features
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
+from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
+from cpmp.sequencer import (
+    EpisodeBatch,
+    checked_demonstrations,
+    checked_features,
+    checked_time,
+    indicator_features,
+)
 
 CHECKPOINT_FORMAT = "cpmp-goal-nearest"
 CHECKPOINT_VERSION = 1
@@ -135,7 +139,7 @@ class GoalNearestSequencer:
         """Forget the current episode (a fresh state; the fitted data stays shared)."""
         self.active: dict[str, str] = {}
         self.events: list[TransitionEvent] = []
-        self.notes: list[Any] = []
+        self.notes: list[SequencerNote] = []
         self.last_tick: TickInfo | None = None
         self._still_since: dict[str, float | None] = {}
         self._z: np.ndarray | None = None
@@ -146,7 +150,7 @@ class GoalNearestSequencer:
         batched policy :func:`cpmp.sim.run_episodes` drives).
         """
         episodes = []
-        for _ in range(GoalNearestBatch.checked_count(n)):
+        for _ in range(EpisodeBatch.checked_count(n)):
             episode = copy.copy(self)
             episode._new_episode()
             episodes.append(episode)
@@ -166,9 +170,7 @@ class GoalNearestSequencer:
         labelled demonstrations. ``options``: :class:`GoalNearestConfig` fields; ``seed`` is
         accepted for a uniform interface (the fit is deterministic and draws nothing).
         """
-        import time
-
-        started = time.perf_counter()
+        started = perf_counter()
         config = goal_nearest_options(options)
         demos, feature_names = checked_demonstrations(demos, "GoalNearestSequencer.fit")
         graphs = build_graphs(demos, variables)
@@ -205,7 +207,7 @@ class GoalNearestSequencer:
             "kind": KIND,
             "n_demos": len(demos),
             "n_support_total": None,
-            "seconds": time.perf_counter() - started,
+            "seconds": perf_counter() - started,
             "warnings": [],
         }
         return cls(
@@ -303,18 +305,22 @@ class GoalNearestSequencer:
         self.last_tick = TickInfo(t, {}, {v: {} for v in self.graphs}, dict(self.active))
         return dict(self.active)
 
-    def replay(
-        self, time: np.ndarray, features: np.ndarray
-    ) -> tuple[dict[str, list[str]], list[TransitionEvent]]:
-        """Run open-loop over a recorded feature stream ``(n,), (n, d)``: the MP sequence per
-        variable and the transition events.
+    def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
+        """Run open-loop over a recorded feature stream.
+
+        Args:
+            time: ``(n,)`` sample times [s].
+            features: ``(n, d)`` features.
+
+        Returns:
+            The MP sequence per variable and the transition events.
         """
         seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
         for t, x in zip(time[1:], features[1:], strict=True):
             for v, mp in self.step(t, x).items():
                 if mp != seqs[v][-1]:
                     seqs[v].append(mp)
-        return seqs, list(self.events)
+        return ReplayResult(seqs, list(self.events))
 
     def describe(self) -> str:
         """The graphs as text, each node followed by the features it waits on."""

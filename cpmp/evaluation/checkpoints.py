@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cpmp.baselines.goal_nearest import CHECKPOINT_FORMAT, GoalNearestSequencer
+from cpmp.baselines import GoalNearestSequencer
+from cpmp.baselines.goal_nearest import CHECKPOINT_FORMAT
 from cpmp.config.goal_nearest import KIND
 from cpmp.errors import CheckpointFormatError, CpmpFileError
-from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sequencer import ConcurrentSequencer
 
 
 def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequencer:

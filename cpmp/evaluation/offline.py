@@ -18,17 +18,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.progress import expected_progress
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.records import TransitionEvent
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.records import TransitionEvent
+from cpmp.sequencer import ConcurrentSequencer, indicator_features
 
 
 @dataclass
@@ -213,8 +211,6 @@ def continuous_features(demos: Sequence[Demonstration]) -> np.ndarray:
     """``(d,)`` bool: features that take more than two distinct values in ``demos`` (binary
     signals, such as touch, flip by 1 when a switch comes one tick early or late).
     """
-    from cpmp.sequencer.switching import indicator_features
-
     return ~indicator_features(np.concatenate([d.features for d in demos], axis=0))
 
 

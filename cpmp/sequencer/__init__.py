@@ -2,18 +2,33 @@
 
 :class:`ConcurrentSequencer` (``sequencer``) fits one sequence graph and one progress predictor
 bank per control variable from demonstrations and steps them closed loop (``reset`` / ``step``,
-``save`` / ``load``). Its parts, one module each:
+``save`` / ``load``). Its parts, one module each, imported in this order (each only from the
+ones before it):
 
-* ``episode``: :class:`SequencerEpisode`, the state machine of one episode;
-* ``batch``: :class:`BatchedSequencer`, N episodes with one predictor call per tick;
+* ``inputs``: the checks of what ``step`` is given (time, features, demonstrations);
 * ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule),
   the learned cross-variable coupling and stall recovery;
 * ``fit_data``: each node's training data and the checks after a fit;
-* ``inputs``: the checks of what ``step`` is given (time, features).
+* ``model``: :class:`NodeIndex` and :class:`TransitionModel`, what an episode reads of a
+  fitted sequencer;
+* ``episode``: :class:`SequencerEpisode`, the state machine of one episode;
+* ``batch``: :class:`BatchedSequencer`, N episodes with one predictor call per tick, and
+  :class:`EpisodeBatch`, what every batched policy shares;
+* ``sequencer``: :class:`ConcurrentSequencer`, on top of all of them.
 """
 
-from cpmp.sequencer.batch import BatchedSequencer, EpisodeBatch
-from cpmp.sequencer.episode import NodeIndex, SequencerEpisode
+from cpmp.sequencer.batch import (
+    BatchedSequencer,
+    EpisodeBatch,
+    EpisodeRecord,
+    Features,
+    FittedSequencer,
+    LiveMask,
+    Times,
+)
+from cpmp.sequencer.episode import SequencerEpisode
+from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
+from cpmp.sequencer.model import NodeIndex, TransitionModel
 from cpmp.sequencer.sequencer import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -28,6 +43,7 @@ from cpmp.sequencer.switching import (
     PlateauRule,
     StallDetector,
     SwitchRule,
+    indicator_features,
     make_rule,
 )
 
@@ -41,11 +57,21 @@ __all__ = [
     "ConcurrentSequencer",
     "Coupling",
     "EpisodeBatch",
+    "EpisodeRecord",
+    "Features",
+    "FittedSequencer",
+    "LiveMask",
     "NodeIndex",
     "PaperRule",
     "PlateauRule",
     "SequencerEpisode",
     "StallDetector",
     "SwitchRule",
+    "Times",
+    "TransitionModel",
+    "checked_demonstrations",
+    "checked_features",
+    "checked_time",
+    "indicator_features",
     "make_rule",
 ]

@@ -1,27 +1,26 @@
 """``N`` episodes of a sequencer at once, for many rollouts (:func:`cpmp.sim.run_episodes`).
 
 :class:`EpisodeBatch` is what every batched policy shares (per-episode ``active``, ``events``,
-``notes``); :class:`BatchedSequencer` runs ``N`` episodes of a
-:class:`~cpmp.sequencer.ConcurrentSequencer` with one predictor call per tick for all of them;
-:class:`GoalNearestBatch` runs those of the goal-nearest baseline one after another. Build
-either with the sequencer's ``batched(n)``.
+``notes``, and the checks of a batch call's inputs); :class:`BatchedSequencer` runs ``N``
+episodes of a fitted sequencer (:class:`FittedSequencer`, e.g. a
+:class:`~cpmp.sequencer.ConcurrentSequencer`) with one predictor call per tick for all of them.
+The goal-nearest baseline's batch, :class:`~cpmp.baselines.GoalNearestBatch`, is another
+:class:`EpisodeBatch`. Build either with the sequencer's ``batched(n)``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import torch
 
 from cpmp.errors import ConfigError, CpmpError, DataError
+from cpmp.predictors import ProgressPredictor
 from cpmp.records import SequencerNote, TransitionEvent
 from cpmp.sequencer.episode import SequencerEpisode
-
-if TYPE_CHECKING:
-    from cpmp.baselines.goal_nearest import GoalNearestSequencer
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sequencer.model import TransitionModel
 
 Times = float | np.ndarray
 """One time [s] for every episode, or ``(N,)`` times."""
@@ -31,24 +30,89 @@ LiveMask = np.ndarray | Sequence[bool] | None
 """``(N,)`` bool: the episodes a batch call advances (``None``: all)."""
 
 
-class EpisodeBatch:
-    """What every batched policy shares: ``episodes``, one object per episode with its
-    ``active`` MPs, ``events`` and ``notes``, and per-episode views of them.
+class BatchInputs(NamedTuple):
+    """The checked inputs of a batch call.
+
+    Attributes:
+        times: each episode's time [s], ``N`` floats.
+        features: ``(N, d)`` float64.
+        rows: the indices of the episodes to advance, in order.
     """
 
-    episodes: list[Any]
+    times: list[float]
+    features: np.ndarray
+    rows: list[int]
+
+
+class EpisodeRecord(Protocol):
+    """What a batch reads of each of its episodes: the episode's record so far."""
+
+    active: dict[str, str]
+    """Variable -> active MP (empty before the episode's start)."""
+    events: list[TransitionEvent]
+    """The episode's transitions, in order."""
+    notes: list[SequencerNote]
+    """The episode's notes (held transitions, recoveries, non-finite φ)."""
+
+
+class FittedSequencer(Protocol):
+    """What :class:`BatchedSequencer` reads of a fitted sequencer.
+
+    A :class:`~cpmp.sequencer.ConcurrentSequencer` is one.
+    """
+
+    feature_names: list[str]
+    """The ``d`` feature names."""
+    predictor: ProgressPredictor
+    """The progress predictor (``stateful`` ones run one stream per episode)."""
+    transition_model: TransitionModel
+    """What each episode of the transition rule reads."""
+
+    def heads(self, x: np.ndarray, heads: int | None = None) -> np.ndarray:
+        """All predictor heads ``(N, H)`` for features ``x (N, d)``."""
+        ...
+
+    def progress(self, x: np.ndarray) -> np.ndarray:
+        """φ of every node ``(N, K)`` for features ``x (N, d)``."""
+        ...
+
+
+class EpisodeBatch:
+    """What every batched policy shares.
+
+    ``episodes`` holds one object per episode with its ``active`` MPs, ``events`` and
+    ``notes`` (:class:`EpisodeRecord`); the batch offers per-episode views of them and the
+    checks of a batch call's inputs.
+    """
+
+    episodes: Sequence[EpisodeRecord]
 
     @staticmethod
     def checked_count(n: int) -> int:
-        """``n`` as the number of episodes of a batch; :class:`ConfigError` unless ``n >= 1``."""
+        """``n`` as the number of episodes of a batch.
+
+        Raises:
+            ConfigError: unless ``n`` is an integer ``>= 1``.
+        """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ConfigError(f"a batched sequencer needs n >= 1 episodes, got {n!r}")
         return int(n)
 
-    def _inputs(
-        self, t: Times, x: Features, live: LiveMask, d: int
-    ) -> tuple[list[float], np.ndarray, list[int]]:
-        """Checked times ``(N,)`` as floats, features ``(N, d)`` float64 and the live rows."""
+    def _inputs(self, t: Times, x: Features, live: LiveMask, d: int) -> BatchInputs:
+        """The inputs of a batch call, checked.
+
+        Args:
+            t: one time [s] or ``(N,)`` times.
+            x: features ``(N, d)``.
+            live: ``(N,)`` bool, the episodes to advance (``None``: all).
+            d: the number of features.
+
+        Returns:
+            Times, features as float64 and the live rows.
+
+        Raises:
+            DataError: a shape, a non-finite time or a mask that is not boolean.
+        """
         n = len(self.episodes)
         if isinstance(x, torch.Tensor):
             x = x.detach().cpu().numpy()
@@ -73,7 +137,7 @@ class EpisodeBatch:
                     f"{mask.shape}"
                 )
             rows = np.flatnonzero(mask).tolist()
-        return times.tolist(), xn, rows
+        return BatchInputs(times.tolist(), xn, rows)
 
     @property
     def n_episodes(self) -> int:
@@ -119,9 +183,11 @@ class BatchedSequencer(EpisodeBatch):
     ``N`` rows (so every row must hold finite features), whatever ``live`` says.
     """
 
-    def __init__(self, seq: ConcurrentSequencer, n: int) -> None:
+    def __init__(self, seq: FittedSequencer, n: int) -> None:
         self.sequencer = seq
-        self.episodes = [SequencerEpisode(seq) for _ in range(self.checked_count(n))]
+        self.episodes = [
+            SequencerEpisode(seq.transition_model) for _ in range(self.checked_count(n))
+        ]
         """One :class:`SequencerEpisode` per episode (``active``, ``events``, ``notes``,
         ``last_tick``)."""
 
@@ -161,36 +227,6 @@ class BatchedSequencer(EpisodeBatch):
         for i, row, ok in zip(rows, phi.tolist(), finite, strict=True):
             try:
                 self.episodes[i].advance(ts[i], xn[i], row, ok)
-            except CpmpError as err:
-                raise type(err)(f"episode {i}: {err}") from err
-        return self.active
-
-
-class GoalNearestBatch(EpisodeBatch):
-    """``N`` independent episodes of one fitted
-    :class:`~cpmp.baselines.GoalNearestSequencer` (build with ``seq.batched(n)``), with the
-    interface of :class:`BatchedSequencer`: ``reset``/``step`` take ``t`` (scalar or ``(N,)``)
-    [s], features ``x (N, d)`` and an optional ``live (N,)`` bool mask (other episodes are left
-    untouched) and return every episode's active MPs; ``episodes[i]`` holds episode ``i``'s
-    ``events`` and ``last_tick``.
-    """
-
-    def __init__(self, episodes: Sequence[GoalNearestSequencer]) -> None:
-        self.episodes = list(episodes)
-
-    def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
-        """Start the ``live`` episodes (default: all)."""
-        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
-        for i in rows:
-            self.episodes[i].reset(ts[i], xn[i])
-        return self.active
-
-    def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
-        """Advance the ``live`` episodes (default: all) one tick."""
-        ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
-        for i in rows:
-            try:
-                self.episodes[i].step(ts[i], xn[i])
             except CpmpError as err:
                 raise type(err)(f"episode {i}: {err}") from err
         return self.active

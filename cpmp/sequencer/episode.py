@@ -1,160 +1,200 @@
-"""One episode of a fitted :class:`~cpmp.sequencer.ConcurrentSequencer`: the state machine of
-the transition rule.
+"""One episode of a fitted sequencer: the state machine of the transition rule.
 
 :class:`SequencerEpisode` holds one episode's state (active MPs, events, notes, the switching
 rules' histories, the stall detector) and applies the transition rule to the φ it is handed:
 the start rule at :meth:`~SequencerEpisode.start`, the transitions, holds and recoveries at
-every :meth:`~SequencerEpisode.advance`. :class:`~cpmp.sequencer.ConcurrentSequencer` drives
-one, :class:`~cpmp.sequencer.batch.BatchedSequencer` many (:mod:`cpmp.sequencer.batch`).
+every :meth:`~SequencerEpisode.advance`. It reads the fitted sequencer only through its
+:class:`~cpmp.sequencer.model.TransitionModel`; :class:`~cpmp.sequencer.ConcurrentSequencer`
+drives one episode, :class:`~cpmp.sequencer.batch.BatchedSequencer` many.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 
-from cpmp.errors import ConfigError, DataError, NotFittedError
-from cpmp.graph import SequenceGraph
-from cpmp.predictors import START_PREFIX
-from cpmp.records import SequencerNote, TickInfo, TransitionEvent
-from cpmp.sequencer.fit_data import start_keys
+from cpmp.errors import DataError, NotFittedError
+from cpmp.records import SequencerNote, SwitchKind, TickInfo, TransitionEvent
 from cpmp.sequencer.inputs import checked_time
-from cpmp.sequencer.switching import StallDetector, make_rule, recovery_choice
-
-if TYPE_CHECKING:
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-
-PlanRow = tuple[str, str, list[str], list[int], int, list[int], list[tuple[int, int, float]]]
-"""One variable's row of :meth:`SequencerEpisode._transition_plan`."""
+from cpmp.sequencer.model import TransitionModel
+from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
 
 
-@dataclass(frozen=True)
-class NodeIndex:
-    """Where each node's φ sits in the predictor's output, and the successor tables the
-    transition rule reads every tick; built once per sequencer (:meth:`build`).
+class PhiCheck(NamedTuple):
+    """A φ that adds one inconsistency to a successor while it is below its bound (coupling).
 
     Attributes:
-        keys: (variable, MP) of every graph node, in the order of the φ columns.
-        index: (variable, MP) -> its φ column.
-        start_index: (variable, MP) -> the column whose ``1 - φ`` is the MP's entry
-            probability at the start (its start head, or its node's column without heads).
-        successors: (variable, MP) -> (successor MPs, their φ columns).
+        successor: the successor's position in its :class:`PlanRow`.
+        column: the φ column of another variable's active MP.
+        bound: the least progress demonstrated at this switch minus the margin.
     """
 
-    keys: list[tuple[str, str]]
-    index: dict[tuple[str, str], int]
-    start_index: dict[tuple[str, str], int]
-    successors: dict[tuple[str, str], tuple[list[str], list[int]]]
+    successor: int
+    column: int
+    bound: float
 
-    @classmethod
-    def build(
-        cls, graphs: Mapping[str, SequenceGraph], predictor_keys: Sequence[tuple[str, str]]
-    ) -> NodeIndex:
-        """The index of ``graphs``' nodes in a predictor with heads ``predictor_keys``: the
-        graph nodes in order, then optionally one start head per initial node.
 
-        Raises:
-            ConfigError: the predictor's heads are not the graphs' nodes.
-        """
-        keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        extra = list(predictor_keys[len(keys) :])
-        if list(predictor_keys[: len(keys)]) != keys or extra not in ([], start_keys(graphs)):
-            raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
-        index = {key: i for i, key in enumerate(keys)}
-        start_index = {
-            (v, mp[len(START_PREFIX) :]): len(keys) + i for i, (v, mp) in enumerate(extra)
-        } or index
-        successors = {
-            (v, mp): (
-                graphs[v].successors(mp),
-                [index[(v, s)] for s in graphs[v].successors(mp)],
-            )
-            for v, mp in keys
-        }
-        return cls(keys, index, start_index, successors)
+class PlanRow(NamedTuple):
+    """One variable's part of the transition plan, fixed while the active MPs do not change.
 
-    def phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
-        """Per-node φ ``(K,)`` (start heads after them ignored) as variable -> MP -> φ."""
-        out: dict[str, dict[str, float]] = {v: {} for v, _ in self.keys}
-        values = phi.tolist() if isinstance(phi, np.ndarray) else phi
-        for (v, mp), value in zip(self.keys, values[: len(self.keys)], strict=True):
-            out[v][mp] = value
-        return out
+    Attributes:
+        variable: the control variable.
+        current: its active MP.
+        successors: the active MP's successors (sorted).
+        columns: their φ columns.
+        exit_column: the active MP's φ column.
+        unseen: per successor, the number of other variables running an MP never seen at
+            that switch (:meth:`~cpmp.sequencer.switching.Coupling.gates`).
+        checks: the φ that add one inconsistency each while below their bound.
+    """
+
+    variable: str
+    current: str
+    successors: list[str]
+    columns: list[int]
+    exit_column: int
+    unseen: list[int]
+    checks: list[PhiCheck]
+
+
+class TransitionPlan(NamedTuple):
+    """What every tick needs while the active MPs are ``context``.
+
+    Attributes:
+        context: variable -> active MP when the plan was made.
+        rows: one :class:`PlanRow` per variable with successors, sorted by variable.
+    """
+
+    context: dict[str, str]
+    rows: list[PlanRow]
+
+
+class TickRow(NamedTuple):
+    """One variable's transition probabilities at one tick.
+
+    Attributes:
+        variable: the control variable.
+        current: its active MP at the tick.
+        successors: the active MP's successors.
+        p: each successor's transition probability ``φ_current · (1 - φ_successor)``.
+        inconsistent: per successor, the number of other variables inconsistent with the
+            demonstrated contexts of that switch.
+    """
+
+    variable: str
+    current: str
+    successors: list[str]
+    p: list[float]
+    inconsistent: list[int]
+
+
+class _PendingTick(NamedTuple):
+    """What a tick computed, kept until :attr:`SequencerEpisode.last_tick` is read."""
+
+    t: float
+    phi: list[float]
+    rows: list[TickRow]
+    active: dict[str, str]
+    held: dict[str, str]
 
 
 class SequencerEpisode:
-    """The state of one episode of a :class:`~cpmp.sequencer.ConcurrentSequencer`: the active
-    MPs, the events, the notes, the switching rules' histories and the stall detector.
+    """The state of one episode of a fitted sequencer.
 
-    :class:`~cpmp.sequencer.ConcurrentSequencer` drives one,
-    :class:`~cpmp.sequencer.batch.BatchedSequencer` many; both evaluate the predictor themselves and
-    hand each episode its φ, so one episode decides the same way in either.
+    It holds the active MPs, the events, the notes, the switching rules' histories and the
+    stall detector. :class:`~cpmp.sequencer.ConcurrentSequencer` drives one,
+    :class:`~cpmp.sequencer.batch.BatchedSequencer` many; both evaluate the predictor
+    themselves and hand each episode its φ, so one episode decides the same way in either.
+
+    Args:
+        model: the fitted sequencer's graphs, node index, options, coupling, feature ranges
+            and demonstrated starts.
     """
 
-    def __init__(self, seq: ConcurrentSequencer) -> None:
-        self.seq = seq
+    def __init__(self, model: TransitionModel) -> None:
+        self.model = model
         self.active: dict[str, str] = {}
         """Variable -> active MP (empty before :meth:`start`)."""
         self.events: list[TransitionEvent] = []
         self.notes: list[SequencerNote] = []
-        c = seq.config
+        c = model.config
         self._rules = {
             v: make_rule(c.switch_rule, c.threshold, c.patience, c.min_improvement)
-            for v in seq.graphs
+            for v in model.graphs
         }
         self._coupled = c.coupling == "context"
-        self._stall = StallDetector(seq.feature_range, c.stall_time, c.rest_speed)
+        self._stall = StallDetector(model.feature_range, c.stall_time, c.rest_speed)
         self._holding: dict[str, str | None] = {}
         self._last_t: float | None = None
-        self._plan: tuple[dict[str, str], list[PlanRow]] | None = None
+        self._plan: TransitionPlan | None = None
         self._tick: TickInfo | None = None
-        self._pending: tuple | None = None
+        self._pending: _PendingTick | None = None
 
     @property
     def last_tick(self) -> TickInfo | None:
         """What the last tick computed (built on first access after the tick)."""
-        if self._pending is not None:
-            t, phi, rows, active, held = self._pending
-            seq = self.seq
-            probs: dict[str, dict[str, float]] = {v: {} for v in sorted(seq.graphs)}
-            for v, _, names, p, _ in rows:
-                probs[v] = dict(zip(names, p, strict=True))
-            self._tick = TickInfo(t, seq.nodes.phi_dict(phi), probs, active, held)
+        pending = self._pending
+        if pending is not None:
+            model = self.model
+            probs: dict[str, dict[str, float]] = {v: {} for v in sorted(model.graphs)}
+            for row in pending.rows:
+                probs[row.variable] = dict(zip(row.successors, row.p, strict=True))
+            self._tick = TickInfo(
+                pending.t, model.nodes.phi_dict(pending.phi), probs, pending.active, pending.held
+            )
             self._pending = None
         return self._tick
 
     def start(self, t: float, x: np.ndarray, phi: np.ndarray) -> dict[str, str]:
-        """Begin the episode at time ``t`` [s] with features ``x (d,)`` and every head's φ
-        ``(H,)``; returns the initial MPs.
+        """Begin the episode: the start rule on every head's φ.
+
+        Args:
+            t: the time [s].
+            x: the features ``(d,)``.
+            phi: every predictor head's φ ``(H,)`` (the nodes', then the start heads).
+
+        Returns:
+            Variable -> initial MP.
+
+        Raises:
+            DataError: a φ is not finite.
         """
         if not np.isfinite(phi).all():
             raise DataError(
                 "the progress predictor gave a non-finite φ at reset; the model is broken "
                 "(check its parameters) or the features are far outside the training data"
             )
-        seq = self.seq
+        model = self.model
         self.active = self._initial_mps(phi)
         self.events = []
         self.notes = []
         for rule in self._rules.values():
             rule.reset()
-        self._holding = {v: None for v in seq.graphs}
+        self._holding = {v: None for v in model.graphs}
         self._stall.reset(t, np.asarray(x, dtype=np.float64).reshape(-1))
         self._last_t = t
         self._plan = None
         self._pending = None
         self._tick = TickInfo(
-            t, seq.nodes.phi_dict(phi), {v: {} for v in seq.graphs}, dict(self.active)
+            t, model.nodes.phi_dict(phi), {v: {} for v in model.graphs}, dict(self.active)
         )
         return dict(self.active)
 
     def check_time(self, t: float) -> float:
-        """``t`` [s] as a float; raises unless the episode was started and ``t`` is finite and
-        does not go back in time.
+        """The time of the next tick, checked.
+
+        Args:
+            t: the time [s].
+
+        Returns:
+            ``t`` as a float.
+
+        Raises:
+            NotFittedError: the episode was not started.
+            DataError: ``t`` is not finite or goes back in time.
         """
         if not self.active:
             raise NotFittedError("call reset(t, x) before step(t, x)")
@@ -166,16 +206,27 @@ class SequencerEpisode:
     def advance(
         self, t: float, state: np.ndarray, phi: list[float], finite: bool
     ) -> dict[str, str]:
-        """One tick at time ``t`` [s]: features ``state (d,)``, the nodes' φ ``(K,)`` as a list
-        and whether all of them are finite. Returns the active MPs after the tick.
+        """One tick of the transition rule: switches, holds and stall recovery.
+
+        Args:
+            t: the time [s] (checked by :meth:`check_time`).
+            state: the features ``(d,)``.
+            phi: the nodes' φ ``(K,)`` as a list.
+            finite: whether all of ``phi`` is finite.
+
+        Returns:
+            Variable -> active MP after the tick.
+
+        Raises:
+            DataError: a φ is not finite and the option ``nonfinite`` is ``raise``.
         """
-        seq = self.seq
-        c = seq.config
+        model = self.model
+        c = model.config
         self._last_t = t
         if not finite:
             bad = [
                 f"{v}/{mp}"
-                for (v, mp), f in zip(seq.nodes.keys, phi, strict=True)
+                for (v, mp), f in zip(model.nodes.keys, phi, strict=True)
                 if not math.isfinite(f)
             ]
             text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
@@ -183,28 +234,28 @@ class SequencerEpisode:
                 raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
             if not self.notes or self.notes[-1].kind != "nonfinite":
                 self.notes.append(SequencerNote(t, "nonfinite", "", text))
-            self._tick = TickInfo(t, seq.nodes.phi_dict(phi), {}, dict(self.active))
+            self._tick = TickInfo(t, model.nodes.phi_dict(phi), {}, dict(self.active))
             self._pending = None
             return dict(self.active)
         self._stall.observe(t, state)
         if self._plan is None:
             context = dict(self.active)
-            self._plan = (context, self._transition_plan(context))
+            self._plan = TransitionPlan(context, self._transition_plan(context))
         context, plan = self._plan
         coupled = self._coupled
         held: dict[str, str] = {}
         rows = []
         fired = False
-        for v, current, names, idx, exit_i, unseen, checks in plan:
-            exit_p = phi[exit_i]
-            p = [exit_p * (1.0 - phi[i]) for i in idx]
+        for v, current, names, columns, exit_column, unseen, checks in plan:
+            exit_p = phi[exit_column]
+            p = [exit_p * (1.0 - phi[i]) for i in columns]
             bad = unseen
             if checks:
                 bad = list(unseen)
-                for successor, j, bound in checks:
-                    if phi[j] < bound:
+                for successor, column, bound in checks:
+                    if phi[column] < bound:
                         bad[successor] += 1
-            rows.append((v, current, names, p, bad))
+            rows.append(TickRow(v, current, names, p, bad))
             gate = exit_p > c.min_exit
             allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
             k = self._rules[v].update(t, p, allowed)
@@ -220,73 +271,79 @@ class SequencerEpisode:
                 fired = True
         if not fired and c.recovery and self._stall.stalled(t):
             candidates = [
-                (v, current, s, q, b)
-                for v, current, names, p, bad in rows
-                for s, q, b in zip(names, p, bad, strict=True)
+                Candidate(row.variable, row.current, s, q, b)
+                for row in rows
+                for s, q, b in zip(row.successors, row.p, row.inconsistent, strict=True)
             ]
             choice = recovery_choice(candidates, c.recovery_threshold)
             if choice is not None:
-                v, source, target, p_rec = choice
-                self._switch(t, v, target, p_rec, state, "recovery")
+                v = choice.variable
+                self._switch(t, v, choice.target, choice.p, state, "recovery")
                 self.notes.append(
                     SequencerNote(
                         t,
                         "recovery",
                         v,
-                        f"stall of {c.stall_time:g} s resolved: {v}: {source} -> {target} "
-                        f"(p={p_rec:.2f})",
+                        f"stall of {c.stall_time:g} s resolved: {v}: {choice.source} -> "
+                        f"{choice.target} (p={choice.p:.2f})",
                     )
                 )
         active = dict(self.active)
-        self._pending = (t, phi, rows, active, held)
+        self._pending = _PendingTick(t, phi, rows, active, held)
         return dict(active)
 
     def _initial_mps(self, phi: np.ndarray) -> dict[str, str]:
-        """The start rule (see :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`) on every
-        head's φ ``(H,)``: variable -> MP.
+        """The start rule on every head's φ ``(H,)``: variable -> MP.
+
+        See :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`.
         """
-        seq = self.seq
-        if seq.config.start_rule == "joint" and seq.initial_combinations:
+        model = self.model
+        start_index = model.nodes.start_index
+        if model.config.start_rule == "joint" and model.initial_combinations:
             entry = np.clip(1.0 - phi, 1e-12, 1.0)
             scores = [
-                sum(np.log(entry[seq.nodes.start_index[(v, mp)]]) for v, mp in combo.items())
-                for combo in seq.initial_combinations
+                sum(np.log(entry[start_index[(v, mp)]]) for v, mp in combo.items())
+                for combo in model.initial_combinations
             ]
-            return dict(seq.initial_combinations[int(np.argmax(scores))])
+            return dict(model.initial_combinations[int(np.argmax(scores))])
         active = {}
-        for v in sorted(seq.graphs):
-            initial = sorted(seq.graphs[v].initial_nodes)
-            entry_v = [1.0 - phi[seq.nodes.start_index[(v, mp)]] for mp in initial]
+        for v in sorted(model.graphs):
+            initial = sorted(model.graphs[v].initial_nodes)
+            entry_v = [1.0 - phi[start_index[(v, mp)]] for mp in initial]
             active[v] = initial[int(np.argmax(entry_v))]
         return active
 
     def _transition_plan(self, context: Mapping[str, str]) -> list[PlanRow]:
-        """What every tick needs while the active MPs are ``context``: per variable with
-        successors (sorted), ``(variable, current MP, successors, their φ columns, the current
-        MP's φ column, unseen, checks)`` (:meth:`~cpmp.sequencer.switching.Coupling.gates`): per
-        successor the number of other variables running an MP never seen at that switch, and
-        ``(successor, φ column, bound)`` for every φ that adds one inconsistency while below
-        its bound.
+        """What every tick needs while the active MPs are ``context``.
+
+        Args:
+            context: variable -> active MP.
+
+        Returns:
+            One :class:`PlanRow` per variable with successors, sorted by variable.
         """
-        seq = self.seq
-        margin = seq.config.progress_margin
+        model = self.model
+        nodes = model.nodes
+        margin = model.config.progress_margin
         plan = []
-        for v in sorted(seq.graphs):
+        for v in sorted(model.graphs):
             current = context[v]
-            names, idx = seq.nodes.successors[(v, current)]
+            names, columns = nodes.successors[(v, current)]
             if not names:
                 continue
             unseen_counts, checks = [], []
             for k, s in enumerate(names):
-                unseen, bounds = seq.coupling.gates((v, current, s), context, margin)
+                unseen, bounds = model.coupling.gates((v, current, s), context, margin)
                 unseen_counts.append(len(unseen))
                 checks += [
-                    (k, seq.nodes.index[(u, context[u])], bound)
-                    for u, _, bound in bounds
-                    if u in context
+                    PhiCheck(k, nodes.index[(b.variable, context[b.variable])], b.bound)
+                    for b in bounds
+                    if b.variable in context
                 ]
             plan.append(
-                (v, current, names, idx, seq.nodes.index[(v, current)], unseen_counts, checks)
+                PlanRow(
+                    v, current, names, columns, nodes.index[(v, current)], unseen_counts, checks
+                )
             )
         return plan
 
@@ -301,10 +358,10 @@ class SequencerEpisode:
         phi: list[float],
     ) -> None:
         """Note a transition the coupling holds back, with the reasons."""
-        seq = self.seq
-        done = {u: phi[seq.nodes.index[(u, mp)]] for u, mp in context.items()}
-        why = seq.coupling.inconsistent(
-            (v, current, target), context, done, seq.config.progress_margin
+        model = self.model
+        done = {u: phi[model.nodes.index[(u, mp)]] for u, mp in context.items()}
+        why = model.coupling.inconsistent(
+            (v, current, target), context, done, model.config.progress_margin
         )
         self.notes.append(
             SequencerNote(
@@ -318,8 +375,9 @@ class SequencerEpisode:
         )
 
     def _switch(
-        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: str
+        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: SwitchKind
     ) -> None:
+        """Switch ``v`` to ``target`` at time ``t`` [s] with probability ``p``, and record it."""
         self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
         self.active[v] = target
         self._rules[v].reset()

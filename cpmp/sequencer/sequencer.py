@@ -22,34 +22,36 @@ import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
+from lightning.pytorch.loggers import Logger
 
 from cpmp.config import FitConfig, SequencerConfig
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
-from cpmp.predictors.training import fit_predictor
-from cpmp.records import SequencerNote, TickInfo, TransitionEvent
+from cpmp.predictors.training import check_logger, fit_predictor
+from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
-from cpmp.sequencer.episode import NodeIndex, SequencerEpisode
+from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.fit_data import (
     demo_progress,
+    fit_demos,
     fit_warnings,
     glitch_warnings,
     initial_combinations,
     node_training_data,
+    node_validation_data,
     nonfinite_parameters,
     start_keys,
 )
 from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
+from cpmp.sequencer.model import NodeIndex, TransitionModel
 from cpmp.sequencer.switching import Coupling, indicator_features
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +125,16 @@ class ConcurrentSequencer:
                 f"feature_range has {self.feature_range.size} entries for "
                 f"{len(self.feature_names)} features"
             )
-        self._episode = SequencerEpisode(self)
+        self.transition_model = TransitionModel(
+            self.graphs,
+            self.nodes,
+            self.config,
+            self.coupling,
+            self.feature_range,
+            self.initial_combinations,
+        )
+        """What each episode reads (:class:`~cpmp.sequencer.model.TransitionModel`)."""
+        self._episode = SequencerEpisode(self.transition_model)
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -131,6 +142,9 @@ class ConcurrentSequencer:
         cls,
         demos: Sequence[Demonstration],
         predictor: str = "klr",
+        *,
+        validation: Sequence[Demonstration] | None = None,
+        logger: Logger | str | None = None,
         **options: Any,
     ) -> ConcurrentSequencer:
         """Build the sequence graphs and fit every node's progress predictor: the keyword form
@@ -146,20 +160,38 @@ class ConcurrentSequencer:
                 (:class:`~cpmp.config.TrainerConfig`), ``seed``, ``variables`` and
                 ``subsample`` (:class:`~cpmp.config.FitConfig`); an unknown name raises
                 :class:`~cpmp.errors.ConfigError`.
+            validation: held-out demonstrations: every epoch logs the progress MAE on them
+                (``val/mae``), and early stopping follows their loss (see :meth:`fit_config`).
+            logger: a Lightning ``Logger``, ``"csv"`` or ``"tensorboard"`` (writing into the
+                trainer option ``log_dir``), or ``None``: no logging.
         """
-        return cls.fit_config(demos, FitConfig.from_options(predictor, **options))
+        config = FitConfig.from_options(predictor, **options)
+        return cls.fit_config(demos, config, validation=validation, logger=logger)
 
     @classmethod
     def fit_config(
-        cls, demos: Sequence[Demonstration], config: FitConfig | None = None
+        cls,
+        demos: Sequence[Demonstration],
+        config: FitConfig | None = None,
+        *,
+        validation: Sequence[Demonstration] | None = None,
+        logger: Logger | str | None = None,
     ) -> ConcurrentSequencer:
         """Build the sequence graphs and fit every node's progress predictor as ``config``
         says (``None``: cpmp's defaults, the main job's ``predictor=klr_path
         sequencer=coupled``).
+
+        ``validation`` (demonstrations, or ``None``: ``trainer.val_fraction`` of ``demos``,
+        none by default) is the fit's held-out data: the progress MAE on it is logged every
+        epoch and is ``fit_summary["val_mae"]``; Adam fits stop on its loss. ``logger``: a
+        Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` or ``None`` (no logging).
         """
         config = config or FitConfig()
         predictor = config.predictor
         demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
+        check_logger(logger, config.trainer.log_dir)
+        split = fit_demos(demos, validation, config.trainer.val_fraction, config.seed)
+        demos = split.train
         graphs = build_graphs(demos, config.variables)
         node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
         if config.sequencer.start_kernel == "isotropic":
@@ -168,7 +200,10 @@ class ConcurrentSequencer:
         all_x = np.concatenate([d.features for d in demos], axis=0)
         model.scaler.fit(all_x, model.config.feature_scaling)
         data = node_training_data(graphs, model, config.subsample)
-        summary = fit_predictor(model, data, config.trainer, seed=config.seed)
+        val = None
+        if split.validation is not None:
+            val = node_validation_data(graphs, model, split.validation)
+        summary = fit_predictor(model, data, config.trainer, config.seed, val, logger)
         bad = nonfinite_parameters(model)
         if bad:
             raise DataError(
@@ -253,12 +288,15 @@ class ConcurrentSequencer:
         """What the last :meth:`reset` or :meth:`step` computed (``None`` before a reset)."""
         return self._episode.last_tick
 
-    def replay(
-        self, time: np.ndarray, features: np.ndarray
-    ) -> tuple[dict[str, list[str]], list[TransitionEvent]]:
-        """Run the sequencer open-loop over a recorded feature stream ``(n,), (n, d)``.
+    def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
+        """Run the sequencer open-loop over a recorded feature stream.
 
-        Returns the MP sequence per variable and the transition events.
+        Args:
+            time: ``(n,)`` sample times [s].
+            features: ``(n, d)`` features.
+
+        Returns:
+            The MP sequence per variable and the transition events.
         """
         seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
         for t, x in zip(time[1:], features[1:], strict=True):
@@ -267,7 +305,7 @@ class ConcurrentSequencer:
             for v, mp in after.items():
                 if mp != before[v]:
                     seqs[v].append(mp)
-        return seqs, list(self.events)
+        return ReplayResult(seqs, list(self.events))
 
     # ----------------------------------------------------------------------------- persistence
     def save(self, path: str | Path) -> Path:

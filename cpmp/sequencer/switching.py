@@ -35,15 +35,13 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from cpmp.config.sequencer import COUPLINGS, SWITCH_RULES
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
-
+from cpmp.data.demonstration import Demonstration
+from cpmp.progress import demo_labels
 
 _EPS_T = 1e-9
 """Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
@@ -139,6 +137,33 @@ Edge = tuple[str, str, str]
 """(variable, source MP, target MP)."""
 
 
+class ProgressBound(NamedTuple):
+    """How far another variable's MP must have progressed for a switch to be consistent.
+
+    Attributes:
+        variable: the other variable.
+        least: the least progress (eq. 1) its MP had at a demonstrated switch.
+        bound: ``least - margin``: a φ below it is inconsistent.
+    """
+
+    variable: str
+    least: float
+    bound: float
+
+
+class Gates(NamedTuple):
+    """What holds back one switch in a given context (:meth:`Coupling.gates`).
+
+    Attributes:
+        unseen: the other variables that run an MP never seen at this switch.
+        bounds: one :class:`ProgressBound` per other variable whose MP had a least
+            demonstrated progress at this switch.
+    """
+
+    unseen: list[str]
+    bounds: list[ProgressBound]
+
+
 @dataclass
 class Coupling:
     """Contexts of the demonstrated switches (see module doc).
@@ -175,8 +200,6 @@ class Coupling:
         progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
         variables = list(variables)
         if progress is None:
-            from cpmp.progress import demo_labels
-
             progress = [demo_labels(demo, variables, transform, labels) for demo in demos]
         for demo, done in zip(demos, progress, strict=True):
             mps = {v: np.asarray(demo.labels[v]) for v in variables}
@@ -221,9 +244,7 @@ class Coupling:
                 )
         return out
 
-    def gates(
-        self, edge: Edge, active: Mapping[str, str], margin: float | None = None
-    ) -> tuple[list[str], list[tuple[str, float, float]]]:
+    def gates(self, edge: Edge, active: Mapping[str, str], margin: float | None = None) -> Gates:
         """The part of :meth:`inconsistent` that depends on the other variables' MPs only
         (fixed between switches, so a sequencer computes it once per context).
 
@@ -243,8 +264,8 @@ class Coupling:
             for u, seen in (self.progress.get(edge) or {}).items():
                 mp = active.get(u)
                 if mp in seen:
-                    bounds.append((u, seen[mp], seen[mp] - margin))
-        return unseen, bounds
+                    bounds.append(ProgressBound(u, seen[mp], seen[mp] - margin))
+        return Gates(unseen, bounds)
 
     def describe(self, variable: str) -> list[str]:
         """One line per switch of ``variable``: the other variables' demonstrated MPs (and
@@ -359,28 +380,56 @@ class StallDetector:
         return self.last_switch <= since and self.last_motion <= since
 
 
-def recovery_choice(
-    candidates: Sequence[tuple[str, str, str, float, int]], threshold: float
-) -> tuple[str, str, str, float] | None:
+class Candidate(NamedTuple):
+    """A transition that stall recovery may take.
+
+    Attributes:
+        variable: the control variable.
+        source: its active MP.
+        target: a successor of ``source``.
+        p: the transition probability at this tick.
+        n_inconsistent: the number of other variables inconsistent with the demonstrated
+            contexts of this switch.
+    """
+
+    variable: str
+    source: str
+    target: str
+    p: float
+    n_inconsistent: int
+
+
+def _recovery_rank(c: Candidate) -> tuple[int, float, str, str]:
+    """Sort key: fewest inconsistencies, then highest ``p``, then by variable and target."""
+    return (c.n_inconsistent, -c.p, c.variable, c.target)
+
+
+def recovery_choice(candidates: Sequence[Candidate], threshold: float) -> Candidate | None:
     """Pick the stall-recovery transition.
 
-    ``candidates``: ``(variable, source, target, p, n_inconsistent)`` for every successor of
-    every variable's current node. Returns the one with the fewest inconsistent other variables
-    and, among those, the highest ``p``, if that ``p`` reaches ``threshold``; else ``None``.
+    Args:
+        candidates: every successor of every variable's current node.
+        threshold: the least ``p`` a recovery needs.
+
+    Returns:
+        The candidate with the fewest inconsistent other variables and, among those, the
+        highest ``p``, if that ``p`` reaches ``threshold``; else ``None``.
     """
-    ok = [c for c in candidates if c[3] >= threshold]
+    ok = [c for c in candidates if c.p >= threshold]
     if not ok:
         return None
-    v, s, t, p, _ = min(ok, key=lambda c: (c[4], -c[3], c[0], c[2]))
-    return v, s, t, p
+    return min(ok, key=_recovery_rank)
 
 
 __all__ = [
     "COUPLINGS",
     "SWITCH_RULES",
+    "Candidate",
     "Coupling",
+    "Gates",
     "PaperRule",
     "PlateauRule",
+    "ProgressBound",
     "StallDetector",
     "SwitchRule",
     "indicator_features",

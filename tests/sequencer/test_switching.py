@@ -13,7 +13,13 @@ from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig, ProgressPredictor
 from cpmp.sequencer.sequencer import ConcurrentSequencer
-from cpmp.sequencer.switching import Coupling, PaperRule, PlateauRule, recovery_choice
+from cpmp.sequencer.switching import (
+    Candidate,
+    Coupling,
+    PaperRule,
+    PlateauRule,
+    recovery_choice,
+)
 
 DT = 0.01
 
@@ -244,10 +250,17 @@ def test_no_recovery_while_moving_or_below_the_relaxed_threshold():
 
 
 def test_recovery_prefers_consistent_then_probable():
-    cands = [("u", "A", "B", 0.6, 1), ("w", "C", "D", 0.4, 0), ("w", "C", "E", 0.5, 0)]
-    assert recovery_choice(cands, 0.3) == ("w", "C", "E", 0.5)
-    assert recovery_choice(cands, 0.55) == ("u", "A", "B", 0.6)
+    cands = [
+        Candidate("u", "A", "B", 0.6, 1),
+        Candidate("w", "C", "D", 0.4, 0),
+        Candidate("w", "C", "E", 0.5, 0),
+    ]
+    assert recovery_choice(cands, 0.3) is cands[2]  # consistent first, then the most probable
+    assert recovery_choice(cands, 0.55) is cands[0]  # the only one at the threshold
     assert recovery_choice(cands, 0.7) is None
+    # equal inconsistency and p: the variable, then the target decide
+    tied = [Candidate("w", "C", "E", 0.5, 0), Candidate("u", "A", "B", 0.5, 0)]
+    assert recovery_choice(tied, 0.3) is tied[1]
 
 
 def test_nonfinite_progress_never_switches():
