@@ -1,13 +1,21 @@
 """The shared records (cpmp.records): what a producer leaves out keeps its documented default,
-and a transition's feature vector takes no part in equality or hashing."""
+a transition's feature vector takes no part in equality or hashing, and kinds are checked."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
-from cpmp.records import TickInfo, TransitionEvent
+from cpmp.errors import DataError
+from cpmp.records import (
+    NOTE_KINDS,
+    SWITCH_KINDS,
+    SequencerNote,
+    TickInfo,
+    TransitionEvent,
+)
 
 
 def test_transitions_compare_and_hash_without_their_state() -> None:
@@ -28,3 +36,13 @@ def test_fields_a_producer_does_not_know_keep_their_defaults() -> None:
     assert (first.progress, first.active, first.features, first.body_poses) == ({}, {}, None, {})
     first.active["v"] = "a"
     assert second.active == {}  # every tick has its own mappings
+
+
+def test_a_kind_outside_its_closed_set_is_refused_where_the_record_is_made() -> None:
+    assert SWITCH_KINDS == ("switch", "recovery")
+    assert NOTE_KINDS == ("hold", "recovery", "nonfinite")
+    with pytest.raises(DataError, match="one of switch, recovery, got 'jump'"):
+        TransitionEvent(0.5, "v", "a", "b", kind="jump")
+    with pytest.raises(DataError, match="one of hold, recovery, nonfinite, got 'Hold'"):
+        SequencerNote(0.5, "Hold", "v", "held")
+    assert SequencerNote(0.5, "recovery", "v", "resolved").kind == "recovery"

@@ -2,9 +2,11 @@
 
 * ``two_point``: two points on a line, two strategies chosen by a context feature;
 * ``relay``: a carrier and a receiver hand an object over (three strategies, a
-  cross-variable wait), with its scripted demonstrator and closed-loop evaluation.
+  cross-variable wait), with its scripted demonstrator and closed-loop evaluation;
+* ``outcomes``: how a closed-loop episode of a world ended (:data:`Outcome`), and the counts.
 """
 
 from cpmp.worlds import relay, two_point
+from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 
-__all__ = ["relay", "two_point"]
+__all__ = ["OUTCOMES", "Outcome", "count_outcomes", "episode_outcome", "relay", "two_point"]

@@ -17,15 +17,49 @@ synchronise through the shared features only.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from cpmp.data.demonstration import Demonstration, DemonstrationLog
+from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
 FEATURE_NAMES = ["p_a", "p_b", "context"]
 VARIABLES = ["a", "b"]
+
+
+@dataclass(frozen=True, eq=False)
+class TwoPointEpisode:
+    """The random parameters of one episode.
+
+    Attributes:
+        start: ``(2,)`` start positions of ``a`` and ``b``.
+        goal: ``(2,)`` goals of their "out" MPs.
+        context: ``c`` in [0, 1]; ``< 0.5`` sequential, ``>= 0.5`` parallel.
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    context: float
+
+    @property
+    def parallel(self) -> bool:
+        """Whether the episode's strategy is the parallel one (``context >= 0.5``)."""
+        return self.context >= 0.5
+
+
+class TwoPointRollout(NamedTuple):
+    """One closed-loop run of a policy (:meth:`SyntheticTask.rollout`).
+
+    Attributes:
+        sequences: variable -> the MPs it ran, in order.
+        done: whether both points returned home within ``max_time``.
+    """
+
+    sequences: dict[str, list[str]]
+    done: bool
 
 
 @dataclass
@@ -56,24 +90,39 @@ class SyntheticTask:
         if min(self.gain) <= 0 or self.dt <= 0 or self.tolerance <= 0 or self.max_time <= 0:
             raise ConfigError("gain, dt, tolerance and max_time must all be > 0")
 
-    def sample_episode(self, rng: np.random.Generator, context: float | None = None) -> dict:
-        """Random start positions, goals and context for one episode."""
-        return {
-            "start": rng.uniform(-self.start_jitter, self.start_jitter, size=2),
-            "goal": 1.0 + rng.uniform(-self.goal_jitter, self.goal_jitter, size=2),
-            "context": float(rng.uniform(0.0, 1.0) if context is None else context),
-        }
+    def sample_episode(
+        self, rng: np.random.Generator, context: float | None = None
+    ) -> TwoPointEpisode:
+        """Random start positions, goals and context for one episode.
 
-    def goals(self, episode: dict, active: dict[str, str]) -> np.ndarray:
+        Args:
+            rng: the random generator (draws the starts, the goals, then the context).
+            context: the context; ``None`` draws it uniformly in [0, 1].
+
+        Returns:
+            The episode.
+        """
+        return TwoPointEpisode(
+            start=rng.uniform(-self.start_jitter, self.start_jitter, size=2),
+            goal=1.0 + rng.uniform(-self.goal_jitter, self.goal_jitter, size=2),
+            context=float(rng.uniform(0.0, 1.0) if context is None else context),
+        )
+
+    def goals(self, episode: TwoPointEpisode, active: dict[str, str]) -> np.ndarray:
         """Attractor goals ``(2,)`` of the active MPs."""
         out = np.zeros(2)
         for i, v in enumerate(VARIABLES):
             mp = active[v]
             if mp.endswith("_go") or mp == "a_wait":
-                out[i] = episode["goal"][i]
+                out[i] = episode.goal[i]
         return out
 
+    def initial_mps(self, episode: TwoPointEpisode) -> dict[str, str]:
+        """The demonstrator's initial MP per variable for ``episode``."""
+        return {"a": "a_go", "b": "b_go" if episode.parallel else "b_wait"}
+
     def _demo_switch(self, p: np.ndarray, g: np.ndarray, active: dict[str, str]) -> dict[str, str]:
+        """The demonstrator's switches at positions ``p (2,)`` with goals ``g (2,)``."""
         near = np.abs(g - p) < self.tolerance
         a, b = active["a"], active["b"]
         new = dict(active)
@@ -85,15 +134,14 @@ class SyntheticTask:
             new["a"], new["b"] = "a_back", "b_back"
         return new
 
-    def demonstrate(self, episode: dict, name: str | None = None) -> Demonstration:
+    def demonstrate(self, episode: TwoPointEpisode, name: str | None = None) -> Demonstration:
         """The scripted demonstrator's labelled demonstration of ``episode``."""
-        parallel = episode["context"] >= 0.5
-        active = {"a": "a_go", "b": "b_go" if parallel else "b_wait"}
-        p = np.array(episode["start"], dtype=float)
+        active = self.initial_mps(episode)
+        p = np.array(episode.start, dtype=float)
         log = DemonstrationLog(VARIABLES)
         t = 0.0
         while t <= self.max_time:
-            log.append(t, [p[0], p[1], episode["context"]], active)
+            log.append(t, [p[0], p[1], episode.context], active)
             if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
                 break
             g = self.goals(episode, active)
@@ -101,55 +149,69 @@ class SyntheticTask:
             p = p + self.dt * np.asarray(self.gain) * (self.goals(episode, active) - p)
             t = round(t + self.dt, 10)
         metadata = {
-            "context": episode["context"],
-            "strategy": "parallel" if parallel else "sequential",
+            "context": episode.context,
+            "strategy": "parallel" if episode.parallel else "sequential",
         }
         return log.to_demonstration(FEATURE_NAMES, name, metadata)
 
-    def rollout(self, episode: dict, policy: Policy) -> tuple[dict[str, list[str]], bool]:
+    def rollout(self, episode: TwoPointEpisode, policy: Policy) -> TwoPointRollout:
         """Run ``policy`` closed-loop on ``episode``.
 
-        Returns the executed MP sequence per variable and whether both points returned home.
+        Args:
+            episode: the episode.
+            policy: what decides the MPs, reset at ``t = 0`` then stepped every ``dt``.
+
+        Returns:
+            The executed MP sequence per variable and whether both points returned home.
         """
-        p = np.array(episode["start"], dtype=float)
-        x = np.array([p[0], p[1], episode["context"]])
+        p = np.array(episode.start, dtype=float)
+        x = np.array([p[0], p[1], episode.context])
         active = policy.reset(0.0, x)
         seqs = {v: [active[v]] for v in VARIABLES}
         t = 0.0
         while t < self.max_time:
             p = p + self.dt * np.asarray(self.gain) * (self.goals(episode, active) - p)
             t = round(t + self.dt, 10)
-            x = np.array([p[0], p[1], episode["context"]])
+            x = np.array([p[0], p[1], episode.context])
             active = policy.step(t, x)
             for v in VARIABLES:
                 if active[v] != seqs[v][-1]:
                     seqs[v].append(active[v])
             if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
-                return seqs, True
-        return seqs, False
+                return TwoPointRollout(seqs, True)
+        return TwoPointRollout(seqs, False)
 
 
 def evaluate(
     seq: Policy, task: SyntheticTask | None = None, n_episodes: int = 20, seed: int = 0
-) -> dict[str, int]:
-    """Closed-loop outcomes of ``seq`` on ``n_episodes`` random episodes (seeded): ``wrong_start``
-    (the initial MPs differ from the demonstrator's for the episode's context), ``incomplete``
-    (both points not home within ``max_time``) or ``complete``.
+) -> dict[Outcome, int]:
+    """Closed-loop outcomes of a policy on random episodes.
+
+    Args:
+        seq: the policy (a fitted sequencer, or any :class:`~cpmp.records.Policy`).
+        task: the task (default: :class:`SyntheticTask`'s defaults).
+        n_episodes: the number of episodes.
+        seed: seeds the episodes.
+
+    Returns:
+        The number of episodes per outcome: ``wrong_start`` (the initial MPs differ from the
+        demonstrator's for the episode's context), ``incomplete`` (both points not home
+        within ``max_time``) or ``complete``.
+
+    Raises:
+        ConfigError: ``n_episodes`` is not a positive integer.
     """
     if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
         raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
     task = task or SyntheticTask()
     rng = np.random.default_rng(seed)
-    counts = {"complete": 0, "wrong_start": 0, "incomplete": 0}
+    outcomes = []
     for _ in range(n_episodes):
         episode = task.sample_episode(rng)
         seqs, done = task.rollout(episode, seq)
-        want = {"a": "a_go", "b": "b_go" if episode["context"] >= 0.5 else "b_wait"}
-        if {v: s[0] for v, s in seqs.items()} != want:
-            counts["wrong_start"] += 1
-        else:
-            counts["complete" if done else "incomplete"] += 1
-    return counts
+        started_right = {v: s[0] for v, s in seqs.items()} == task.initial_mps(episode)
+        outcomes.append(episode_outcome(started_right, done))
+    return count_outcomes(outcomes)
 
 
 def make_demonstrations(

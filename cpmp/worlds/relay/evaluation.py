@@ -13,9 +13,10 @@ import numpy as np
 
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
-from cpmp.worlds.relay.world import STRATEGIES, VARIABLES, RelayEpisode, RelayTask
+from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
+from cpmp.worlds.relay.world import STRATEGIES, VARIABLES, RelayEpisode, RelayTask, Strategy
 
-OUTCOMES = ("complete", "wrong_start", "incomplete")
+__all__ = ["OUTCOMES", "RolloutResult", "evaluate", "outcome_counts", "rollout"]
 
 
 @dataclass
@@ -32,13 +33,13 @@ class RolloutResult:
         strategy: the episode's strategy.
     """
 
-    outcome: str
+    outcome: Outcome
     sequences: dict[str, list[str]]
     time: float
     initial: dict[str, str]
     expected_initial: dict[str, str]
     reached_goal: bool
-    strategy: str
+    strategy: Strategy
 
 
 def rollout(
@@ -68,10 +69,7 @@ def rollout(
             if active[v] != seqs[v][-1]:
                 seqs[v].append(active[v])
         reached = task.at_goal(state, episode)
-    if initial != expected:
-        outcome = "wrong_start"
-    else:
-        outcome = "complete" if reached else "incomplete"
+    outcome = episode_outcome(initial == expected, reached)
     return RolloutResult(outcome, seqs, t, initial, expected, reached, episode.strategy)
 
 
@@ -108,9 +106,6 @@ def evaluate(
     return {**outcome_counts(results), "n_episodes": n_episodes, "per_episode": rows}
 
 
-def outcome_counts(results: Sequence[RolloutResult]) -> dict[str, int]:
+def outcome_counts(results: Sequence[RolloutResult]) -> dict[Outcome, int]:
     """Number of results per outcome (every outcome present)."""
-    counts = dict.fromkeys(OUTCOMES, 0)
-    for r in results:
-        counts[r.outcome] += 1
-    return counts
+    return count_outcomes(r.outcome for r in results)

@@ -35,6 +35,7 @@ their outcomes are :mod:`cpmp.worlds.relay.evaluation`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -43,7 +44,11 @@ from cpmp.errors import ConfigError, UnknownMPError
 
 FEATURE_NAMES = ["carrier_x", "carrier_y", "receiver_x", "receiver_y", "grip_force", "context"]
 VARIABLES = ["carrier", "gripper", "receiver"]
-STRATEGIES = ("meet", "fetch")
+Strategy = Literal["meet", "fetch"]
+"""The two strategies: the carrier meets the receiver, or the receiver fetches the object."""
+STRATEGIES: tuple[Strategy, ...] = get_args(Strategy)
+Holder = Literal["carrier", "receiver", "none"]
+"""What moves the object: the carrier, the receiver's gripper, or nothing (released)."""
 
 CARRIER_HOME = (0.0, 0.0)
 RECEIVER_HOME = (2.0, 0.0)
@@ -83,7 +88,7 @@ class RelayEpisode:
     bin: np.ndarray
 
     @property
-    def strategy(self) -> str:
+    def strategy(self) -> Strategy:
         """``meet`` or ``fetch``."""
         return "meet" if self.context < 0.5 else "fetch"
 
@@ -115,7 +120,7 @@ class RelayState:
     receiver: np.ndarray
     aperture: float = 1.0
     obj: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    holder: str = "carrier"
+    holder: Holder = "carrier"
     between: bool = False
     force: float = 0.0
 
@@ -203,13 +208,22 @@ class RelayTask:
     def sample_episode(
         self,
         rng: np.random.Generator,
-        strategy: str | None = None,
+        strategy: Strategy | None = None,
         context: float | None = None,
     ) -> RelayEpisode:
         """Random homes, goals and context for one episode.
 
-        ``strategy`` (``meet``/``fetch``, default: either with probability 1/2) draws the
-        context uniformly from its half of [0, 1] minus the gap; ``context`` fixes it instead.
+        Args:
+            rng: the random generator.
+            strategy: ``meet`` or ``fetch`` (default: either with probability 1/2); the
+                context is drawn uniformly from its half of [0, 1] minus the gap.
+            context: fixes the context in [0, 1] instead.
+
+        Returns:
+            The episode.
+
+        Raises:
+            ConfigError: an unknown strategy or a context outside [0, 1].
         """
         half = 0.5 - self.context_gap / 2
         if context is not None:
