@@ -192,8 +192,15 @@ class BatchedSequencer(EpisodeBatch):
         ``last_tick``)."""
 
     def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
-        """Start the ``live`` episodes (default: all) at time ``t`` [s] (scalar or ``(N,)``)
-        with features ``x (N, d)``; returns every episode's active MPs.
+        """Start the ``live`` episodes (default: all).
+
+        Args:
+            t: one time [s] or ``(N,)`` times.
+            x: features ``(N, d)``.
+            live: ``(N,)`` bool, the episodes to start (``None``: all).
+
+        Returns:
+            Every episode's active MPs (variable -> MP).
         """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
@@ -207,8 +214,18 @@ class BatchedSequencer(EpisodeBatch):
         return self.active
 
     def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
-        """Advance the ``live`` episodes (default: all) one tick at time ``t`` [s] (scalar or
-        ``(N,)``) with features ``x (N, d)``; returns every episode's active MPs.
+        """Advance the ``live`` episodes (default: all) one tick.
+
+        Args:
+            t: one time [s] or ``(N,)`` times.
+            x: features ``(N, d)``.
+            live: ``(N,)`` bool, the episodes to advance (``None``: all).
+
+        Returns:
+            Every episode's active MPs (variable -> MP).
+
+        Raises:
+            CpmpError: what an episode raised, with the episode's index in the message.
         """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))

@@ -1,5 +1,6 @@
-"""What a fit learns from and what it checks afterwards: per-node training data, the non-finite
-and degenerate-node checks, label-glitch warnings.
+"""What a fit learns from and what it checks afterwards.
+
+Per-node training data, the non-finite and degenerate-node checks, label-glitch warnings.
 
 :meth:`cpmp.sequencer.ConcurrentSequencer.fit_config` builds one :class:`~cpmp.predictors.NodeData`
 per node (its scaled samples and progress targets, eq. 1) with :func:`node_training_data`,
@@ -11,18 +12,15 @@ demonstrated starts of ``start_rule="joint"``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
 from cpmp.progress import path_length, path_trajectory, progress_labels
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
 
 
 def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
@@ -35,8 +33,16 @@ def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
 def initial_combinations(
     demos: Sequence[Demonstration], variables: Sequence[str]
 ) -> list[dict[str, str]]:
-    """The distinct initial MP per variable of the demonstrations (variable -> MP), in order of
-    first appearance (what ``start_rule="joint"`` chooses among).
+    """The distinct initial MP per variable of the demonstrations, in order of first appearance.
+
+    What ``start_rule="joint"`` chooses among.
+
+    Args:
+        demos: the demonstrations.
+        variables: the control variables.
+
+    Returns:
+        One variable -> MP mapping per distinct start.
     """
     combos: list[dict[str, str]] = []
     for demo in demos:
@@ -49,12 +55,12 @@ def initial_combinations(
 def node_training_data(
     graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
 ) -> list[NodeData]:
-    """Per-node training samples (scaled features) and progress targets (eq. 1, or normalised
-    time for a predictor with ``labels = "time"``), in the predictor's node order;
-    ``subsample`` keeps every k-th sample (and the last) for the loss.
+    """Per-node training samples (scaled features) and progress targets, in the predictor's order.
 
-    Each activation is scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for
-    ``path_denoised`` labels) and labelled once; a start head shares its node's.
+    The targets are eq. 1, or normalised time for a predictor with ``labels = "time"``;
+    ``subsample`` keeps every k-th sample (and the last) for the loss. Each activation is
+    scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for ``path_denoised``
+    labels) and labelled once; a start head shares its node's.
     """
     denoised = predictor.labels == "path_denoised"  # then eq. 1 ("path") along denoised paths
     noise, kind = ("auto", "path") if denoised else ("none", predictor.labels)
@@ -91,10 +97,19 @@ def node_training_data(
 def demo_progress(
     graphs: Mapping[str, SequenceGraph], data: Sequence[NodeData], n_samples: Sequence[int]
 ) -> list[dict[str, np.ndarray]]:
-    """The fit's progress labels laid out along the demonstrations the ``graphs`` were built
-    from: per demonstration (``n_samples`` each), per variable, ``(n,)``, every activation
-    labelled as its node trained on it (what :meth:`cpmp.sequencer.switching.Coupling.learn`
-    measures the demonstrated switches with, so that it need not label them again).
+    """The fit's progress labels laid out along the demonstrations the ``graphs`` were built from.
+
+    Every activation is labelled as its node trained on it: what
+    :meth:`cpmp.sequencer.switching.Coupling.learn` measures the demonstrated switches with, so
+    that it need not label them again.
+
+    Args:
+        graphs: the fit's sequence graphs.
+        data: the fit's per-node training data (:func:`node_training_data`).
+        n_samples: each demonstration's number of samples.
+
+    Returns:
+        Per demonstration, per variable, the labels ``(n,)``.
     """
     out = [{v: np.zeros(n) for v in graphs} for n in n_samples]
     for node in data:
@@ -129,9 +144,11 @@ label glitches."""
 def glitch_warnings(
     graphs: Mapping[str, SequenceGraph], demos: Sequence[Demonstration]
 ) -> list[str]:
-    """One message per node with an activation of at most :data:`GLITCH_SAMPLES` samples in
-    the middle of a demonstration (A...A, B, C...C): such a node can hardly ever be entered in
-    closed loop, and the sequencer would wait there.
+    """One message per node with a very short activation in the middle of a demonstration.
+
+    An activation of at most :data:`GLITCH_SAMPLES` samples between two other MPs (A...A, B,
+    C...C): such a node can hardly ever be entered in closed loop, and the sequencer would
+    wait there.
     """
     out = []
     for v in sorted(graphs):
@@ -155,9 +172,11 @@ def glitch_warnings(
 
 
 def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:
-    """Degenerate nodes, one message each: activations without feature change (their progress
-    falls back to normalised time, which the features cannot show) and nodes whose fitted φ
-    misses their own targets by more than :data:`UNSEPARATED_MAE` on average.
+    """Degenerate nodes, one message each.
+
+    Activations without feature change (their progress falls back to normalised time, which
+    the features cannot show) and nodes whose fitted φ misses their own targets by more than
+    :data:`UNSEPARATED_MAE` on average.
     """
     out = []
     with torch.no_grad():

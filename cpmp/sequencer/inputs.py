@@ -30,8 +30,17 @@ def checked_time(t: float) -> float:
 
 
 def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:
-    """Features ``x (..., d)`` as a float64 array, checked against ``feature_names`` (d of them)
-    and for finiteness; :class:`~cpmp.errors.DataError` says what is wrong.
+    """Features ``x (..., d)`` as a float64 array, checked.
+
+    Args:
+        x: the features, NumPy or torch.
+        feature_names: the ``d`` names the features must match in number.
+
+    Returns:
+        ``x`` as float64 ``(..., d)``.
+
+    Raises:
+        DataError: the last axis is not ``d`` long, or a feature is not finite.
     """
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
@@ -49,8 +58,15 @@ def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str])
 def checked_demonstrations(
     demos: Sequence[Demonstration], fitter: str
 ) -> tuple[list[Demonstration], list[str]]:
-    """The demonstrations as a list and their shared feature names; ``fitter`` (e.g.
-    ``"ConcurrentSequencer.fit"``) names the caller in the message when there are none.
+    """The demonstrations as a list and their shared feature names.
+
+    Args:
+        demos: the demonstrations.
+        fitter: names the caller in the message when there are none (e.g.
+            ``"ConcurrentSequencer.fit"``).
+
+    Returns:
+        The demonstrations and their feature names.
 
     Raises:
         DataError: no demonstrations, or two with different feature names.

@@ -62,7 +62,7 @@ CHECKPOINT = CheckpointSpec(
 )
 """The sequencer's checkpoint kind (it still reads version 1 files)."""
 
-PAPER_OPTIONS: dict[str, Any] = {
+PAPER_OPTIONS: dict[str, str | bool] = {
     "feature_weighting": "none",
     "feature_scaling": "none",
     "path_noise": "none",
@@ -201,8 +201,18 @@ class ConcurrentSequencer:
         return self.heads(x, len(self.nodes.keys))
 
     def heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
-        """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any);
-        ``heads`` keeps only the first ``heads`` columns (and skips evaluating the others).
+        """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any).
+
+        Args:
+            x: features ``(..., d)``.
+            heads: keep only the first ``heads`` columns (and skip evaluating the others);
+                ``None``: all.
+
+        Returns:
+            φ ``(..., H)``.
+
+        Raises:
+            DataError: the features do not match :attr:`feature_names` or are not finite.
         """
         xn = checked_features(x, self.feature_names)
         with torch.no_grad():
@@ -219,9 +229,17 @@ class ConcurrentSequencer:
         return self.nodes.phi_dict(self.progress(state))
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """Start every graph at its initial node of highest entry probability ``1 - φ`` (or the
-        demonstrated combination of initial nodes with the highest summed log entry probability
-        when ``start_rule="joint"``).
+        """Start every graph at its initial node of highest entry probability ``1 - φ``.
+
+        With ``start_rule="joint"``, the demonstrated combination of initial nodes with the
+        highest summed log entry probability instead.
+
+        Args:
+            t: the time [s].
+            x: the features ``(d,)``.
+
+        Returns:
+            Variable -> initial MP.
         """
         t = checked_time(t)
         self.predictor.reset_state(1)
@@ -236,8 +254,9 @@ class ConcurrentSequencer:
         return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()))
 
     def batched(self, n: int) -> BatchedSequencer:
-        """``n`` independent episodes of this sequencer, stepped together (see
-        :class:`~cpmp.sequencer.batch.BatchedSequencer`).
+        """``n`` independent episodes of this sequencer, stepped together.
+
+        See :class:`~cpmp.sequencer.batch.BatchedSequencer`.
         """
         return BatchedSequencer(self, n)
 

@@ -1,5 +1,6 @@
-"""When a control variable switches: the switching rules, the learned coupling between graphs and
-stall recovery. Pure Python on top of the per-tick transition probabilities; used by
+"""When a control variable switches: switching rules, coupling between graphs, stall recovery.
+
+Pure Python on top of the per-tick transition probabilities; used by
 :class:`cpmp.sequencer.ConcurrentSequencer`.
 
 **Switching rules** decide, per variable and tick, whether the best successor ``s`` of the
@@ -54,8 +55,15 @@ class SwitchRule(Protocol):
         """Forget the history (called when the variable's node changes)."""
 
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record the successors' ``p`` at time ``t`` [s]; return the index of the successor
-        to switch to now (only one with ``allowed[i]``), or ``None``.
+        """Record the successors' ``p`` at time ``t`` [s] and decide.
+
+        Args:
+            t: the tick's time [s].
+            p: each successor's transition probability.
+            allowed: per successor, whether it may fire (the coupling's and the exit gate).
+
+        Returns:
+            The index of the successor to switch to now (one with ``allowed[i]``), or ``None``.
         """
 
 
@@ -80,9 +88,11 @@ class PaperRule:
         self._history: deque[tuple[float, list[float]]] = deque()
 
     def reset(self) -> None:
+        """Forget the history (called when the variable's node changes)."""
         self._history.clear()
 
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        """Record the successors' ``p`` at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
         history = self._history
         history.append((t, list(p)))
         # Keep exactly one entry at or before t - patience: the reference tick.
@@ -110,9 +120,11 @@ class PlateauRule:
         self._since = 0.0
 
     def reset(self) -> None:
+        """Forget the history (called when the variable's node changes)."""
         self._target = None
 
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        """Record the successors' ``p`` at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
         best = _best(p, allowed)
         if best is None or p[best] <= self.threshold:
             self._target = None
@@ -187,14 +199,24 @@ class Coupling:
         labels: str = "path",
         progress: Sequence[Mapping[str, np.ndarray]] | None = None,
     ) -> Coupling:
-        """Collect the contexts of every switch of ``variables`` in ``demos``; ``transform``
-        maps features ``(n, d)`` to the space progress is measured in (the predictor's
-        scaling) and ``labels`` is the predictor's kind of progress label
-        (:func:`cpmp.progress.progress_labels`), so that the learned progress thresholds are
-        in the units of the φ they are compared with (e.g. eq. 1 on the denoised trajectory of
-        noisy demonstrations). ``progress``: each demonstration's labels per variable ``(n,)``
-        when the caller has them already (a fit: :func:`cpmp.sequencer.fit_data.demo_progress`);
-        ``transform`` and ``labels`` are then not used.
+        """Collect the contexts of every switch of ``variables`` in ``demos``.
+
+        The learned progress thresholds are in the units of the φ they are compared with (e.g.
+        eq. 1 on the denoised trajectory of noisy demonstrations).
+
+        Args:
+            demos: labelled demonstrations.
+            variables: the control variables.
+            transform: maps features ``(n, d)`` to the space progress is measured in (the
+                predictor's scaling); ``None``: the features as they are.
+            labels: the predictor's kind of progress label
+                (:func:`cpmp.progress.progress_labels`).
+            progress: each demonstration's labels per variable ``(n,)`` when the caller has
+                them already (a fit: :func:`cpmp.sequencer.fit_data.demo_progress`);
+                ``transform`` and ``labels`` are then not used.
+
+        Returns:
+            The coupling.
         """
         contexts: dict[Edge, dict[str, set[str]]] = {}
         progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
@@ -229,11 +251,19 @@ class Coupling:
         phi: Mapping[str, float] | None = None,
         margin: float | None = None,
     ) -> list[str]:
-        """Why a transition along ``edge`` is inconsistent with every demonstrated context: one
-        entry per other variable that runs an MP never seen at this switch, or (with ``phi``,
-        each variable's predicted progress of its active MP, and a ``margin``) whose MP is
-        more than ``margin`` less advanced than at any demonstrated switch. Empty: consistent
-        (also for an edge that was never demonstrated).
+        """Why a transition along ``edge`` is inconsistent with every demonstrated context.
+
+        Args:
+            edge: the switch.
+            active: variable -> active MP.
+            phi: each variable's predicted progress of its active MP (``None``: compare MPs
+                only).
+            margin: how much less advanced than at any demonstrated switch an MP may be.
+
+        Returns:
+            One entry per other variable that runs an MP never seen at this switch, or (with
+            ``phi`` and ``margin``) whose MP is more than ``margin`` less advanced than at any
+            demonstrated switch. Empty: consistent (also for an edge never demonstrated).
         """
         unseen, bounds = self.gates(edge, active, None if phi is None else margin)
         out = [f"{u} runs {active[u]}" for u in unseen]
@@ -245,14 +275,21 @@ class Coupling:
         return out
 
     def gates(self, edge: Edge, active: Mapping[str, str], margin: float | None = None) -> Gates:
-        """The part of :meth:`inconsistent` that depends on the other variables' MPs only
-        (fixed between switches, so a sequencer computes it once per context).
+        """The part of :meth:`inconsistent` that depends on the other variables' MPs only.
 
-        Returns ``unseen``: the other variables that run an MP never seen at this switch; and
-        ``bounds``: ``(variable, least, least - margin)`` for every other variable whose MP had
-        a least demonstrated progress ``least`` at this switch (empty when ``margin`` is
-        ``None``). The transition is inconsistent once per ``unseen`` variable and once per
-        bound whose variable's φ is below ``least - margin``.
+        It is fixed between switches, so a sequencer computes it once per context. The
+        transition is inconsistent once per ``unseen`` variable and once per bound whose
+        variable's φ is below its ``bound``.
+
+        Args:
+            edge: the switch.
+            active: variable -> active MP.
+            margin: subtracted from the least demonstrated progress; ``None``: no bounds.
+
+        Returns:
+            The other variables that run an MP never seen at this switch, and one
+            :class:`ProgressBound` per other variable whose MP had a least demonstrated
+            progress at this switch (none when ``margin`` is ``None``).
         """
         unseen = [
             u
@@ -268,8 +305,9 @@ class Coupling:
         return Gates(unseen, bounds)
 
     def describe(self, variable: str) -> list[str]:
-        """One line per switch of ``variable``: the other variables' demonstrated MPs (and
-        the least progress at which they were seen).
+        """One line per switch of ``variable``: the other variables' demonstrated MPs.
+
+        Each MP is followed by the least progress at which it was seen, where known.
         """
         lines = []
         for (v, source, target), ctx in sorted(self.contexts.items()):
@@ -325,8 +363,9 @@ class Coupling:
 
 
 def indicator_features(x: np.ndarray) -> np.ndarray:
-    """``(d,)`` bool: features of ``x (N, d)`` that take at most two distinct values (binary
-    signals such as touch; they flicker while a contact is made or broken).
+    """``(d,)`` bool: the features of ``x (N, d)`` that take at most two distinct values.
+
+    Binary signals such as touch; they flicker while a contact is made or broken.
     """
     x = np.asarray(x, dtype=np.float64)
     lo, hi = x.min(axis=0), x.max(axis=0)
@@ -353,6 +392,7 @@ class StallDetector:
         self.last_motion = 0.0
 
     def reset(self, t: float, x: np.ndarray) -> None:
+        """Start an episode at ``t`` [s] with features ``x (d,)`` (counts as switch and motion)."""
         self._x = np.array(x, dtype=np.float64)
         self.last_switch = self.last_motion = t
 
@@ -372,6 +412,7 @@ class StallDetector:
             self._x = np.array(x, dtype=np.float64)
 
     def switched(self, t: float) -> None:
+        """Note a switch at ``t`` [s]."""
         self.last_switch = t
 
     def stalled(self, t: float) -> bool:
