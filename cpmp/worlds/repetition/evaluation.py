@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 from cpmp.worlds.repetition.world import (
     STRATEGIES,
     VARIABLES,
@@ -21,8 +22,7 @@ from cpmp.worlds.repetition.world import (
     RepetitionTask,
 )
 
-Outcome = Literal["complete", "wrong_start", "incomplete"]
-OUTCOMES: tuple[Outcome, ...] = ("complete", "wrong_start", "incomplete")
+__all__ = ["OUTCOMES", "RolloutResult", "evaluate", "outcome_counts", "rollout"]
 
 
 @dataclass
@@ -89,11 +89,8 @@ def rollout(
             if active[v] != seqs[v][-1]:
                 seqs[v].append(active[v])
         reached = task.at_goal(state, episode)
-    outcome: Outcome
-    if initial != {v: s[0] for v, s in expected.items()}:
-        outcome = "wrong_start"
-    else:
-        outcome = "complete" if reached and seqs == expected else "incomplete"
+    started_right = initial == {v: s[0] for v, s in expected.items()}
+    outcome = episode_outcome(started_right, reached and seqs == expected)
     return RolloutResult(
         outcome, seqs, expected, t, initial, reached, episode.strategy, episode.need, state.spilled
     )
@@ -156,9 +153,6 @@ def evaluate(
     }
 
 
-def outcome_counts(results: Sequence[RolloutResult]) -> dict[str, int]:
+def outcome_counts(results: Sequence[RolloutResult]) -> dict[Outcome, int]:
     """Number of results per outcome (every outcome present)."""
-    counts = dict.fromkeys(OUTCOMES, 0)
-    for r in results:
-        counts[r.outcome] += 1
-    return counts
+    return count_outcomes(r.outcome for r in results)
