@@ -29,8 +29,10 @@ class CpmpFileError(CpmpError, OSError):
 
 
 class CheckpointFormatError(CpmpFileError):
-    """A readable checkpoint of another format; ``found`` is its ``"format"`` entry (``None``
-    where it has none).
+    """A readable checkpoint of another format.
+
+    Attributes:
+        found: the file's ``"format"`` entry (``None`` where it has none).
     """
 
     def __init__(self, message: str, found: object = None) -> None:

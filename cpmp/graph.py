@@ -34,6 +34,7 @@ class SequenceGraph:
     activations: dict[str, list[Activation]] = field(default_factory=dict)
 
     def add_node(self, mp: str) -> None:
+        """Add ``mp`` as a node (with no activations yet) unless it is one already."""
         if mp not in self.nodes:
             self.nodes.add(mp)
             self.activations.setdefault(mp, [])
@@ -44,6 +45,7 @@ class SequenceGraph:
         return sorted(t for s, t in self.edges if s == mp)
 
     def predecessors(self, mp: str) -> list[str]:
+        """Sorted predecessors of ``mp``; raises :class:`UnknownMPError` for an unknown MP."""
         self._check(mp)
         return sorted(s for s, t in self.edges if t == mp)
 
@@ -52,6 +54,7 @@ class SequenceGraph:
         return sorted(self.nodes)
 
     def _check(self, mp: str) -> None:
+        """:class:`UnknownMPError` unless ``mp`` is a node."""
         if mp not in self.nodes:
             raise UnknownMPError(
                 f"MP {mp!r} is not a node of the graph of {self.variable!r}; "
@@ -93,6 +96,7 @@ class SequenceGraph:
 
     @classmethod
     def from_dict(cls, d: dict) -> SequenceGraph:
+        """Inverse of :meth:`to_dict`: the structure, without the activations."""
         g = cls(variable=str(d["variable"]))
         for mp in d["nodes"]:
             g.add_node(str(mp))

@@ -1,5 +1,7 @@
-"""Atomic file writing (a failed write never leaves a partial file behind) and the checkpoint
-files of the sequencers: one writer, one loader that checks format, version and trust.
+"""Atomic file writing and the checkpoint files of the sequencers.
+
+A failed write never leaves a partial file behind. Checkpoints have one writer and one loader
+that checks format, version and trust.
 """
 
 from __future__ import annotations
@@ -78,8 +80,15 @@ def _fsync_directory(directory: Path) -> None:
 
 
 def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
-    """Remove the temporary files that interrupted saves to ``path`` left behind (those whose
-    writing process no longer exists); returns the removed paths.
+    """Remove the temporary files that interrupted saves to ``path`` left behind.
+
+    Those whose writing process no longer exists.
+
+    Args:
+        path: the file the saves were writing.
+
+    Returns:
+        The removed paths.
     """
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
@@ -128,8 +137,10 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
 
 
 def to_builtin(obj: Any) -> Any:
-    """Recursively convert numpy arrays/scalars, tuples and mappings to plain Python (JSON and
-    ``torch.load(weights_only=True)`` safe); non-finite floats become ``None``.
+    """Recursively convert numpy arrays/scalars, tuples and mappings to plain Python.
+
+    The result is JSON and ``torch.load(weights_only=True)`` safe; non-finite floats become
+    ``None``.
     """
     if isinstance(obj, Mapping):
         return {str(k): to_builtin(v) for k, v in obj.items()}
@@ -145,9 +156,15 @@ def to_builtin(obj: Any) -> Any:
 
 
 def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) -> Path:
-    """Write a checkpoint ``payload`` (tensors and plain Python only, so that
-    :func:`load_checkpoint` reads it with ``weights_only=True``) atomically to ``path`` with
-    ``torch.save``; returns the path.
+    """Write a checkpoint ``payload`` atomically to ``path`` with ``torch.save``.
+
+    Args:
+        path: the file.
+        payload: tensors and plain Python only, so that :func:`load_checkpoint` reads it with
+            ``weights_only=True``.
+
+    Returns:
+        The path.
     """
     path = Path(path)
     with atomic_path(path) as tmp:
@@ -178,8 +195,9 @@ class CheckpointSpec(NamedTuple):
 def load_checkpoint(
     path: str | os.PathLike[str], spec: CheckpointSpec, rebuild: Callable[[dict[str, Any], int], T]
 ) -> T:
-    """Read a checkpoint written by :func:`save_checkpoint` and rebuild its model; every failure
-    is a :class:`CpmpFileError`.
+    """Read a checkpoint written by :func:`save_checkpoint` and rebuild its model.
+
+    Every failure is a :class:`CpmpFileError`.
 
     The payload is loaded with ``torch.load(weights_only=True)``: a file holding Python objects
     is refused as untrusted, never with torch's hint to switch the protection off. Then its
@@ -221,8 +239,10 @@ def load_checkpoint(
 
 
 def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
-    """What ``torch.load(path, weights_only=True)`` returns; :class:`CpmpFileError` for a
-    missing, unreadable or untrusted file (see :func:`load_checkpoint`).
+    """What ``torch.load(path, weights_only=True)`` returns.
+
+    Raises:
+        CpmpFileError: a missing, unreadable or untrusted file (see :func:`load_checkpoint`).
     """
     if not path.is_file():
         raise CpmpFileError(f"checkpoint {path} does not exist; {spec.remedy}")

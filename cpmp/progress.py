@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, get_args
 
 import numpy as np
 
 from cpmp.errors import ConfigError, DataError
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # annotation only: the options (cpmp.config) import this module, and the
+    # command line composes them before h5py and torch (which cpmp.data loads) are needed
     from cpmp.data.demonstration import Demonstration
 
 
@@ -38,7 +39,9 @@ def _as_trajectory(features: np.ndarray) -> np.ndarray:
     return x
 
 
-PATH_NOISE = ("auto", "none")
+PathNoise = Literal["auto", "none"]
+"""How eq. 1 treats noise on the features (see :data:`PATH_NOISE`)."""
+PATH_NOISE: tuple[PathNoise, ...] = get_args(PathNoise)
 """Values of ``noise`` (the predictors' ``path_noise`` option): ``none`` measures eq. 1 on the
 features as recorded (the paper); ``auto`` on :func:`denoise_trajectory`'s estimate of the
 noise-free trajectory, which is the recorded one wherever no white noise is detected."""
@@ -47,22 +50,25 @@ _MAD_TO_STD = 1.482602218505602
 """``1 / Φ⁻¹(3/4)``: median absolute deviation -> standard deviation of a normal law."""
 
 
-def _check_noise(noise: str) -> str:
+def _check_noise(noise: str) -> PathNoise:
     if noise not in PATH_NOISE:
         raise ConfigError(f"path noise must be one of {', '.join(PATH_NOISE)}, got {noise!r}")
     return noise
 
 
 def _robust_power(u: np.ndarray) -> np.ndarray:
-    """Mean square about zero ``(d,)`` of zero-mean samples ``u (m, d)``, from their median
-    absolute value (robust to the few large values of jumps and contact events).
+    """Mean square about zero ``(d,)`` of zero-mean samples ``u (m, d)``, robustly.
+
+    From their median absolute value: robust to the few large values of jumps and contact
+    events.
     """
     return (_MAD_TO_STD * np.median(np.abs(u), axis=0)) ** 2
 
 
 def white_noise_std(features: np.ndarray) -> np.ndarray:
-    """Standard deviation ``(d,)`` of the white (sample-to-sample independent) noise on each
-    feature of a trajectory ``(n, d)`` [feature units]; ``0`` where none is detected.
+    """Standard deviation ``(d,)`` of the white noise on each feature of a trajectory ``(n, d)``.
+
+    White: independent from sample to sample; in feature units, ``0`` where none is detected.
 
     Two filters cancel every straight line ``a + b t`` and respond to white noise of standard
     deviation σ with variance 20σ² and 4σ²: the third difference ``x₃ - 3x₂ + 3x₁ - x₀``, which
@@ -84,11 +90,11 @@ def white_noise_std(features: np.ndarray) -> np.ndarray:
 
 
 def tv_denoise(signal: np.ndarray, lam: float) -> np.ndarray:
-    """Total-variation denoising of one feature ``signal (n,)``: the minimiser ``(n,)`` of
-    ``½ Σ (y_i - signal_i)² + lam Σ |y_{i+1} - y_i|`` (``lam >= 0``, in the signal's units).
+    """Total-variation denoising of one feature ``signal (n,)``.
 
-    Exact, by Johnson's dynamic programme (J. Comput. Graph. Stat. 22, 2013), O(n). ``lam = 0``
-    returns a copy; a large ``lam`` returns the constant mean.
+    The minimiser ``(n,)`` of ``½ Σ (y_i - signal_i)² + lam Σ |y_{i+1} - y_i|`` (``lam >= 0``,
+    in the signal's units). Exact, by Johnson's dynamic programme (J. Comput. Graph. Stat. 22,
+    2013), O(n). ``lam = 0`` returns a copy; a large ``lam`` returns the constant mean.
     """
     y = [float(v) for v in np.asarray(signal, dtype=np.float64).reshape(-1)]
     n = len(y)
@@ -153,48 +159,50 @@ def denoise_trajectory(features: np.ndarray) -> np.ndarray:
     return out
 
 
-def path_trajectory(features: np.ndarray, noise: str) -> np.ndarray:
-    """The trajectory ``(n, d)`` along which eq. 1 measures an activation ``features (n, d)``:
-    :func:`denoise_trajectory` of it for ``noise="auto"``, the features as recorded for
-    ``"none"`` (see :data:`PATH_NOISE`).
+def path_trajectory(features: np.ndarray, noise: PathNoise) -> np.ndarray:
+    """The trajectory ``(n, d)`` along which eq. 1 measures an activation ``features (n, d)``.
 
-    Every function below that takes ``noise`` starts with this step; on its result they
-    measure with ``noise="none"``. Denoising being the costly part, a fit takes this step
-    once per activation (:func:`cpmp.sequencer.fit_data.node_training_data`) and hands the result on
-    in :attr:`~cpmp.predictors.NodeData.paths`.
+    :func:`denoise_trajectory` of it for ``noise="auto"``, the features as recorded for
+    ``"none"`` (see :data:`PATH_NOISE`). Every function below that takes ``noise`` starts with
+    this step; on its result they measure with ``noise="none"``. Denoising being the costly
+    part, a fit takes this step once per activation
+    (:func:`cpmp.sequencer.fit_data.node_training_data`) and hands the result on in
+    :attr:`~cpmp.predictors.NodeData.paths`.
     """
     x = _as_trajectory(features)
     return denoise_trajectory(x) if _check_noise(noise) == "auto" else x
 
 
-def feature_path_lengths(features: np.ndarray, noise: str = "none") -> np.ndarray:
-    """L1 path length of each feature ``(d,)`` of a trajectory ``(n, d)``: the terms eq. 1's
-    integral splits into (they sum to :func:`path_length`).
+def feature_path_lengths(features: np.ndarray, noise: PathNoise = "none") -> np.ndarray:
+    """L1 path length of each feature ``(d,)`` of a trajectory ``(n, d)``.
+
+    The terms eq. 1's integral splits into (they sum to :func:`path_length`).
     """
     x = path_trajectory(features, noise)
     return np.abs(np.diff(x, axis=0)).sum(axis=0)
 
 
-def cumulative_path_length(features: np.ndarray, noise: str = "none") -> np.ndarray:
-    """Unnormalised eq. 1: ``(n,)`` running L1 path length, starting at 0; with
-    ``noise="auto"`` along :func:`denoise_trajectory` (see :data:`PATH_NOISE`).
+def cumulative_path_length(features: np.ndarray, noise: PathNoise = "none") -> np.ndarray:
+    """Unnormalised eq. 1: ``(n,)`` running L1 path length, starting at 0.
+
+    With ``noise="auto"`` along :func:`denoise_trajectory` (see :data:`PATH_NOISE`).
     """
     x = path_trajectory(features, noise)
     steps = np.abs(np.diff(x, axis=0)).sum(axis=1)
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
-def path_length(features: np.ndarray, noise: str = "none") -> float:
+def path_length(features: np.ndarray, noise: PathNoise = "none") -> float:
     """Total L1 path length of a trajectory ``(n, d)`` (the final ϕ before normalising)."""
     return float(cumulative_path_length(features, noise)[-1])
 
 
 def expected_progress(
-    features: np.ndarray, time: np.ndarray | None = None, noise: str = "none"
+    features: np.ndarray, time: np.ndarray | None = None, noise: PathNoise = "none"
 ) -> np.ndarray:
-    """Expected progress ``(n,)`` in [0, 1] of one activation ``(n, d)`` (paper eq. 1), with
-    ``noise="auto"`` measured along :func:`denoise_trajectory` (see :data:`PATH_NOISE`).
+    """Expected progress ``(n,)`` in [0, 1] of one activation ``(n, d)`` (paper eq. 1).
 
+    With ``noise="auto"`` measured along :func:`denoise_trajectory` (see :data:`PATH_NOISE`).
     Monotone non-decreasing, first value 0 and last value 1 (for ``n >= 2``).
 
     Zero path length (features constant while the MP was active) carries no information about
@@ -244,16 +252,17 @@ def _count_for_length(
 
 
 def support_point_count(
-    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: str
+    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: PathNoise
 ) -> int:
-    """How many points :func:`support_points` places along ``features (n, d)``, without
-    placing them.
+    """How many points :func:`support_points` places along ``features (n, d)``.
+
+    Counted without placing them.
     """
     return _count_for_length(path_length(features, noise), scale, min_support, max_support)
 
 
 def support_points(
-    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: str
+    features: np.ndarray, scale: float, min_support: int, max_support: int | None, noise: PathNoise
 ) -> np.ndarray:
     """Support points ``(S, d)`` equidistant by L1 arc length along a trajectory ``(n, d)``.
 
@@ -280,7 +289,9 @@ def support_points(
     return x[idx] + frac[:, None] * (x[idx + 1] - x[idx])
 
 
-LABELS = ("path", "path_denoised", "time")
+LabelKind = Literal["path", "path_denoised", "time"]
+"""A kind of training label (see :data:`LABELS`)."""
+LABELS: tuple[LabelKind, ...] = get_args(LabelKind)
 """Kinds of training label: ``path`` (eq. 1, the L1 line integral), ``path_denoised`` (eq. 1
 along :func:`denoise_trajectory`, i.e. ``noise="auto"``) or ``time`` (normalised elapsed time,
 the usual phase variable; the label ablation of eq. 1)."""
@@ -309,10 +320,14 @@ def time_labels(time: np.ndarray) -> np.ndarray:
     return phase
 
 
-def progress_labels(features: np.ndarray, time: np.ndarray, kind: str = "path") -> np.ndarray:
-    """Training labels ``(n,)`` of one activation ``features (n, d)``, ``time (n,)`` [s]:
+def progress_labels(features: np.ndarray, time: np.ndarray, kind: LabelKind = "path") -> np.ndarray:
+    """Training labels ``(n,)`` of one activation ``features (n, d)``, ``time (n,)`` [s].
+
     :func:`expected_progress` for ``kind="path"`` (``noise="auto"`` for ``"path_denoised"``),
     :func:`time_labels` for ``kind="time"``.
+
+    Raises:
+        ConfigError: an unknown ``kind`` (see :data:`LABELS`).
     """
     if kind in ("path", "path_denoised"):
         return expected_progress(features, time, "auto" if kind == "path_denoised" else "none")
@@ -331,10 +346,12 @@ def demo_labels(
     demo: Demonstration,
     variables: Sequence[str],
     transform: Callable[[np.ndarray], np.ndarray] | None,
-    labels: str,
+    labels: LabelKind,
 ) -> dict[str, np.ndarray]:
-    """Progress labels ``(n,)`` of each variable along ``demo``: each activation labelled on
-    its own (:func:`progress_labels` of ``labels`` kind on ``transform`` of its features).
+    """Progress labels ``(n,)`` of each variable along ``demo``.
+
+    Each activation is labelled on its own: :func:`progress_labels` of ``labels`` kind on
+    ``transform`` of its features.
     """
     x = demo.features if transform is None else transform(demo.features)
     done = {}

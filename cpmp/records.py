@@ -1,5 +1,8 @@
-"""The records every layer shares: a transition, a sequencer note, a control tick, and the
-policy protocols a closed loop drives.
+"""The records every layer shares: transitions, notes, ticks, replays and policy protocols.
+
+A transition, a sequencer note, a control tick, an open-loop replay, and the policy protocols
+a closed loop drives; the closed sets of transition and note kinds (:data:`SwitchKind`,
+:data:`NoteKind`) are checked where a record is made.
 
 The sequencer (:mod:`cpmp.sequencer.sequencer`), the simulator runner (:mod:`cpmp.sim.runner`), the
 recordings (:mod:`cpmp.recordings`) and the evaluation (:mod:`cpmp.evaluation.offline`) all
@@ -86,8 +89,10 @@ class SequencerNote:
 
 @dataclass
 class TickInfo:
-    """One control tick. The sequencer fills what it computed (``last_tick``); the simulator
-    runner passes what it observed to ``on_tick`` callbacks (before the tick's physics).
+    """One control tick.
+
+    The sequencer fills what it computed (``last_tick``); the simulator runner passes what it
+    observed to ``on_tick`` callbacks (before the tick's physics).
 
     Attributes:
         t: time [s].
@@ -123,31 +128,41 @@ class ReplayResult(NamedTuple):
 
 
 class Policy(Protocol):
-    """What a closed loop drives, one episode: ``reset`` at the start, then ``step`` every
-    control tick, each with the time ``t`` [s] and the features ``x`` (d,); both return
-    variable -> active MP. A fitted :class:`~cpmp.sequencer.ConcurrentSequencer` is one.
+    """What a closed loop drives, one episode: ``reset`` at the start, then ``step`` every tick.
+
+    A fitted :class:`~cpmp.sequencer.ConcurrentSequencer` is one.
     """
 
-    def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
+    def reset(self, t: float, x: np.ndarray) -> Mapping[str, str]:
+        """Start at time ``t`` [s] with features ``x (d,)``; variable -> initial MP."""
+        ...
 
-    def step(self, t: float, x: np.ndarray) -> Mapping[str, str]: ...
+    def step(self, t: float, x: np.ndarray) -> Mapping[str, str]:
+        """One control tick at time ``t`` [s] with features ``x (d,)``; variable -> active MP."""
+        ...
 
 
 class BatchedPolicy(Protocol):
-    """:class:`Policy` for N episodes at once, e.g. :class:`~cpmp.sequencer.batch.BatchedSequencer`.
-    ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool marks the episodes still running (the others'
-    rows are to be ignored); the result holds one mapping variable -> MP per episode.
+    """:class:`Policy` for ``N`` episodes at once.
+
+    E.g. :class:`~cpmp.sequencer.BatchedSequencer`. ``x`` is ``(N, d)``; ``live`` ``(N,)`` bool
+    marks the episodes still running (the others' rows are to be ignored); the result holds
+    one mapping variable -> MP per episode.
     """
 
     def __len__(self) -> int: ...
 
     def reset(
         self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> Sequence[Mapping[str, str]]: ...
+    ) -> Sequence[Mapping[str, str]]:
+        """Start the ``live`` episodes at time ``t`` [s] with features ``x (N, d)``."""
+        ...
 
     def step(
         self, t: float, x: np.ndarray, live: np.ndarray | None = None
-    ) -> Sequence[Mapping[str, str]]: ...
+    ) -> Sequence[Mapping[str, str]]:
+        """One control tick of the ``live`` episodes at time ``t`` [s], features ``x (N, d)``."""
+        ...
 
 
 __all__ = [

@@ -1,5 +1,7 @@
-"""A sequencing baseline without learned progress: wait until the active MP has converged, then
-take the successor whose demonstrated entry states are nearest (``sequencer=goal_nearest``).
+"""A sequencing baseline without learned progress: wait until done, then pick the nearest.
+
+Wait until the active MP has converged, then take the successor whose demonstrated entry states
+are nearest (``sequencer=goal_nearest``).
 
 It shows what learned progress adds over "wait until done, then pick the closest":
 
@@ -74,9 +76,10 @@ _EPS_T = 1e-9
 
 
 class GoalNearestSequencer:
-    """The goal-nearest baseline (see the module doc). Build with :meth:`fit` or :meth:`load`;
-    drive with :meth:`reset` then :meth:`step` once per control tick, like
-    :class:`~cpmp.sequencer.ConcurrentSequencer`.
+    """The goal-nearest baseline (see the module doc).
+
+    Build with :meth:`fit` or :meth:`load`; drive with :meth:`reset` then :meth:`step` once per
+    control tick, like :class:`~cpmp.sequencer.ConcurrentSequencer`.
 
     Attributes:
         graphs: variable -> sequence graph (structure only after :meth:`load`).
@@ -146,8 +149,11 @@ class GoalNearestSequencer:
         self._last_t: float | None = None
 
     def batched(self, n: int) -> GoalNearestBatch:
-        """``n`` independent episodes of this sequencer (:class:`GoalNearestBatch`, the
-        batched policy :func:`cpmp.sim.run_episodes` drives).
+        """``n`` independent episodes of this sequencer, stepped together.
+
+        A :class:`~cpmp.baselines.GoalNearestBatch`, the batched policy
+        :func:`cpmp.sim.run_episodes` drives; each episode is a copy of this sequencer sharing
+        its fitted data.
         """
         episodes = []
         for _ in range(EpisodeBatch.checked_count(n)):
@@ -166,9 +172,17 @@ class GoalNearestSequencer:
         variables: Sequence[str] | None = None,
         **options: Any,
     ) -> GoalNearestSequencer:
-        """Build the graphs and collect each node's moving features and entry states from
-        labelled demonstrations. ``options``: :class:`GoalNearestConfig` fields; ``seed`` is
-        accepted for a uniform interface (the fit is deterministic and draws nothing).
+        """Build the graphs; collect each node's moving features and entry states.
+
+        Args:
+            demos: labelled demonstrations sharing feature names and control variables.
+            seed: accepted for a uniform interface (the fit is deterministic and draws
+                nothing).
+            variables: the control variables to sequence (``None``: all).
+            **options: :class:`~cpmp.config.GoalNearestConfig` fields.
+
+        Returns:
+            The fitted baseline.
         """
         started = perf_counter()
         config = goal_nearest_options(options)
@@ -228,20 +242,23 @@ class GoalNearestSequencer:
         return list(self.predictor.node_keys)
 
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        """Nearest-neighbour progress of every node for features ``x (..., d)``: ``(..., K)``
-        (offline evaluation; the switching rule does not use it).
+        """Nearest-neighbour progress ``(..., K)`` of every node for features ``x (..., d)``.
+
+        For offline evaluation; the switching rule does not use it.
         """
         xn = self._features(x)
         with torch.no_grad():
             return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
 
     def _features(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
+        """``x`` as checked float64 features ``(..., d)``."""
         return checked_features(x, self.feature_names)
 
     @staticmethod
     def _nearest(z: np.ndarray, candidates: Sequence[np.ndarray]) -> int:
-        """Index of the candidate state set ``(n, d)`` with a state nearest to ``z (d,)``
-        (the first one on ties).
+        """Index of the candidate state set ``(n, d)`` with a state nearest to ``z (d,)``.
+
+        The first one on ties.
         """
         best = [float(np.min(np.linalg.norm(c - z, axis=1))) for c in candidates]
         return int(np.argmin(best))

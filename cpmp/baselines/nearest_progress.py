@@ -9,19 +9,29 @@ sample of each node.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 from torch import nn
 
 from cpmp.errors import DataError
 from cpmp.predictors.base import FeatureScaler
 
 
+class _NodeTree(NamedTuple):
+    """One node's training samples, searchable, and their expected progress."""
+
+    tree: cKDTree
+    targets: np.ndarray
+
+
 class NearestProgress(nn.Module):
-    """Nearest-neighbour progress of every node: φ of node ``k`` at ``x`` is the expected
-    progress (eq. 1) of the training sample of ``k`` nearest to ``x`` in the scaled space.
+    """Nearest-neighbour progress of every node.
+
+    φ of node ``k`` at ``x`` is the expected progress (eq. 1) of the training sample of ``k``
+    nearest to ``x`` in the scaled space.
 
     Buffers: ``samples (P, d)`` scaled training samples of all nodes, ``targets (P,)`` their
     expected progress, ``node (P,)`` the node index of each. Offers what offline evaluation
@@ -44,30 +54,36 @@ class NearestProgress(nn.Module):
         self.register_buffer("samples", torch.zeros(n_samples, n_features, dtype=dtype))
         self.register_buffer("targets", torch.zeros(n_samples, dtype=dtype))
         self.register_buffer("node", torch.zeros(n_samples, dtype=torch.long))
-        self._trees: list[Any] | None = None
+        self._trees: list[_NodeTree] | None = None
 
     def reset_state(self, n_streams: int) -> None:
         """Stateless: nothing to reset."""
 
     def n_parameters(self) -> int:
+        """No trained parameters: 0."""
         return 0
 
-    def _lookup(self) -> list[Any]:
+    def _lookup(self) -> list[_NodeTree]:
+        """Each node's search tree, built on first use."""
         if self._trees is None:
-            from scipy.spatial import cKDTree
-
             samples, node = self.samples.numpy(), self.node.numpy()
             self._trees = []
             for k in range(len(self.node_keys)):
                 rows = np.flatnonzero(node == k)
                 if rows.size == 0:
                     raise DataError(f"node {self.node_keys[k]} has no training samples")
-                self._trees.append((cKDTree(samples[rows]), self.targets.numpy()[rows]))
+                self._trees.append(_NodeTree(cKDTree(samples[rows]), self.targets.numpy()[rows]))
         return self._trees
 
     def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
-        """``x (..., d)`` raw features -> ``(..., K)`` nearest-neighbour progress in [0, 1]
-        (``heads``: only the first ``heads`` nodes).
+        """Raw features ``x (..., d)`` -> nearest-neighbour progress ``(..., K)`` in [0, 1].
+
+        Args:
+            x: raw features ``(..., d)``.
+            heads: only the first ``heads`` nodes (``None``: all).
+
+        Returns:
+            φ ``(..., K)``, float64.
         """
         lead = x.shape[:-1]
         z = self.scaler.transform(x.detach().cpu().numpy().reshape(-1, self.n_features))
@@ -78,5 +94,6 @@ class NearestProgress(nn.Module):
         return torch.from_numpy(out).reshape(*lead, len(trees))
 
     def load_state_dict(self, *args: Any, **kwargs: Any) -> Any:
+        """:meth:`torch.nn.Module.load_state_dict`; the search trees are rebuilt on next use."""
         self._trees = None
         return super().load_state_dict(*args, **kwargs)

@@ -1,9 +1,10 @@
-"""The HDF5 file format of demonstrations: :func:`save_demonstrations`,
-:func:`load_demonstrations` and :func:`list_splits`.
+"""The HDF5 file format of demonstrations, read and written atomically.
 
-Files follow the robomimic layout (``/data/demo_<i>/{time,features,labels/<variable>}``,
+:func:`save_demonstrations`, :func:`load_demonstrations` and :func:`list_splits`. Files
+follow the robomimic layout (``/data/demo_<i>/{time,features,labels/<variable>}``,
 ``/mask/<split>``); ``docs/data_format.md`` documents it for hand-written recordings. The
-record itself (:class:`~cpmp.data.Demonstration`, its validation) is :mod:`cpmp.data.demonstration`.
+record itself (:class:`~cpmp.data.Demonstration`, its validation) is
+:mod:`cpmp.data.demonstration`.
 """
 
 from __future__ import annotations

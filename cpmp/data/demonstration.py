@@ -1,5 +1,7 @@
-"""Labelled demonstrations: the record (:class:`Demonstration`, validated on construction)
-and its activations (:class:`Activation`).
+"""Labelled demonstrations: the record and its activations.
+
+The record is :class:`Demonstration` (validated on construction), an MP's activation in it
+:class:`Activation`.
 
 A :class:`Demonstration` is one recorded execution of a task (paper Sec. III-A): a feature
 trajectory ``X`` of shape ``(n, d)`` sampled at times ``t`` and, for every control variable, the
@@ -26,8 +28,7 @@ MetadataValue = str | int | float | bool | None
 
 @dataclass(frozen=True)
 class Activation:
-    """One activation of an MP: samples ``start`` (inclusive) to ``stop`` (exclusive) of a
-    demonstration.
+    """One activation of an MP: samples ``start`` (inclusive) to ``stop`` (exclusive).
 
     Attributes:
         mp: MP name.
@@ -114,8 +115,9 @@ class Demonstration:
         return float(self.time[-1] - self.time[0])
 
     def segments(self, variable: str) -> list[Activation]:
-        """Consecutive activations of ``variable``'s MPs, in time order (their ``time`` and
-        ``features`` are views into this demonstration's arrays).
+        """Consecutive activations of ``variable``'s MPs, in time order.
+
+        Their ``time`` and ``features`` are views into this demonstration's arrays.
         """
         labels = self._variable_labels(variable)
         bounds = [0, *self.switch_indices(variable).tolist(), len(labels)]
@@ -125,10 +127,11 @@ class Demonstration:
         ]
 
     def transitions(self, variable: str | None = None) -> list[TransitionEvent]:
-        """The demonstrated switches of ``variable`` (of every variable if ``None``) in time
-        order, variables in :attr:`variables` order at equal times. Each is at the time of
-        the first sample under the new MP, with that sample's features as ``state`` (d,) and
-        no ``probability`` (``nan``: a label is not a prediction).
+        """The demonstrated switches of ``variable`` (of every variable if ``None``), in order.
+
+        In time order, variables in :attr:`variables` order at equal times. Each is at the
+        time of the first sample under the new MP, with that sample's features as ``state``
+        (d,) and no ``probability`` (``nan``: a label is not a prediction).
         """
         variables = self.variables if variable is None else [variable]
         events = []
@@ -335,7 +338,8 @@ def mp_sequences(demo: Demonstration) -> dict[str, list[str]]:
 
 
 class DemonstrationLog:
-    """A demonstration being recorded by a scripted demonstrator, one sample per control tick;
+    """A demonstration being recorded by a scripted demonstrator, one sample per control tick.
+
     :meth:`to_demonstration` validates it into a :class:`Demonstration`.
     """
 

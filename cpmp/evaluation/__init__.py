@@ -1,5 +1,8 @@
-"""Offline evaluation: progress error against eq. 1 (Fig. 6), switch distances (Table Ib) and
-open-loop replay of demonstrations, and loading any sequencer checkpoint to evaluate it.
+"""Offline evaluation of a fitted sequencer on recorded demonstrations.
+
+Progress error against eq. 1 (Fig. 6), switch distances (Table Ib) and open-loop replay of
+demonstrations (``offline``), and loading any sequencer checkpoint to evaluate it
+(``checkpoints``).
 """
 
 from cpmp.evaluation.checkpoints import load_sequencer

@@ -17,15 +17,23 @@ from cpmp.sequencer import ConcurrentSequencer
 
 
 def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequencer:
-    """Load any sequencer checkpoint cpmp writes (the main job's ``model_D<d>.pt``,
-    ``train.py``'s ``model.pt``): a :class:`~cpmp.sequencer.ConcurrentSequencer` with any
-    predictor, or a :class:`~cpmp.baselines.GoalNearestSequencer`; the checkpoint's own
-    format decides.
+    """Load any sequencer checkpoint cpmp writes: the checkpoint's own format decides the kind.
 
-    Both share the :meth:`~cpmp.sequencer.ConcurrentSequencer.load` interface offline
+    The main job's ``model_D<d>.pt`` and ``train.py``'s ``model.pt`` are a
+    :class:`~cpmp.sequencer.ConcurrentSequencer` with any predictor, or a
+    :class:`~cpmp.baselines.GoalNearestSequencer`. Both share the interface offline
     evaluation needs (``graphs``, ``feature_names``, ``node_keys``, ``progress``, ``predictor``
-    with ``scaler`` and ``stateful``, ``replay``). A missing, damaged or untrusted file raises
-    :class:`CpmpFileError` as that loader does; a file of neither format names both.
+    with ``scaler`` and ``stateful``, ``replay``).
+
+    Args:
+        path: the checkpoint file.
+
+    Returns:
+        The sequencer.
+
+    Raises:
+        CpmpFileError: a missing, damaged or untrusted file (as each loader says), or a file
+            of neither format (naming both).
     """
     try:
         return ConcurrentSequencer.load(path)

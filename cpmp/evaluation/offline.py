@@ -91,6 +91,7 @@ def stream_progress(seq: ConcurrentSequencer, features: np.ndarray) -> np.ndarra
 
 
 def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:
+    """:class:`DataError` unless ``demo`` has the features ``seq`` was trained on."""
     if list(demo.feature_names) != seq.feature_names:
         raise DataError(
             f"{demo.name or 'demonstration'} has features {list(demo.feature_names)[:4]}... but "
@@ -99,8 +100,19 @@ def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:
 
 
 def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) -> dict[str, Any]:
-    """Mean absolute progress error: overall, in the first and last ``edge`` fraction of each
-    activation (by normalised time), and per node (``"variable/mp"``).
+    """Mean absolute progress error: overall, at the ends of the activations and per node.
+
+    Args:
+        records: expected and predicted progress per activation.
+        edge: the fraction of each activation (by normalised time) at its start and at its
+            end that ``mae_first`` and ``mae_last`` cover.
+
+    Returns:
+        ``mae``, ``mae_first``, ``mae_last``, ``n_activations`` and ``per_node``
+        (``"variable/mp"`` -> MAE).
+
+    Raises:
+        DataError: no activations.
     """
     if not records:
         raise DataError("no activations to evaluate: the demonstrations share no MP with the model")
@@ -192,10 +204,18 @@ def switch_distances(
     variable: str,
     columns: np.ndarray | None = None,
 ) -> list[float] | None:
-    """Distances between triggered and demonstrated switch states of ``variable``; ``None`` if
-    the triggered switches (``events``, each with its ``state``) do not match the demonstrated
-    ones (:meth:`~cpmp.data.Demonstration.transitions`) one to one. ``columns`` (d,) bool
-    restricts the distance to those features (e.g. :func:`continuous_features`).
+    """Distances between triggered and demonstrated switch states of ``variable``.
+
+    Args:
+        events: the triggered switches, each with its ``state``.
+        demo: the demonstration (:meth:`~cpmp.data.Demonstration.transitions`).
+        variable: the control variable.
+        columns: ``(d,)`` bool, the features the distance is measured on (e.g.
+            :func:`continuous_features`); ``None``: all.
+
+    Returns:
+        One Euclidean distance per switch, or ``None`` if the triggered switches do not match
+        the demonstrated ones one to one.
     """
     fired = [e for e in events if e.variable == variable]
     shown = demo.transitions(variable)
@@ -208,8 +228,9 @@ def switch_distances(
 
 
 def continuous_features(demos: Sequence[Demonstration]) -> np.ndarray:
-    """``(d,)`` bool: features that take more than two distinct values in ``demos`` (binary
-    signals, such as touch, flip by 1 when a switch comes one tick early or late).
+    """``(d,)`` bool: the features that take more than two distinct values in ``demos``.
+
+    Binary signals, such as touch, flip by 1 when a switch comes one tick early or late.
     """
     return ~indicator_features(np.concatenate([d.features for d in demos], axis=0))
 
@@ -262,10 +283,11 @@ def replay_demonstrations(
 def evaluate_offline(
     seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
 ) -> dict[str, Any]:
-    """Everything offline about ``seq`` on ``demos``: progress MAE (overall, first/last 10 %,
-    per node; :func:`progress_errors`), Fig. 6 curves (:func:`progress_curves` with ``n_bins``)
-    and the raw ``(expected, predicted)`` pairs per activation, and a replay of the recorded
-    feature streams (:func:`replay_demonstrations`).
+    """Everything offline about ``seq`` on ``demos``.
+
+    Progress MAE (overall, first/last 10 %, per node; :func:`progress_errors`), Fig. 6 curves
+    (:func:`progress_curves` with ``n_bins``) and the raw ``(expected, predicted)`` pairs per
+    activation, and a replay of the recorded feature streams (:func:`replay_demonstrations`).
 
     Returns:
         ``{"progress", "curves", "replay", "pairs"}``.

@@ -42,7 +42,7 @@ import numpy as np
 
 from cpmp.config.sequencer import COUPLINGS, SWITCH_RULES
 from cpmp.data.demonstration import Demonstration
-from cpmp.progress import demo_labels
+from cpmp.progress import LabelKind, demo_labels
 
 _EPS_T = 1e-9
 """Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
@@ -196,7 +196,7 @@ class Coupling:
         demos: Sequence[Demonstration],
         variables: Sequence[str],
         transform: Callable[[np.ndarray], np.ndarray] | None = None,
-        labels: str = "path",
+        labels: LabelKind = "path",
         progress: Sequence[Mapping[str, np.ndarray]] | None = None,
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``.

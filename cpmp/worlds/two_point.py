@@ -229,8 +229,10 @@ def make_demonstrations(
 
 
 def curved_trajectories(n: int = 4, seed: int = 0, n_samples: int = 100) -> list[Demonstration]:
-    """``n`` curved 2-D trajectories from a start region near (0.1, 0.1) to an end region near
-    (0.9, 0.9), each one activation of a single MP ``move`` (the setting of the paper's Fig. 3).
+    """``n`` curved 2-D trajectories of one MP ``move`` (the setting of the paper's Fig. 3).
+
+    Each runs from a start region near (0.1, 0.1) to an end region near (0.9, 0.9) in one
+    activation.
     """
     rng = np.random.default_rng(seed)
     u = np.linspace(0.0, 1.0, n_samples)[:, None]

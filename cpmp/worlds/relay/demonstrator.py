@@ -1,5 +1,7 @@
-"""The relay task's scripted demonstrator (:mod:`cpmp.worlds.relay.world`): its labelled
-demonstrations and the same finite state machine as a closed-loop policy.
+"""The relay task's scripted demonstrator: its labelled demonstrations and closed-loop policy.
+
+The task is :mod:`cpmp.worlds.relay.world`; the same finite state machine records the
+demonstrations and runs as a closed-loop policy (:class:`ScriptedPolicy`).
 
 The scripted demonstrator (a finite state machine) switches as soon as a guard holds, with no
 settle time:
@@ -73,8 +75,9 @@ def script(
 
 
 def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None) -> Demonstration:
-    """The scripted demonstrator's labelled demonstration of ``episode``, recorded every
-    ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``).
+    """The scripted demonstrator's labelled demonstration of ``episode``.
+
+    Recorded every ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``).
     """
     state = task.initial_state(episode)
     active = task.initial_mps(episode)
@@ -98,8 +101,9 @@ def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None)
 
 
 class ScriptedPolicy:
-    """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy`
-    interface (it knows the episode's goals, as the demonstrator does).
+    """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy` interface.
+
+    It knows the episode's goals, as the demonstrator does.
     """
 
     def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
@@ -108,10 +112,12 @@ class ScriptedPolicy:
         self.active: dict[str, str] = {}
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The demonstrator's initial MPs for the episode."""
         self.active = self.task.initial_mps(self.episode)
         return dict(self.active)
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The demonstrator's switches at features ``x (6,)``; the active MPs after them."""
         self.active = script(self.task, np.asarray(x, float), self.episode, self.active)
         return dict(self.active)
 
@@ -119,8 +125,18 @@ class ScriptedPolicy:
 def make_demonstrations(
     n: int, seed: int = 0, task: RelayTask | None = None
 ) -> list[Demonstration]:
-    """``n`` demonstrations alternating meet and fetch (``demo_0`` meet), reproducible from
-    ``seed``.
+    """``n`` demonstrations alternating meet and fetch (``demo_0`` meet), reproducible.
+
+    Args:
+        n: the number of demonstrations.
+        seed: seeds the episodes.
+        task: the task (default: :class:`~cpmp.worlds.relay.RelayTask`'s defaults).
+
+    Returns:
+        The demonstrations, named ``demo_<i>``.
+
+    Raises:
+        ConfigError: ``n`` is not a positive integer.
     """
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ConfigError(f"n must be a positive integer, got {n!r}")

@@ -1,5 +1,7 @@
-"""Closed-loop runs of the relay task (:mod:`cpmp.worlds.relay.world`): one episode under a
-policy (:func:`rollout`), its outcome, and the outcome counts over seeded random episodes
+"""Closed-loop runs of the relay task: one episode, its outcome, and the counts over many.
+
+One episode of :mod:`cpmp.worlds.relay.world` under a policy (:func:`rollout`), its outcome
+(:mod:`cpmp.worlds.outcomes`), and the outcome counts over seeded random episodes
 (:func:`evaluate`).
 """
 
@@ -80,12 +82,23 @@ def evaluate(
     seed: int = 0,
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, Any]:
-    """Closed-loop outcomes of a sequencer (or any policy) ``seq`` on ``n_episodes`` random
-    episodes alternating the strategies, reproducible from ``seed`` (use a seed other than the
-    demonstrations' for held-out episodes; ``observe`` as in :func:`rollout`).
+    """Closed-loop outcomes of a sequencer (or any policy) on random episodes.
 
-    Returns ``{"complete": int, "wrong_start": int, "incomplete": int, "n_episodes": int,
-    "per_episode": [{"strategy", "context", "outcome", "time", "sequences"}, ...]}``.
+    The episodes alternate the strategies and are reproducible from ``seed``.
+
+    Args:
+        seq: the policy.
+        task: the task (default: :class:`~cpmp.worlds.relay.RelayTask`'s defaults).
+        n_episodes: the number of episodes.
+        seed: seeds the episodes (use another than the demonstrations' for held-out ones).
+        observe: as in :func:`rollout`.
+
+    Returns:
+        ``{"complete": int, "wrong_start": int, "incomplete": int, "n_episodes": int,
+        "per_episode": [{"strategy", "context", "outcome", "time", "sequences"}, ...]}``.
+
+    Raises:
+        ConfigError: ``n_episodes`` is not a positive integer.
     """
     if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
         raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
