@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-from cpmp.data.demonstration import Activation, Demonstration
+from cpmp.data import Activation, Demonstration
 from cpmp.errors import DataError, UnknownMPError
 
 

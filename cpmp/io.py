@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
-import torch
 
 from cpmp.errors import CheckpointFormatError, CpmpError, CpmpFileError
 
@@ -166,6 +165,8 @@ def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) ->
     Returns:
         The path.
     """
+    import torch  # lazy: cpmp.data and the importers write through this module without torch
+
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(dict(payload), tmp)
@@ -244,6 +245,8 @@ def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
     Raises:
         CpmpFileError: a missing, unreadable or untrusted file (see :func:`load_checkpoint`).
     """
+    import torch  # lazy: cpmp.data and the importers write through this module without torch
+
     if not path.is_file():
         raise CpmpFileError(f"checkpoint {path} does not exist; {spec.remedy}")
     try:

@@ -25,7 +25,7 @@ from cpmp.errors import ConfigError, DataError
 
 if TYPE_CHECKING:  # annotation only: the options (cpmp.config) import this module, and the
     # command line composes them before h5py and torch (which cpmp.data loads) are needed
-    from cpmp.data.demonstration import Demonstration
+    from cpmp.data import Demonstration
 
 
 def _as_trajectory(features: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from torch import nn
 
 from cpmp.errors import DataError
-from cpmp.predictors.base import FeatureScaler
+from cpmp.predictors import FeatureScaler
 
 
 class _NodeTree(NamedTuple):

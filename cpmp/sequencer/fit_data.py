@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import torch
 
-from cpmp.data.demonstration import Demonstration
+from cpmp.data import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor

@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
+from cpmp.data import Demonstration
 from cpmp.errors import DataError
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
 
 
 def checked_time(t: float) -> float:

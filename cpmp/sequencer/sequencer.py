@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from cpmp.config import FitConfig, SequencerConfig
-from cpmp.data.demonstration import Demonstration
+from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin

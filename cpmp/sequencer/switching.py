@@ -40,8 +40,8 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from cpmp.config.sequencer import COUPLINGS, SWITCH_RULES
-from cpmp.data.demonstration import Demonstration
+from cpmp.config import COUPLINGS, SWITCH_RULES
+from cpmp.data import Demonstration
 from cpmp.progress import LabelKind, demo_labels
 
 _EPS_T = 1e-9

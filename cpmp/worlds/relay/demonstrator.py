@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cpmp.data.demonstration import Demonstration, DemonstrationLog
+from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError
 from cpmp.worlds.relay.world import (
     FEATURE_NAMES,
