@@ -166,6 +166,7 @@ class ClockedPolicy:
         self._sample: np.ndarray = np.zeros(0)
         self._sample_t = 0.0
         self._next_sample = math.inf
+        self._bursts: list[float] = []
         self._nan_left = 0
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
