@@ -39,7 +39,7 @@ from cpmp.config.sequencer import (
     SequencerConfig,
 )
 from cpmp.config.task import TaskConfig
-from cpmp.config.trainer import LOGGERS, SOLVERS, TrainerConfig
+from cpmp.config.trainer import LOGGERS, SOLVERS, SolverOptions, TrainerConfig
 
 __all__ = [
     "ACTIVATIONS",
@@ -63,6 +63,7 @@ __all__ = [
     "RegressionClipConfig",
     "SequencerConfig",
     "SklearnKLRConfig",
+    "SolverOptions",
     "SparseKLRConfig",
     "TaskConfig",
     "TimePhaseConfig",

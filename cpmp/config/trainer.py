@@ -6,12 +6,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from cpmp.errors import ConfigError
-
-if TYPE_CHECKING:
-    from cpmp.predictors.newton import SolverOptions
 
 LOGGERS = ("csv", "tensorboard")
 """Values of :attr:`TrainerConfig.logger` besides ``None``."""
@@ -138,6 +134,21 @@ class TrainerConfig:
 
     def solver_options(self) -> SolverOptions:
         """The convex-solver settings handed to the predictor."""
-        from cpmp.predictors.newton import SolverOptions
-
         return SolverOptions(self.solver, self.newton_tol, self.newton_max_iter)
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How convex weight fits are solved (what a bank's ``solve_convex`` is told).
+
+    Attributes:
+        method: ``newton`` (:mod:`cpmp.predictors.newton`) or ``lbfgs`` (torch's LBFGS, strong
+            Wolfe line search).
+        tol: Newton stops when the gradient's max-norm or the Newton decrement
+            ``λ = sqrt(gᵀ H⁻¹ g)`` is at most ``tol``.
+        max_iter: Newton iterations per node at most.
+    """
+
+    method: str = "newton"
+    tol: float = TrainerConfig.newton_tol
+    max_iter: int = TrainerConfig.newton_max_iter

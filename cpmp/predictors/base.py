@@ -18,8 +18,9 @@ from torch import nn
 from torch.nn import functional as F
 
 from cpmp.config.predictors import SCALINGS, PredictorConfig  # noqa: F401 (re-exported)
+from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError, DataError
-from cpmp.predictors.newton import NewtonInfo, SolverOptions
+from cpmp.predictors.newton import NewtonInfo
 from cpmp.progress import denoise_trajectory
 
 NodeKey = tuple[str, str]
@@ -54,6 +55,41 @@ class NodeData:
     paths: list[np.ndarray] = field(default_factory=list)
     labels: list[np.ndarray] = field(default_factory=list)
 
+    @property
+    def n_samples(self) -> int:
+        """Training samples ``P`` of the node."""
+        return int(self.x.shape[0])
+
+    def to(self, device: torch.device | str) -> NodeData:
+        """This node's data with ``x`` and ``target`` on ``device``.
+
+        Args:
+            device: the torch device the bank is on.
+
+        Returns:
+            ``self`` when both tensors are there already, else a copy holding the moved
+            tensors (the NumPy fields are shared).
+        """
+        x, target = self.x.to(device), self.target.to(device)
+        if x is self.x and target is self.target:
+            return self
+        return dataclasses.replace(self, x=x, target=target)
+
+
+def nodes_to(data: list[NodeData], device: torch.device | str) -> list[NodeData]:
+    """Every node's data on ``device`` (:meth:`NodeData.to`).
+
+    Args:
+        data: per-node data.
+        device: the torch device the bank is on.
+
+    Returns:
+        ``data`` itself when nothing had to move (so that a bank's per-list caches still
+        apply), else a new list.
+    """
+    moved = [node.to(device) for node in data]
+    return data if all(a is b for a, b in zip(moved, data, strict=True)) else moved
+
 
 class FeatureScaler(nn.Module):
     """Affine feature scaling ``(x - offset) / scale`` fitted on training data.
@@ -84,8 +120,11 @@ class FeatureScaler(nn.Module):
         self.register_buffer("scale", torch.ones(n_features, dtype=dtype))
 
     def fit(self, x: np.ndarray, mode: str) -> None:
-        """Fit on training samples ``x`` (N, d), in recording order (demonstrations one after
-        the other).
+        """Fit on training samples.
+
+        Args:
+            x: ``(N, d)`` samples in recording order (demonstrations one after the other).
+            mode: the scaling, one of :data:`~cpmp.config.SCALINGS`.
         """
         if mode == "none":
             return
@@ -105,11 +144,12 @@ class FeatureScaler(nn.Module):
         self.scale.copy_(torch.as_tensor(scale, dtype=self.scale.dtype))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Scaled features ``(..., d)`` of ``x (..., d)``."""
         return (x - self.offset) / self.scale
 
     def transform(self, x: np.ndarray) -> np.ndarray:
         """NumPy version of :meth:`forward`: ``(..., d) -> (..., d)``."""
-        return (x - self.offset.numpy()) / self.scale.numpy()
+        return (x - self.offset.numpy(force=True)) / self.scale.numpy(force=True)
 
 
 class ProgressPredictor(nn.Module):
@@ -148,6 +188,7 @@ class ProgressPredictor(nn.Module):
 
     @property
     def n_nodes(self) -> int:
+        """The number of heads ``K``."""
         return len(self.node_keys)
 
     def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
@@ -164,7 +205,7 @@ class ProgressPredictor(nn.Module):
         if heads is not None and not 0 < heads <= self.n_nodes:
             raise DataError(f"heads must be in 1..{self.n_nodes}, got {heads}")
         lead = x.shape[:-1]
-        z = x.to(self.dtype_).reshape(-1, self.n_features)
+        z = x.to(self.scaler.offset.device, self.dtype_).reshape(-1, self.n_features)
         if self.config.feature_scaling != "none":
             z = self.scaler(z)
         out = torch.sigmoid(self.logits(z) if heads is None else self.head_logits(z, heads))
@@ -175,14 +216,17 @@ class ProgressPredictor(nn.Module):
         raise NotImplementedError
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """Logits of the first ``heads`` nodes ``(B, heads)``; banks override this to skip the
-        other nodes' work.
+        """Logits ``(B, heads)`` of the first ``heads`` nodes for scaled features ``z (B, d)``.
+
+        Banks override this to skip the other nodes' work.
         """
         return self.logits(z)[:, :heads]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
-        """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``; banks override
-        this to skip the other nodes' work (e.g. to score each node on its own samples).
+        """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``.
+
+        Banks override this to skip the other nodes' work (e.g. to score each node on its own
+        samples).
         """
         return self.logits(z)[:, i]
 
@@ -192,13 +236,33 @@ class ProgressPredictor(nn.Module):
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Data-dependent set-up before training (support points, initial weights)."""
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        """Sum over nodes of the mean soft-label BCE (eq. 5) plus regularisation."""
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
+        """Sum over nodes of the mean soft-label BCE (eq. 5) plus regularisation.
+
+        Args:
+            data: every node's training data, in node order.
+            rows: per node, the rows of its data in this mini-batch (``(b_i,)`` indices, at
+                least one each); ``None``: all of them (full batch). Banks trained by Adam
+                take mini-batches; the others only the full batch.
+
+        Returns:
+            The scalar loss.
+        """
         raise NotImplementedError
 
     def solve_convex(self, data: list[NodeData], solver: SolverOptions) -> list[NewtonInfo]:
-        """Set the trainable parameters to the minimiser of :meth:`training_loss` by Newton's
-        method (convex banks only); returns each node's solver outcome.
+        """Set the trainable parameters to the minimiser of :meth:`training_loss`.
+
+        By Newton's method (convex banks only).
+
+        Args:
+            data: every node's training data (on the bank's device).
+            solver: the solver's tolerances.
+
+        Returns:
+            Each node's solver outcome.
         """
         raise NotImplementedError(f"predictor {self.kind!r} is not convex")
 
@@ -210,6 +274,7 @@ class ProgressPredictor(nn.Module):
         return {"kind": self.kind, "n_nodes": self.n_nodes, "n_parameters": self.n_parameters()}
 
     def n_parameters(self) -> int:
+        """The number of parameter entries (trainable or not)."""
         return sum(p.numel() for p in self.parameters())
 
     def shape_spec(self) -> dict[str, Any]:

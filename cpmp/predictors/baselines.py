@@ -23,15 +23,17 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
+from sklearn.linear_model import LogisticRegression
 
 from cpmp.config.predictors import (
     RegressionClipConfig,
     SklearnKLRConfig,
     TimePhaseConfig,
 )
+from cpmp.config.trainer import SolverOptions
 from cpmp.predictors.base import NodeData
 from cpmp.predictors.klr import KLRPredictor
-from cpmp.predictors.newton import NewtonInfo, SolverOptions, penalised_loss
+from cpmp.predictors.newton import NewtonInfo, penalised_loss
 
 
 class SklearnKLRPredictor(KLRPredictor):
@@ -48,19 +50,26 @@ class SklearnKLRPredictor(KLRPredictor):
     def solve_convex(
         self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
     ) -> list[NewtonInfo]:
-        """Fit each node's weights and bias with ``LogisticRegression`` on its kernel features
-        ``(P, S)`` (two weighted copies per sample); report scikit-learn's iterations and the
-        max-norm of the gradient of ``klr``'s loss at the result.
-        """
-        from sklearn.linear_model import LogisticRegression
+        """Fit each node's weights and bias with scikit-learn's ``LogisticRegression``.
 
+        On its kernel features ``(P, S)``, two weighted copies per sample.
+
+        Args:
+            data: every node's training data.
+            solver: unused (scikit-learn's own solver and tolerance apply).
+            kernels: each node's ``(P_i, S)`` kernel (default: the cached ones).
+
+        Returns:
+            Per node scikit-learn's iterations and the max-norm of the gradient of ``klr``'s
+            loss at the result.
+        """
         c = self.config
 
         def solve(i: int, k: torch.Tensor, phi: torch.Tensor) -> tuple:
             n = k.shape[0]
-            features = torch.cat([k, k]).numpy()
+            features = torch.cat([k, k]).numpy(force=True)
             classes = np.concatenate([np.ones(n), np.zeros(n)])
-            sample_weight = torch.cat([phi, 1.0 - phi]).numpy()
+            sample_weight = torch.cat([phi, 1.0 - phi]).numpy(force=True)
             model = LogisticRegression(
                 C=1.0 / (n * c.l2) if c.l2 > 0 else np.inf,
                 fit_intercept=c.bias,
@@ -69,7 +78,7 @@ class SklearnKLRPredictor(KLRPredictor):
                 max_iter=c.sklearn_max_iter,
             )
             model.fit(features, classes, sample_weight=sample_weight)
-            w = torch.as_tensor(model.coef_[0], dtype=torch.float64)
+            w = torch.as_tensor(model.coef_[0], dtype=torch.float64, device=k.device)
             b = float(model.intercept_[0]) if c.bias else float(self.bias[i])
             return w, b, self._report(k, phi, w, b, int(np.max(model.n_iter_)))
 
@@ -90,6 +99,7 @@ class SklearnKLRPredictor(KLRPredictor):
         return NewtonInfo(iterations, float(grad.abs().max()), float("nan"), loss, converged)
 
     def summary(self) -> dict[str, Any]:
+        """The kernel bank's facts and scikit-learn's solver."""
         out = super().summary()
         out["sklearn_solver"] = self.config.sklearn_solver
         return out
@@ -110,17 +120,24 @@ class RegressionClipPredictor(KLRPredictor):
     config: RegressionClipConfig
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        """``logit(clip(K w + b, 0, 1))`` ``(B, heads)`` of the first ``heads`` nodes."""
         return _clipped_logit(super().head_logits(z, heads))
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        """``logit(clip(K w + b, 0, 1))`` ``(B,)`` of node ``i``."""
         return _clipped_logit(super().node_logits(z, i))
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
         """Sum over nodes of ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (unclipped output)."""
-        total = torch.zeros((), dtype=self.dtype_)
+        total = torch.zeros((), dtype=self.dtype_, device=self.weight.device)
         for i, (node, kern) in enumerate(zip(data, self.node_kernels(data), strict=True)):
             w = self.weight[i] * self.support_mask[i]
-            residual = kern @ w + self.bias[i] - node.target
+            target = node.target
+            if rows is not None:
+                kern, target = kern[rows[i]], target[rows[i]]
+            residual = kern @ w + self.bias[i] - target
             total = total + 0.5 * (residual * residual).mean()
             total = total + 0.5 * self.config.l2 * (w * w).sum()
         return total
@@ -128,16 +145,26 @@ class RegressionClipPredictor(KLRPredictor):
     def solve_convex(
         self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
     ) -> list[NewtonInfo]:
-        """Closed-form ridge solution per node: ``(XᵀX / n + R) θ = Xᵀ φ / n`` with
-        ``X = [K, 1]`` and ``R = diag(l2, ..., l2, 0)``; one Cholesky solve (least squares if
-        the system is singular, e.g. for ``l2 = 0`` with repeated supports).
+        """Closed-form ridge solution per node: ``(XᵀX / n + R) θ = Xᵀ φ / n``.
+
+        With ``X = [K, 1]`` and ``R = diag(l2, ..., l2, 0)``; one Cholesky solve (least squares
+        if the system is singular, e.g. for ``l2 = 0`` with repeated supports).
+
+        Args:
+            data: every node's training data.
+            solver: unused (the solution is exact).
+            kernels: each node's ``(P_i, S)`` kernel (default: the cached ones).
+
+        Returns:
+            Per node one "iteration" and the max-norm of the gradient at the solution.
         """
 
         def solve(i: int, k: torch.Tensor, y: torch.Tensor) -> tuple:
             n = k.shape[0]
+            f64 = {"dtype": torch.float64, "device": k.device}
             offset = 0.0 if self.config.bias else float(self.bias[i])
-            x = torch.cat([k, torch.ones(n, 1, dtype=torch.float64)], 1) if self.config.bias else k
-            reg = torch.full((x.shape[1],), float(self.config.l2), dtype=torch.float64)
+            x = torch.cat([k, torch.ones(n, 1, **f64)], 1) if self.config.bias else k
+            reg = torch.full((x.shape[1],), float(self.config.l2), **f64)
             if self.config.bias:
                 reg[-1] = 0.0
             gram = x.T @ x / n + torch.diag(reg)
@@ -165,9 +192,17 @@ def _solve_nodes(
     kernels: list[torch.Tensor] | None,
     solve: Callable[[int, torch.Tensor, torch.Tensor], tuple[torch.Tensor, float, NewtonInfo]],
 ) -> list[NewtonInfo]:
-    """Fit every node of a kernel bank by ``solve(i, K_i (P, S_i), target (P,))`` -> (weights
-    ``(S_i,)``, bias, outcome) on its real supports (default kernels: the cached ones), then
-    write all weights and biases into the bank; returns the outcomes.
+    """Fit every node of a kernel bank by ``solve`` and write the weights into the bank.
+
+    Args:
+        bank: the kernel bank.
+        data: every node's training data.
+        kernels: each node's ``(P_i, S)`` kernel (default: the cached ones).
+        solve: ``solve(i, K_i (P, S_i), target (P,))`` -> (weights ``(S_i,)``, bias,
+            outcome) of node ``i`` on its real supports.
+
+    Returns:
+        Each node's outcome.
     """
     kernels = bank.node_kernels(data) if kernels is None else kernels
     weight = torch.zeros_like(bank.weight, requires_grad=False)
@@ -192,8 +227,9 @@ def _clipped_logit(raw: torch.Tensor) -> torch.Tensor:
 
 
 class TimePhasePredictor(KLRPredictor):
-    """``time_phase``: ``klr`` trained on normalised elapsed time (:func:`cpmp.progress.
-    time_labels`) instead of the L1 line integral of eq. 1.
+    """``time_phase``: ``klr`` trained on normalised elapsed time instead of eq. 1.
+
+    The labels are :func:`cpmp.progress.time_labels`, not the L1 line integral.
     """
 
     kind: ClassVar[str] = "time_phase"

@@ -38,9 +38,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
+from dtw import asymmetric, dtw
 from torch.nn import functional as F
 
 from cpmp.config.predictors import DTWConfig
+from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.base import (
     START_PREFIX,
@@ -48,7 +50,7 @@ from cpmp.predictors.base import (
     NodeKey,
     ProgressPredictor,
 )
-from cpmp.predictors.newton import NewtonInfo, SolverOptions
+from cpmp.predictors.newton import NewtonInfo
 from cpmp.progress import expected_progress
 
 SEPARATOR = 2
@@ -57,8 +59,10 @@ step pattern skips at most one)."""
 
 
 def window_ticks(newest: int, window: int, stride: int) -> np.ndarray:
-    """Ticks of the window points at tick ``newest``, oldest first: ``newest`` and every
-    ``stride``-th tick before it, within the last ``window`` ticks and not before tick 0.
+    """Ticks of the window points at tick ``newest``, oldest first.
+
+    ``newest`` and every ``stride``-th tick before it, within the last ``window`` ticks and
+    not before tick 0.
     """
     return np.arange(newest, max(newest - window, -1), -stride)[::-1]
 
@@ -99,8 +103,9 @@ def interpolate_progress(
 
 
 class _Streams:
-    """Distances of the last ``span`` ticks of ``n`` streams to every reference sample, in a
-    ring buffer ``(n, span, R)``.
+    """Distances of the last ``span`` ticks of ``n`` streams to every reference sample.
+
+    Kept in a ring buffer ``(n, span, R)``.
     """
 
     def __init__(self, n: int, span: int, n_reference: int) -> None:
@@ -153,12 +158,14 @@ class DTWPredictor(ProgressPredictor):
         self._steps_cache: tuple[tuple[int, ...], np.ndarray] | None = None
 
     def shape_spec(self) -> dict[str, Any]:
+        """The number of kept reference samples ``R``."""
         return {"n_reference": int(self.reference.shape[0])}
 
     # ----------------------------------------------------------------------------- fitting
     def _thin(self, n: int) -> np.ndarray:
-        """Indices of the kept samples of an activation of ``n`` samples: every ``stride``-th
-        and the last, at most ``max_reference`` (evenly thinned).
+        """Indices of the kept samples of an activation of ``n`` samples.
+
+        Every ``stride``-th and the last, at most ``max_reference`` (evenly thinned).
         """
         c = self.config
         idx = np.arange(0, n, c.stride)
@@ -169,8 +176,9 @@ class DTWPredictor(ProgressPredictor):
         return idx
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
-        """Store every node's thinned activations (scaled features) and their expected
-        progress; start heads share their node's reference.
+        """Store every node's thinned activations (scaled features) and expected progress.
+
+        Start heads share their node's reference.
         """
         refs, progress, columns, ranges = [], [], [], []
         seen: dict[NodeKey, tuple[int, int]] = {}
@@ -204,25 +212,44 @@ class DTWPredictor(ProgressPredictor):
         """Nothing to solve: the references were stored by :meth:`initialize`."""
         return []
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        """Sum over nodes of the mean soft BCE (eq. 5) of φ against expected progress when each
-        training activation is replayed (as a fresh stream) against the node's own references,
-        scored at every ``stride``-th tick and the last one (:meth:`replay`). Cached for the
-        same ``data`` list (the fit asks twice).
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
+        """Sum over nodes of the mean soft BCE (eq. 5) of φ against expected progress.
+
+        Each training activation is replayed (as a fresh stream) against the node's own
+        references and scored at every ``stride``-th tick and the last one (:meth:`replay`).
+        Cached for the same ``data`` list (the fit asks twice).
+
+        Args:
+            data: every node's training data.
+            rows: must be ``None``: the replay scores whole activations (full batch only).
+
+        Returns:
+            The scalar loss.
+
+        Raises:
+            ConfigError: ``rows`` given.
         """
+        if rows is not None:
+            raise ConfigError("the dtw predictor scores whole activations: no mini-batches")
         if self._loss_cache is not None and self._loss_cache[0] is data:
             return self._loss_cache[1]
-        total = torch.zeros((), dtype=self.dtype_)
+        total = self._tensor(0.0)
         for i, node in enumerate(data):
             phi, target = [], []
             for act in node.activations:
-                z = torch.as_tensor(np.asarray(act), dtype=self.dtype_)
+                z = self._tensor(np.asarray(act))
                 ticks = self._scored_ticks(len(act))
-                phi.append(torch.as_tensor(self.replay(z, i, ticks), dtype=self.dtype_))
-                target.append(torch.as_tensor(expected_progress(act)[ticks], dtype=self.dtype_))
+                phi.append(self._tensor(self.replay(z, i, ticks)))
+                target.append(self._tensor(expected_progress(act)[ticks]))
             total = total + F.binary_cross_entropy(torch.cat(phi), torch.cat(target))
         self._loss_cache = (data, total)
         return total
+
+    def _tensor(self, values: Any) -> torch.Tensor:
+        """``values`` (a NumPy array or a number) as a tensor of the bank's dtype and device."""
+        return torch.as_tensor(values, dtype=self.dtype_, device=self.reference.device)
 
     def _scored_ticks(self, n: int) -> np.ndarray:
         """Every ``stride``-th tick of ``n`` and the last one."""
@@ -242,8 +269,9 @@ class DTWPredictor(ProgressPredictor):
         return None if self._streams is None else self._streams.n
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        """One tick of every stream: scaled features ``z (n_streams, d)`` -> ``(n_streams, K)``
-        logits ``logit(φ)``.
+        """One tick of every stream: logits ``logit(φ)`` ``(n_streams, K)``.
+
+        ``z (n_streams, d)``: the streams' scaled features at this tick.
         """
         if self._streams is None:
             self.reset_state(int(z.shape[0]))
@@ -257,9 +285,9 @@ class DTWPredictor(ProgressPredictor):
         streams.push(self._distances(z))
         slots = streams.window(self.config.stride)
         starts, segment, head_segment = self._layout()
-        columns = self.column.numpy()
+        columns = self.column.numpy(force=True)
         width = int(columns[-1]) + 1
-        progress = self.reference_progress.numpy()
+        progress = self.reference_progress.numpy(force=True)
         steps = self._steps()
         phi = np.stack(
             [
@@ -269,29 +297,33 @@ class DTWPredictor(ProgressPredictor):
                 for b in range(streams.n)
             ]
         )
-        return torch.logit(torch.as_tensor(phi[:, head_segment], dtype=self.dtype_))
+        return torch.logit(self._tensor(phi[:, head_segment]))
 
     def _layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The heads' reference ranges as segments: first sample of each distinct range
-        ``(U,)``, segment of each reference sample ``(R,)`` and of each head ``(K,)`` (start
-        heads share their node's). Cached until ``head_range`` changes.
+        """The heads' reference ranges as segments.
+
+        First sample of each distinct range ``(U,)``, segment of each reference sample
+        ``(R,)`` and of each head ``(K,)`` (start heads share their node's). Cached until
+        ``head_range`` changes.
         """
         key = (id(self.head_range), self.head_range._version)
         if self._layout_cache is None or self._layout_cache[0] != key:
-            ranges = self.head_range.numpy()
+            ranges = self.head_range.numpy(force=True)
             distinct, head_segment = np.unique(ranges, axis=0, return_inverse=True)
             segment = np.repeat(np.arange(len(distinct)), distinct[:, 1] - distinct[:, 0])
             self._layout_cache = (key, (distinct[:, 0], segment, head_segment.reshape(-1)))
         return self._layout_cache[1]
 
     def _steps(self) -> np.ndarray:
-        """``(R,)`` distance from each kept reference sample to the next kept sample of the same
-        activation (scaled feature units); ``nan`` at an activation's last sample. Cached until
+        """``(R,)`` distance from each kept reference sample to the next one of its activation.
+
+        In scaled feature units; ``nan`` at an activation's last sample. Cached until
         ``reference`` or ``column`` changes.
         """
         key = (id(self.reference), self.reference._version, id(self.column), self.column._version)
         if self._steps_cache is None or self._steps_cache[0] != key:
-            reference, column = self.reference.numpy(), self.column.numpy()
+            reference = self.reference.numpy(force=True)
+            column = self.column.numpy(force=True)
             steps = np.full(len(column), np.nan)
             same = column[1:] == column[:-1] + 1
             lengths = np.linalg.norm(np.diff(reference, axis=0), axis=1)
@@ -300,15 +332,16 @@ class DTWPredictor(ProgressPredictor):
         return self._steps_cache[1]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
-        """Logits ``(B,)`` of node ``i`` when the rows of ``z (B, d)`` are the consecutive
-        ticks of one fresh stream (the live streams are left alone). A self-check for long
-        training sets, so aligned only at every ``stride``-th tick and the last one, each
-        value held until the next aligned tick.
+        """Logits ``(B,)`` of node ``i``, the rows of ``z (B, d)`` one fresh stream's ticks.
+
+        The live streams are left alone. A self-check for long training sets, so aligned only
+        at every ``stride``-th tick and the last one, each value held until the next aligned
+        tick.
         """
         ticks = self._scored_ticks(int(z.shape[0])) if z.shape[0] else np.zeros(0, np.int64)
         phi = self.replay(z, i, ticks)
         held = np.searchsorted(ticks, np.arange(z.shape[0]), side="right") - 1
-        return torch.logit(torch.as_tensor(phi[held], dtype=self.dtype_))
+        return torch.logit(self._tensor(phi[held]))
 
     def _distances(self, z: torch.Tensor, lo: int = 0, hi: int | None = None) -> np.ndarray:
         """Euclidean distances ``(B, R)`` of ``z (B, d)`` to the reference samples ``lo:hi``."""
@@ -317,15 +350,17 @@ class DTWPredictor(ProgressPredictor):
             self.reference[lo:hi],
             compute_mode="donot_use_mm_for_euclid_dist",
         )
-        return dist.to(torch.float64).numpy()
+        return dist.to(torch.float64).numpy(force=True)
 
     def replay(self, z: torch.Tensor, i: int, ticks: np.ndarray | None = None) -> np.ndarray:
-        """φ of node ``i`` at ``ticks`` (default: every tick) of one fresh stream whose
-        consecutive ticks are the rows of ``z (B, d)`` (scaled features), aligned against node
-        ``i``'s references only; the live streams are left alone. Returns ``(len(ticks),)``.
+        """φ ``(len(ticks),)`` of node ``i`` at ``ticks`` of one fresh stream.
+
+        The stream's consecutive ticks are the rows of ``z (B, d)`` (scaled features), aligned
+        against node ``i``'s references only; the live streams are left alone. ``ticks``:
+        default every tick.
         """
         lo, hi = self.head_range[i].tolist()
-        columns = self.column[lo:hi].numpy()
+        columns = self.column[lo:hi].numpy(force=True)
         columns = columns - columns[0]
         width = int(columns[-1]) + 1
         ticks = np.arange(z.shape[0]) if ticks is None else np.asarray(ticks, dtype=np.int64)
@@ -338,7 +373,7 @@ class DTWPredictor(ProgressPredictor):
         dist = np.zeros((z.shape[0], hi - lo))
         if len(needed):
             dist[needed] = self._distances(z[torch.as_tensor(needed)], lo, hi)
-        progress = self.reference_progress[lo:hi].numpy()
+        progress = self.reference_progress[lo:hi].numpy(force=True)
         steps = self._steps()[lo:hi]
         starts, segment = np.zeros(1, np.int64), np.zeros(hi - lo, np.int64)
         return np.array(
@@ -366,16 +401,15 @@ class DTWPredictor(ProgressPredictor):
         progress: np.ndarray,
         steps: np.ndarray,
     ) -> np.ndarray:
-        """φ ``(U,)`` per segment of reference samples (contiguous, in order: first samples
-        ``starts (U,)``, ``segment (R,)`` of each sample): the ``progress (R,)`` at the sample
-        where the cheapest open-begin, open-end alignment of the window ``dist (n_w, R)``
-        (distances of the window points, oldest first, to the reference samples laid out at
-        ``columns (R,)`` of a ``width``-column cost matrix) ends within that segment,
-        interpolated towards its neighbours (:func:`interpolate_progress`, ``steps (R,)`` as
-        :meth:`_steps`).
-        """
-        from dtw import asymmetric, dtw
+        """φ ``(U,)`` per segment of reference samples, by open-end DTW of one window.
 
+        Segments are contiguous, in order (first samples ``starts (U,)``, ``segment (R,)`` of
+        each sample). φ is the ``progress (R,)`` at the sample where the cheapest open-begin,
+        open-end alignment of the window ``dist (n_w, R)`` (distances of the window points,
+        oldest first, to the reference samples laid out at ``columns (R,)`` of a
+        ``width``-column cost matrix) ends within that segment, interpolated towards its
+        neighbours (:func:`interpolate_progress`, ``steps (R,)`` as :meth:`_steps`).
+        """
         local = np.full((dist.shape[0], width), np.inf)
         local[:, columns] = dist
         result = dtw(
@@ -392,6 +426,7 @@ class DTWPredictor(ProgressPredictor):
         return interpolate_progress(hit[first], dist[-1], steps, progress)
 
     def summary(self) -> dict[str, Any]:
+        """The base facts, the reference size and the window."""
         out = super().summary()
         out["n_reference"] = int(self.reference.shape[0])
         out["window"] = self.config.window

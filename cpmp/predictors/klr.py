@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from cpmp.config.predictors import KLRConfig, SparseKLRConfig
+from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
     START_PREFIX,
@@ -26,7 +27,7 @@ from cpmp.predictors.base import (
     ProgressPredictor,
     soft_bce,
 )
-from cpmp.predictors.newton import NewtonInfo, SolverOptions, newton_fit
+from cpmp.predictors.newton import NewtonInfo, newton_fit
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
 
 
@@ -53,17 +54,20 @@ class KLRPredictor(ProgressPredictor):
         self._packed_cache: tuple[tuple, tuple[Any, ...], dict[int, tuple]] | None = None
 
     def shape_spec(self) -> dict[str, Any]:
+        """The padded support count ``S``."""
         return {"n_support": int(self.support.shape[1])}
 
     def feature_weights(self) -> torch.Tensor:
-        """Per-node, per-feature kernel weights ``(K, d)``: γ times the feature scale (all ones
-        for the isotropic kernel).
+        """Per-node, per-feature kernel weights ``(K, d)``.
+
+        γ times the feature scale (all ones for the isotropic kernel).
         """
         return self.gamma * self.feature_scale
 
     def kernel(self, z: torch.Tensor) -> torch.Tensor:
-        """RBF kernel of scaled features ``z (B, d)`` with every node's supports: ``(B, K, S)``
-        (padded slots are 0).
+        """RBF kernel ``(B, K, S)`` of scaled features ``z (B, d)`` with every node's supports.
+
+        Padded slots are 0.
         """
         a = self.feature_weights()
         s = self.support
@@ -74,11 +78,13 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq) * self.support_mask
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
+        """Logits ``(B, K)`` of every node for scaled features ``z (B, d)``."""
         return self.head_logits(z, self.n_nodes)
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """Logits ``(B, heads)`` of the first ``heads`` nodes over their packed (unpadded)
-        supports.
+        """Logits ``(B, heads)`` of the first ``heads`` nodes over their packed supports.
+
+        The packed supports are the real ones, without padding.
 
         With ``a_n`` the kernel weights of support ``n``'s node,
         ``Σ_j a_nj (z_j - s_nj)² = a_n · z² - 2 z · (a_n s_n) + a_n · s_n²``: one small product
@@ -95,8 +101,9 @@ class KLRPredictor(ProgressPredictor):
         return out.index_add(1, node, terms) + self.bias[:heads]
 
     def _packed(self, heads: int) -> tuple[torch.Tensor, ...]:
-        """The real (unpadded) supports of the first ``heads`` nodes, grouped by node: kernel
-        weights ``a[:heads]ᵀ (d, heads)``, node index ``(N,)``, ``a_n s_n (N, d)``,
+        """The real (unpadded) supports of the first ``heads`` nodes, grouped by node.
+
+        Kernel weights ``a[:heads]ᵀ (d, heads)``, node index ``(N,)``, ``a_n s_n (N, d)``,
         ``a_n · s_n² (N,)`` and weights ``(N,)``. Cached per ``heads`` while no gradient is
         needed, keyed on the identity and version counter of every tensor they derive from.
         """
@@ -153,6 +160,7 @@ class KLRPredictor(ProgressPredictor):
             )
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        """Place every node's supports along its activations (and its path feature weights)."""
         self._check_support_budget(data)
         per_node = [self._supports_for(node) for node in data]
         self._set_supports(per_node)
@@ -190,16 +198,21 @@ class KLRPredictor(ProgressPredictor):
         self.support = support
 
     def node_kernels(self, data: list[NodeData]) -> list[torch.Tensor]:
-        """Kernel matrix ``(P_i, S)`` of each node's samples against its own supports."""
-        if self._cache is None:
+        """Kernel matrix ``(P_i, S)`` of each node's samples against its own supports.
+
+        Computed once per fit (and again after the bank moves to another device); the
+        supports and kernel weights must not change in between.
+        """
+        if self._cache is None or self._cache[0].device != self.support.device:
             with torch.no_grad():
                 self._cache = [self.node_kernel(i, node.x) for i, node in enumerate(data)]
         return self._cache
 
     def node_kernel(self, i: int, x: torch.Tensor) -> torch.Tensor:
-        """Kernel ``(P, S)`` of samples ``x (P, d)`` against node ``i``'s supports (padded slots
-        0), with ``Σ_j a_j (x_j - s_j)² = a · x² - 2 x · (a s) + a · s²``: one matrix product
-        instead of a ``(P, S, d)`` difference tensor.
+        """Kernel ``(P, S)`` of samples ``x (P, d)`` against node ``i``'s supports.
+
+        Padded slots are 0. ``Σ_j a_j (x_j - s_j)² = a · x² - 2 x · (a s) + a · s²``: one matrix
+        product instead of a ``(P, S, d)`` difference tensor.
         """
         a = self.feature_weights()[i]
         weighted = a * self.support[i]
@@ -208,21 +221,39 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq.clamp_min(0.0)) * self.support_mask[i]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        """Logits ``(B,)`` of node ``i`` for scaled features ``z (B, d)``."""
         return self.node_kernel(i, z) @ self.weight[i] + self.bias[i]
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        return self._penalised_loss(data, self.node_kernels(data))
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
+        """Mean soft BCE (eq. 5) plus ``½ l2 ||w||²`` per node, summed (see the base class)."""
+        return self._penalised_loss(data, _rows_of(self.node_kernels(data), rows), rows=rows)
 
     def _penalised_loss(
-        self, data: list[NodeData], kernels: list[torch.Tensor], l1: float = 0.0
+        self,
+        data: list[NodeData],
+        kernels: list[torch.Tensor],
+        l1: float = 0.0,
+        rows: list[torch.Tensor] | None = None,
     ) -> torch.Tensor:
-        """Sum over nodes of the mean soft BCE (eq. 5) given each node's kernel matrix
-        ``(P_i, S)``, plus ``½ l2 ||w||²`` and, if ``l1 > 0``, ``l1 · mean |w|`` per node.
+        """Sum over nodes of the penalised soft-label loss given each node's kernel matrix.
+
+        Args:
+            data: every node's training data.
+            kernels: per node the kernel ``(P_i, S)`` of its samples (``(b_i, S)``: of the
+                mini-batch's rows when ``rows`` is given).
+            l1: weight of the ``l1 · mean |w|`` term per node (0: none).
+            rows: per node the mini-batch's rows ``(b_i,)`` (``None``: every sample).
+
+        Returns:
+            Σ over nodes of the mean soft BCE (eq. 5) + ``½ l2 ||w||²`` (+ the L1 term).
         """
-        total = torch.zeros((), dtype=self.dtype_)
+        total = torch.zeros((), dtype=self.dtype_, device=self.weight.device)
         for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
             w = self.weight[i] * self.support_mask[i]
-            total = total + soft_bce(kern @ w + self.bias[i], node.target)
+            target = node.target if rows is None else node.target[rows[i]]
+            total = total + soft_bce(kern @ w + self.bias[i], target)
             total = total + 0.5 * self.config.l2 * (w * w).sum()
             if l1 > 0.0:
                 total = total + l1 * w.abs().sum() / self.support_mask[i].sum().clamp_min(1)
@@ -231,8 +262,15 @@ class KLRPredictor(ProgressPredictor):
     def solve_convex(
         self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
     ) -> list[NewtonInfo]:
-        """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias with the kernel
-        fixed; ``kernels``: each node's ``(P_i, S)`` kernel (default: the cached ones).
+        """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias, kernel fixed.
+
+        Args:
+            data: every node's training data.
+            solver: the solver's tolerances.
+            kernels: each node's ``(P_i, S)`` kernel (default: the cached ones).
+
+        Returns:
+            Each node's solver outcome.
         """
         kernels = self.node_kernels(data) if kernels is None else kernels
         masks = list(self.support_mask)
@@ -256,17 +294,26 @@ class KLRPredictor(ProgressPredictor):
         return infos
 
     def support_counts(self) -> dict[str, int]:
+        """Real supports per node, keyed ``"variable/mp"``."""
         return {
             f"{v}/{mp}": int(n)
             for (v, mp), n in zip(self.node_keys, self.support_mask.sum(1).tolist(), strict=True)
         }
 
     def summary(self) -> dict[str, Any]:
+        """The base facts and the support counts (per node and in total)."""
         out = super().summary()
         counts = self.support_counts()
         out["support_counts"] = counts
         out["n_support_total"] = sum(counts.values())
         return out
+
+
+def _rows_of(kernels: list[torch.Tensor], rows: list[torch.Tensor] | None) -> list[torch.Tensor]:
+    """Each node's kernel ``(P_i, S)`` cut to its mini-batch rows ``(b_i,)`` (``None``: all)."""
+    if rows is None:
+        return kernels
+    return [kern[r] for kern, r in zip(kernels, rows, strict=True)]
 
 
 class FullKLRPredictor(KLRPredictor):
@@ -275,7 +322,7 @@ class FullKLRPredictor(KLRPredictor):
     kind: ClassVar[str] = "klr_full"
 
     def _supports_for(self, node: NodeData) -> np.ndarray:
-        return node.x.detach().cpu().numpy()
+        return node.x.detach().numpy(force=True)
 
     def _support_total(self, data: list[NodeData]) -> int:
         return sum(int(node.x.shape[0]) for node in data)
@@ -306,6 +353,7 @@ class SparseKLRPredictor(KLRPredictor):
         """Per-node outcome of the last Newton re-fit (empty before one)."""
 
     def feature_weights(self) -> torch.Tensor:
+        """Per-node, per-feature kernel weights ``(K, d)``: γ times the learned scales."""
         return self.gamma * torch.exp(self.log_feature_scale)
 
     def _support_rule(self) -> tuple[float, int, int | None]:
@@ -318,17 +366,26 @@ class SparseKLRPredictor(KLRPredictor):
     def _learned_kernel(self) -> bool:
         return self.config.learn_positions or self.config.learn_lengthscales
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
+        """Penalised loss with the L1 term; a learned kernel is recomputed on every call."""
         if self._learned_kernel():
             self._cache = None
-            kernels = [self.node_kernel(i, node.x) for i, node in enumerate(data)]
+            kernels = [
+                self.node_kernel(i, node.x if rows is None else node.x[rows[i]])
+                for i, node in enumerate(data)
+            ]
         else:
-            kernels = self.node_kernels(data)
-        return self._penalised_loss(data, kernels, self.config.l1)
+            kernels = _rows_of(self.node_kernels(data), rows)
+        return self._penalised_loss(data, kernels, self.config.l1, rows)
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
-        """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights
-        by ``solver`` (default: Newton).
+        """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights.
+
+        Args:
+            data: every node's training data.
+            solver: how the convex re-fit is solved (default: Newton).
         """
         with torch.no_grad():
             w = (self.weight * self.support_mask).abs()
@@ -338,9 +395,10 @@ class SparseKLRPredictor(KLRPredictor):
             if empty.any():
                 keep[empty] = self.support_mask[empty] & (w[empty] == w[empty].max(1, True).values)
             s_max = int(keep.sum(1).max())
-            support = torch.zeros(self.n_nodes, s_max, self.n_features, dtype=self.dtype_)
-            weight = torch.zeros(self.n_nodes, s_max, dtype=self.dtype_)
-            mask = torch.zeros(self.n_nodes, s_max, dtype=torch.bool)
+            on = {"device": self.weight.device}
+            support = torch.zeros(self.n_nodes, s_max, self.n_features, dtype=self.dtype_, **on)
+            weight = torch.zeros(self.n_nodes, s_max, dtype=self.dtype_, **on)
+            mask = torch.zeros(self.n_nodes, s_max, dtype=torch.bool, **on)
             for i in range(self.n_nodes):
                 idx = torch.nonzero(keep[i]).squeeze(1)
                 support[i, : len(idx)] = self.support[i, idx]
@@ -356,8 +414,9 @@ class SparseKLRPredictor(KLRPredictor):
             self._refit(data, solver or SolverOptions())
 
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
-        """Convex re-fit of weights and bias on the surviving (fixed) supports, without the L1
-        shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``.
+        """Convex re-fit of weights and bias on the surviving (fixed) supports.
+
+        Without the L1 shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``.
         """
         kernels = self.node_kernels(data)
         if solver.method == "newton":
@@ -381,6 +440,7 @@ class SparseKLRPredictor(KLRPredictor):
         opt.step(closure)
 
     def summary(self) -> dict[str, Any]:
+        """The kernel bank's facts and which kernel parts were learned."""
         out = super().summary()
         out["learn_positions"] = self.config.learn_positions
         out["learn_lengthscales"] = self.config.learn_lengthscales

@@ -51,9 +51,11 @@ class MLPPredictor(ProgressPredictor):
                 b.zero_()
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
+        """Logits ``(B, K)`` of every node for scaled features ``z (B, d)``."""
         return self.head_logits(z, self.n_nodes)
 
     def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
+        """Logits ``(B, heads)`` of the first ``heads`` MLPs (one batched einsum per layer)."""
         h = z[:, None, :].expand(-1, heads, -1)
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
@@ -63,6 +65,7 @@ class MLPPredictor(ProgressPredictor):
         return h[..., 0]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        """Logits ``(B,)`` of node ``i``'s MLP for scaled features ``z (B, d)``."""
         h = z
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
@@ -71,15 +74,22 @@ class MLPPredictor(ProgressPredictor):
                 h = self._act(h)
         return h[:, 0]
 
-    def training_loss(self, data: list[NodeData]) -> torch.Tensor:
-        total = torch.zeros((), dtype=self.dtype_)
+    def training_loss(
+        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
+        """Mean soft BCE (eq. 5) plus ``½ weight_decay ||W||²`` per node, summed."""
+        total = torch.zeros((), dtype=self.dtype_, device=self.biases[0].device)
         for i, node in enumerate(data):
-            total = total + soft_bce(self.node_logits(node.x, i), node.target)
+            x, target = (
+                (node.x, node.target) if rows is None else (node.x[rows[i]], node.target[rows[i]])
+            )
+            total = total + soft_bce(self.node_logits(x, i), target)
             penalty = sum((w[i] * w[i]).sum() for w in self.weights)
             total = total + 0.5 * self.config.weight_decay * penalty
         return total
 
     def summary(self) -> dict[str, Any]:
+        """The base facts and the hidden layer sizes."""
         out = super().summary()
         out["hidden"] = list(self.config.hidden)
         return out

@@ -32,22 +32,6 @@ _EPS = torch.finfo(torch.float64).eps
 
 
 @dataclass(frozen=True)
-class SolverOptions:
-    """How convex weight fits are solved.
-
-    Attributes:
-        method: ``newton`` (this module) or ``lbfgs`` (torch's LBFGS, strong Wolfe).
-        tol: Newton stops when the gradient's max-norm or the Newton decrement
-            ``λ = sqrt(gᵀ H⁻¹ g)`` is at most ``tol``.
-        max_iter: Newton iterations per node at most.
-    """
-
-    method: str = "newton"
-    tol: float = NEWTON_TOL
-    max_iter: int = NEWTON_MAX_ITER
-
-
-@dataclass(frozen=True)
 class NewtonInfo:
     """Outcome of one node's Newton solve.
 
@@ -68,8 +52,10 @@ class NewtonInfo:
 
 
 def bce_terms(z: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """Per-sample soft-label BCE from logits ``z (n,)`` and labels ``y (n,)``, computed as
-    :func:`torch.nn.functional.binary_cross_entropy_with_logits` does (no softplus cut-off).
+    """Per-sample soft-label BCE ``(n,)`` from logits ``z (n,)`` and labels ``y (n,)``.
+
+    Computed as :func:`torch.nn.functional.binary_cross_entropy_with_logits` does (no
+    softplus cut-off).
     """
     return z.clamp_min(0.0) - z * y + torch.log1p(torch.exp(-z.abs()))
 
@@ -88,13 +74,15 @@ def penalised_loss(
 
 
 def _newton_direction(hessian: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
-    """``-H⁻¹ g`` by Cholesky; if ``H`` is not numerically positive definite, with growing
-    diagonal jitter, and as a last resort by least squares.
+    """The Newton direction ``-H⁻¹ g``.
+
+    By Cholesky; if ``H`` is not numerically positive definite, with growing diagonal
+    jitter, and as a last resort by least squares.
     """
     chol, info = torch.linalg.cholesky_ex(hessian)
     if int(info) == 0:
         return -torch.cholesky_solve(grad[:, None], chol)[:, 0]
-    eye = torch.eye(hessian.shape[0], dtype=hessian.dtype)
+    eye = torch.eye(hessian.shape[0], dtype=hessian.dtype, device=hessian.device)
     jitter = 1e-12 * max(float(hessian.diagonal().abs().max()), 1.0)
     for _ in range(8):
         chol, info = torch.linalg.cholesky_ex(hessian + jitter * eye)
@@ -122,7 +110,8 @@ def newton_solve(
         target: ``(n,)`` soft labels in [0, 1].
         l2: weight of ``½ l2 ||w||²`` (the bias is not penalised).
         weight: ``(n,)`` per-sample weights ``c``; ``None``: ``1/n`` each (mean BCE).
-        w0, b0: starting point (``None``: zeros); ``b0`` is kept fixed when ``fit_bias`` is off.
+        w0: ``(S,)`` starting weights (``None``: zeros).
+        b0: starting bias, kept fixed when ``fit_bias`` is off.
         fit_bias: optimise the bias too.
         tol: stop when ``max|g| <= tol`` or the Newton decrement ``λ <= tol``.
         max_iter: Newton steps at most.
@@ -132,16 +121,17 @@ def newton_solve(
     """
     k = kernel.detach().to(torch.float64)
     n, s = k.shape
-    y = target.detach().to(torch.float64)
-    c = torch.full((n,), 1.0 / max(n, 1), dtype=torch.float64) if weight is None else weight
-    c = c.detach().to(torch.float64)
-    x = torch.cat([k, torch.ones(n, 1, dtype=torch.float64)], 1) if fit_bias else k
-    reg = torch.full((x.shape[1],), float(l2), dtype=torch.float64)
+    f64 = {"dtype": torch.float64, "device": k.device}
+    y = target.detach().to(**f64)
+    c = torch.full((n,), 1.0 / max(n, 1), **f64) if weight is None else weight
+    c = c.detach().to(**f64)
+    x = torch.cat([k, torch.ones(n, 1, **f64)], 1) if fit_bias else k
+    reg = torch.full((x.shape[1],), float(l2), **f64)
     if fit_bias:
         reg[-1] = 0.0
-    theta = torch.zeros(x.shape[1], dtype=torch.float64)
+    theta = torch.zeros(x.shape[1], **f64)
     if w0 is not None:
-        theta[:s] = w0.detach().to(torch.float64)
+        theta[:s] = w0.detach().to(**f64)
     offset = 0.0 if fit_bias else float(b0)
     if fit_bias:
         theta[-1] = float(b0)
@@ -205,7 +195,9 @@ def newton_fit(
         l2: L2 weight on ``w``, shared by all nodes.
         weights: per node ``(n_k,)`` sample weights (``None``: the mean over samples).
         init: per node starting ``(w (S_k,), b)`` (``None``: zeros).
-        fit_bias, tol, max_iter: as in :func:`newton_solve`.
+        fit_bias: optimise the biases too (as in :func:`newton_solve`).
+        tol: the stopping tolerance (as in :func:`newton_solve`).
+        max_iter: Newton steps per node at most.
 
     Returns:
         Per node ``(w (S_k,) float64, b)`` and a :class:`NewtonInfo`.

@@ -7,11 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
 
 from cpmp.config import predictor_config
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation.offline import activation_progress, progress_errors, stream_progress
+from cpmp.experiment.config import predictor_options
 from cpmp.graph import build_graphs
 from cpmp.predictors import make_predictor
 from cpmp.progress import time_labels
@@ -69,10 +71,6 @@ def test_held_out_progress_mae(fitted, test_demos, kind):
 
 @pytest.mark.parametrize("kind", BASELINES)
 def test_yaml_holds_the_dataclass_defaults(kind):
-    from hydra import compose, initialize_config_dir
-
-    from cpmp.experiment.config import predictor_options
-
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("experiment", overrides=[f"predictor={kind}"])
     name, options = predictor_options(cfg.predictor)

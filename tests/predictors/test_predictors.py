@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.predictors import make_predictor, predictor_from_spec
@@ -144,8 +145,6 @@ def test_spec_round_trip(fitted):
 
 
 def test_feature_scaling_minmax_is_affine_invariant(train_demos, test_demos):
-    from cpmp.data.demonstration import Demonstration
-
     shifted = [
         Demonstration(d.time, d.features * 50.0 + 3.0, d.labels, d.feature_names, d.name)
         for d in train_demos
@@ -178,8 +177,6 @@ def test_bad_options():
 
 
 def test_path_feature_weighting(train_demos, test_demos):
-    from cpmp.data.demonstration import Demonstration
-
     # add a nuisance feature, constant within each demo and different across demos
     rng = np.random.default_rng(0)
     noisy = [
