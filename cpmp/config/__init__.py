@@ -39,13 +39,12 @@ from cpmp.config.sequencer import (
     SequencerConfig,
 )
 from cpmp.config.task import TaskConfig
-from cpmp.config.trainer import LOGGERS, SOLVERS, SolverOptions, TrainerConfig
+from cpmp.config.trainer import SOLVERS, SolverOptions, TrainerConfig
 
 __all__ = [
     "ACTIVATIONS",
     "COUPLINGS",
     "FIT_OPTIONS",
-    "LOGGERS",
     "NONFINITE_POLICIES",
     "PREDICTOR_CONFIGS",
     "SCALINGS",

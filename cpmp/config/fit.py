@@ -1,5 +1,7 @@
-"""Everything :meth:`cpmp.sequencer.ConcurrentSequencer.fit` takes besides the demonstrations,
-typed: the predictor's kind and options, the transition rule, the trainer, the seed.
+"""What a sequencer is fitted with, typed: predictor kind and options, rule, trainer, seed.
+
+Everything :meth:`cpmp.sequencer.ConcurrentSequencer.fit` takes besides the demonstrations
+(and, at run time, the validation demonstrations and the logger).
 """
 
 from __future__ import annotations
@@ -66,9 +68,18 @@ class FitConfig:
 
     @classmethod
     def from_options(cls, predictor: str = "klr", **options: Any) -> FitConfig:
-        """The keyword form: ``options`` routed by name to the predictor's options, the
-        :class:`SequencerConfig`, the :class:`TrainerConfig` and the fit's own
-        (:data:`FIT_OPTIONS`); an unknown name is a :class:`ConfigError` listing the valid ones.
+        """The keyword form: ``options`` routed by name to the part that has them.
+
+        Args:
+            predictor: the predictor kind.
+            **options: options of the predictor, the :class:`SequencerConfig`, the
+                :class:`TrainerConfig` and the fit's own (:data:`FIT_OPTIONS`).
+
+        Returns:
+            The typed fit configuration.
+
+        Raises:
+            ConfigError: an unknown name (the message lists the valid ones) or a bad value.
         """
         names = {
             "predictor": set(predictor_option_names(predictor)),

@@ -1,6 +1,7 @@
-"""The jobs for your own demonstrations (no simulator): ``cpmp-train`` trains a sequencer from
-an HDF5 file of demonstrations, ``cpmp-evaluate`` evaluates a checkpoint offline on one and
-writes ``evaluation.json`` and ``evaluation.md``.
+"""The jobs for your own demonstrations (no simulator): ``cpmp-train`` and ``cpmp-evaluate``.
+
+``cpmp-train`` trains a sequencer from an HDF5 file of demonstrations, ``cpmp-evaluate``
+evaluates a checkpoint offline on one and writes ``evaluation.json`` and ``evaluation.md``.
 """
 
 from __future__ import annotations
@@ -9,22 +10,37 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from cpmp.baselines.goal_nearest import GoalNearestSequencer
+from cpmp.config.goal_nearest import KIND
+from cpmp.data.datafile import list_splits, load_demonstrations
 from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.evaluation.checkpoints import load_sequencer
 from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.config import job_fit_settings
 from cpmp.experiment.console import stage
 from cpmp.experiment.fitting import train_sequencer
+from cpmp.experiment.plots import plot_progress_curves
 from cpmp.experiment.report import predictor_entry, write_json
+from cpmp.io import atomic_write_text
 
 log = logging.getLogger(__name__)
 
 
 def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
-    """The ``data`` group's file (checked to exist) and split; ``split: auto`` means
-    ``auto_split`` when the file has that mask, else every demonstration.
-    """
-    from cpmp.data.datafile import list_splits
+    """The ``data`` group's file (checked to exist) and split.
 
+    Args:
+        cfg: the job's composed config.
+        auto_split: what ``split: auto`` means when the file has that mask (else every
+            demonstration).
+
+    Returns:
+        The file and the split (``None``: every demonstration).
+
+    Raises:
+        ConfigError: no ``data.path``.
+        CpmpFileError: the file does not exist.
+    """
     if not cfg.data.get("path"):
         raise ConfigError("data.path is required: give an HDF5 file of demonstrations")
     path = Path(str(cfg.data.path))
@@ -37,17 +53,27 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
 
 
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
-    """Train a sequencer from a demonstration file (its ``mask/train`` split when present) and
-    save ``model.pt`` into ``run_dir``; returns the checkpoint path.
+    """Train a sequencer from a demonstration file and save ``model.pt`` into ``run_dir``.
+
+    The file's ``mask/train`` split trains when present (else every demonstration); when it
+    trains on ``mask/train`` and the file has ``mask/test``, those demonstrations validate
+    the fit (their progress MAE is logged every epoch, ``val_mae`` in ``train_summary.json``).
+
+    Returns:
+        The checkpoint's path.
     """
     settings = job_fit_settings(cfg)
-    from cpmp.data.datafile import load_demonstrations
-
     path, split = _demo_file(cfg, "train")
     demos = load_demonstrations(path, split=split)
+    validation = None
+    if split == "train" and "test" in list_splits(path):
+        validation = load_demonstrations(path, split="test")
     run_dir = Path(run_dir)
-    with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'})"):
-        seq = train_sequencer(demos, settings, int(cfg.seed), log_dir=run_dir / "lightning")
+    held_out = f", validated on {len(validation)} from split test" if validation else ""
+    with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'}){held_out}"):
+        seq = train_sequencer(
+            demos, settings, int(cfg.seed), log_dir=run_dir / "lightning", validation=validation
+        )
     out = seq.save(run_dir / "model.pt")
     write_json(
         run_dir / "train_summary.json",
@@ -58,13 +84,14 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
 
 
 def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
-    """Evaluate a checkpoint offline on a file's test split: progress MAE per node, replay of the
-    recorded feature streams, Fig. 6 plot. Writes ``evaluation.json``/``.md``; returns the JSON.
-    """
-    from cpmp.data.datafile import load_demonstrations
-    from cpmp.evaluation.checkpoints import load_sequencer
-    from cpmp.experiment.plots import plot_progress_curves
+    """Evaluate a checkpoint offline on a file's test split.
 
+    Progress MAE per node, replay of the recorded feature streams, Fig. 6 plot; writes
+    ``evaluation.json`` and ``evaluation.md``.
+
+    Returns:
+        The path of ``evaluation.json``.
+    """
     if not cfg.get("checkpoint"):
         raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
     checkpoint = Path(str(cfg.checkpoint))
@@ -100,19 +127,17 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
         "replay": result["replay"],
     }
     json_path = write_json(run_dir / "evaluation.json", out)
-    from cpmp.io import atomic_write_text
-
     atomic_write_text(run_dir / "evaluation.md", _evaluation_markdown(out))
     return json_path
 
 
 def _model_entry(seq: Any) -> dict[str, Any]:
-    """What an evaluated checkpoint is: ``sequencer`` (``learned`` or ``goal_nearest``) and
-    ``predictor`` (its kind, ``none`` for goal_nearest, with a note on what its progress is).
-    """
-    from cpmp.baselines.goal_nearest import GoalNearestSequencer
-    from cpmp.config.goal_nearest import KIND
+    """What an evaluated checkpoint is.
 
+    Returns:
+        ``sequencer`` (``learned`` or ``goal_nearest``) and ``predictor`` (its kind, ``none``
+        for goal_nearest, with a note on what its progress is).
+    """
     if isinstance(seq, GoalNearestSequencer):
         entry = predictor_entry("none", {}, {"kind": KIND})
         return {"sequencer": KIND, "predictor": entry.pop("kind"), **entry}
@@ -120,9 +145,17 @@ def _model_entry(seq: Any) -> dict[str, Any]:
 
 
 def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
-    """MPs labelled in ``demos`` (demonstrations) that ``seq`` (a sequencer) has no node for:
-    a renamed MP, or every MP of a variable the model was not trained on. Returns
-    ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by variable, MP.
+    """MPs labelled in ``demos`` that ``seq`` has no node for.
+
+    A renamed MP, or every MP of a variable the model was not trained on.
+
+    Args:
+        seq: a fitted sequencer.
+        demos: demonstrations.
+
+    Returns:
+        ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by
+        variable and MP.
     """
     found: dict[tuple[str, str], dict[str, Any]] = {}
     for m, demo in enumerate(demos):

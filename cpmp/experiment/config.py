@@ -118,13 +118,14 @@ def predictor_options(cfg: Any) -> tuple[str, dict[str, Any]]:
 
 
 def fit_settings(
-    predictor_cfg: Any, sequencer_cfg: Any = None, trainer_cfg: Any = None
+    predictor_cfg: Any, sequencer_cfg: Any = None, trainer_cfg: Any = None, logger_cfg: Any = None
 ) -> FitSettings:
-    """Typed :class:`FitSettings` from the ``predictor``, ``sequencer`` and ``trainer`` groups
-    (nodes or mappings; ``None``: the defaults), validated; the ``goal_nearest`` baseline
-    needs no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a predictor that has
-    one (the Adam-trained ones), so that the saved model says which rate it was trained
-    with.
+    """Typed :class:`FitSettings` from the ``predictor``, ``sequencer``, ``trainer`` groups.
+
+    The groups are nodes or mappings (``None``: the defaults), validated; the ``goal_nearest``
+    baseline needs no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a predictor
+    that has one (the Adam-trained ones), so that the saved model says which rate it was
+    trained with. ``logger_cfg`` (the ``logger`` group) is checked by :func:`logger_spec`.
     """
     sequencer = to_dict(sequencer_cfg)
     goal_nearest = None
@@ -147,12 +148,39 @@ def fit_settings(
         raise ConfigError(f"bad sequencer/trainer option: {err}") from err
     if trainer.lr is not None and hasattr(predictor, "lr"):
         predictor = dataclasses.replace(predictor, lr=trainer.lr)
-    return FitSettings(FitConfig(kind, predictor, rule, trainer), goal_nearest)
+    return FitSettings(
+        FitConfig(kind, predictor, rule, trainer), goal_nearest, logger_spec(logger_cfg)
+    )
+
+
+def logger_spec(cfg: Any) -> dict[str, Any] | None:
+    """The ``logger`` group as a plain mapping, or ``None`` for no logger.
+
+    Args:
+        cfg: the group's node or mapping: a Lightning logger's ``_target_`` and arguments
+            (``conf/logger/csv.yaml``, ``tensorboard.yaml``, or any logger a user names);
+            ``None`` or empty (``conf/logger/none.yaml``): no logger.
+
+    Raises:
+        ConfigError: options without a ``_target_`` naming the logger's class.
+    """
+    spec = to_dict(cfg)
+    if not spec:
+        return None
+    target = spec.get("_target_")
+    if not isinstance(target, str) or not target:
+        raise ConfigError(
+            "logger needs _target_: the class of a Lightning logger (e.g. "
+            "lightning.pytorch.loggers.CSVLogger); choose logger=csv, tensorboard or none"
+        )
+    return spec
 
 
 def job_fit_settings(cfg: Any) -> FitSettings:
     """:func:`fit_settings` of a job's composed config."""
-    return fit_settings(cfg.predictor, cfg.get("sequencer"), cfg.get("trainer"))
+    return fit_settings(
+        cfg.predictor, cfg.get("sequencer"), cfg.get("trainer"), cfg.get("logger")
+    )
 
 
 def validate_common(cfg: Any) -> tuple[str, dict[str, Any]]:

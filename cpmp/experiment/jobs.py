@@ -100,7 +100,8 @@ def run_train_size(
     seconds: dict[str, float] = {}
     subset = balanced_subset(data.train, d)
     with timed(seconds, "train", f"seed {seed}: train {kind} on {d} demos"):
-        seq = train_sequencer(subset, job.fit, seed, log_dir=seed_dir / "lightning" / f"D{d}")
+        log_dir = seed_dir / "lightning" / f"D{d}"
+        seq = train_sequencer(subset, job.fit, seed, log_dir=log_dir, validation=data.test)
         seq.save(seed_dir / f"model_D{d}.pt")
     with timed(seconds, "evaluate", f"seed {seed}: evaluate progress (D={d})"):
         offline = evaluate_offline(seq, data.test)

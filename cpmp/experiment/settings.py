@@ -132,7 +132,7 @@ class ExperimentSettings:
 
 @dataclass(frozen=True)
 class FitSettings:
-    """The typed ``predictor``, ``sequencer`` and ``trainer`` groups of a job.
+    """The typed ``predictor``, ``sequencer``, ``trainer`` and ``logger`` groups of a job.
 
     Attributes:
         fit: the learned sequencer's :class:`~cpmp.config.FitConfig` (seed 0; the jobs set
@@ -140,10 +140,13 @@ class FitSettings:
         goal_nearest: the options of the ``goal_nearest`` baseline when the ``sequencer``
             group selects it (``kind: goal_nearest``; the predictor and trainer are then not
             used), else ``None``.
+        logger: the ``logger`` group: a Lightning logger's ``_target_`` and arguments, built
+            per fit by :func:`cpmp.experiment.fitting.make_logger`; ``None``: no logging.
     """
 
     fit: FitConfig
     goal_nearest: Any | None = None
+    logger: dict[str, Any] | None = None
 
     @property
     def predictor(self) -> str:

@@ -1,157 +1,96 @@
 """Fitting progress predictors through Lightning: all nodes of all graphs in one fit.
 
-The whole training set is one full batch (a few thousand samples). Convex predictors (``klr``,
-``klr_full``) are solved exactly: by default per node by damped Newton steps (IRLS, see
-:mod:`cpmp.predictors.newton`) inside one manually optimised training step, or, with
-``solver: lbfgs``, by LBFGS with a strong-Wolfe line search over all nodes together. The others
-use Adam: when the training loss stops improving the learning rate drops, and at the last
-such plateau the fit stops (:class:`LossPlateau`); ``klr_sparse`` re-fits its pruned weights
-with the convex solver.
+:func:`fit_predictor` builds the :class:`~cpmp.predictors.lightning.ProgressModule` around the
+bank, the :class:`~cpmp.predictors.datamodule.ProgressDataModule` around its training (and
+validation) data, Lightning's callbacks and the logger, and runs ``Trainer.fit``. Convex
+predictors (``klr``, ``klr_full``, the baselines) are solved exactly: per node by damped Newton
+steps (IRLS, see :mod:`cpmp.predictors.newton`) in one manually optimised epoch, or, with
+``solver: lbfgs``, by LBFGS with a strong-Wolfe line search over all nodes together. The
+others use Adam with Lightning's ``EarlyStopping`` and a ``ReduceLROnPlateau`` rate decay on the
+validation loss (the training loss without validation data); ``klr_sparse`` then re-fits its
+pruned weights with the convex solver.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
-import math
 import time
-import warnings
-from dataclasses import dataclass
-from pathlib import Path
+from collections.abc import Iterator
 from typing import Any, Literal
 
+import lightning as L
 import torch
+import torch.utils._pytree as torch_pytree
+from lightning.pytorch.callbacks import Callback, EarlyStopping, LearningRateMonitor
+from lightning.pytorch.loggers import CSVLogger, Logger, TensorBoardLogger
+from lightning.pytorch.utilities import _pytree as lightning_pytree
 
 from cpmp.config.trainer import TrainerConfig
 from cpmp.errors import ConfigError
-from cpmp.predictors import NodeData, ProgressPredictor
+from cpmp.predictors.base import NodeData, ProgressPredictor
+from cpmp.predictors.datamodule import ProgressDataModule
+from cpmp.predictors.lightning import HeldOutSums, ProgressModule, Solver
 from cpmp.predictors.newton import NewtonInfo
 
 log = logging.getLogger(__name__)
 
+LoggerName = Literal["csv", "tensorboard"]
+"""The loggers :func:`lightning_logger` makes from a name."""
+LOGGER_NAMES: tuple[LoggerName, ...] = ("csv", "tensorboard")
+LOGGER_RUN_NAME = "progress"
+"""The run name (subfolder of the log directory) of the loggers made from a name."""
 
-@dataclass
-class LossPlateau:
-    """Early-stopping rule on the training loss (one value per epoch).
+_CONSOLE_LOGGERS = ("lightning.pytorch.utilities.rank_zero", "lightning.pytorch.accelerators.cuda")
+"""Where Lightning writes its start-up lines (which accelerator and device it uses)."""
 
-    An epoch improves if its loss is below ``best - tol * |best|`` (``best``: the lowest loss
-    of an improving epoch so far; the first epoch always improves). Once ``patience`` epochs
-    in a row have not improved, the rule asks to lower the learning rate (``"decay"``) while
-    it has done so fewer than ``decays`` times, else to stop; a non-finite loss stops at once.
-    Slow progress accumulates: losses that each fall by less than the tolerance still improve
-    once their sum exceeds it. The loss is a sum over nodes of soft-label cross-entropies,
-    whose minimum is the targets' entropy, not 0, so the relative tolerance measures progress
-    against the loss itself, whatever the number of nodes.
+
+def _lightning_leaf_spec_compat() -> None:
+    """Let Lightning build leaf tree specs as torch >= 2.13 asks (one compatibility step).
+
+    Lightning 2.6's ``CombinedLoader`` (which wraps every loader of every fit) flattens the
+    loaders with ``LeafSpec()``, a constructor torch 2.13 deprecates with a ``FutureWarning``
+    on every call. ``torch.utils._pytree.treespec_leaf()`` returns the same leaf spec without
+    it, so Lightning's module is pointed at that; nothing changes where it is missing.
     """
-
-    tol: float
-    patience: int
-    decays: int = 0
-    best: float = math.inf
-    wait: int = 0
-    decayed: int = 0
-
-    def update(self, loss: float) -> Literal["go", "decay", "stop"]:
-        """Record one epoch's ``loss``; say whether to go on, lower the rate, or stop."""
-        if not math.isfinite(loss):
-            return "stop"
-        if math.isinf(self.best) or loss < self.best - self.tol * abs(self.best):
-            self.best = loss
-            self.wait = 0
-            return "go"
-        self.wait += 1
-        if self.wait < self.patience:
-            return "go"
-        if self.decayed < self.decays:
-            self.decayed += 1
-            self.wait = 0
-            return "decay"
-        return "stop"
+    if hasattr(torch_pytree, "treespec_leaf") and hasattr(lightning_pytree, "LeafSpec"):
+        lightning_pytree.LeafSpec = torch_pytree.treespec_leaf
 
 
-def _lightning_module(
-    predictor: ProgressPredictor,
-    data: list[NodeData],
-    cfg: TrainerConfig,
-    plateau: LossPlateau | None,
-    rate: float | None,
-):
-    """The Lightning module of one fit; ``plateau``: the early-stopping rule (``None``: run
-    every epoch); ``rate``: Adam's learning rate (``None`` for convex predictors).
-    """
-    import lightning as L
-
-    newton = _solver(predictor, cfg) == "newton"
-
-    class ProgressModule(L.LightningModule):
-        """Wraps a predictor bank; one training step = the full-batch loss over all nodes.
-
-        With Newton (manual optimisation) a step solves every node's convex problem and logs
-        the loss at the solution; otherwise it returns the loss to LBFGS or Adam.
-        """
-
-        def __init__(self) -> None:
-            super().__init__()
-            self.automatic_optimization = not newton
-            self.predictor = predictor
-            self.data = data
-            self.save_hyperparameters({"predictor": predictor.spec()["config"]})
-            self.history: list[float] = []
-            self.newton_info: list[NewtonInfo] = []
-            self.stopped_early = False
-
-        def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
-            if newton:
-                self.newton_info = self.predictor.solve_convex(self.data, cfg.solver_options())
-                with torch.no_grad():
-                    loss = self.predictor.training_loss(self.data)
-            else:
-                loss = self.predictor.training_loss(self.data)
-            self.log("train/loss", loss.detach(), prog_bar=True, on_epoch=True, on_step=False)
-            return loss
-
-        def on_train_epoch_end(self) -> None:
-            loss = float(self.trainer.callback_metrics["train/loss"])
-            self.history.append(loss)
-            action = "go" if plateau is None else plateau.update(loss)
-            if action == "decay":
-                for group in self.trainer.optimizers[0].param_groups:
-                    group["lr"] *= cfg.early_stopping_lr_factor
-            elif action == "stop":
-                self.stopped_early = len(self.history) < self.trainer.max_epochs
-                self.trainer.should_stop = True
-
-        def configure_optimizers(self) -> torch.optim.Optimizer | None:
-            if newton:
-                return None
-            params = [p for p in self.predictor.parameters() if p.requires_grad]
-            if rate is None:
-                return torch.optim.LBFGS(
-                    params,
-                    max_iter=int(_predictor_option(predictor, "max_iter")),
-                    line_search_fn="strong_wolfe",
-                    tolerance_grad=cfg.lbfgs_tolerance_grad,
-                    tolerance_change=cfg.lbfgs_tolerance_change,
-                    history_size=cfg.lbfgs_history_size,
-                )
-            return torch.optim.Adam(params, lr=rate)
-
-    return ProgressModule()
+_lightning_leaf_spec_compat()
 
 
-def _solver(predictor: ProgressPredictor, cfg: TrainerConfig) -> str:
-    """``adam`` for gradient-trained banks; for convex ones ``cfg.solver``, except that a bank
-    without trainable parameters (e.g. ``dtw``) always uses its own :meth:`solve_convex`.
+def solver_for(predictor: ProgressPredictor, cfg: TrainerConfig) -> Solver:
+    """How ``predictor``'s parameters are fitted.
+
+    Args:
+        predictor: the bank.
+        cfg: the trainer's options (``solver`` for convex banks).
+
+    Returns:
+        ``adam`` for gradient-trained banks; ``cfg.solver`` for convex ones, except that a
+        bank without trainable parameters (e.g. ``dtw``) always uses its own
+        :meth:`~cpmp.predictors.ProgressPredictor.solve_convex` (``newton``).
     """
     if not predictor.convex:
         return "adam"
     if not any(p.requires_grad for p in predictor.parameters()):
         return "newton"
-    return cfg.solver
+    return "lbfgs" if cfg.solver == "lbfgs" else "newton"
 
 
 def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
-    """Option ``name`` of the predictor's config, which its solver needs (Adam: ``epochs``,
-    ``lr``; LBFGS: ``max_iter``).
+    """Option ``name`` of the predictor's config, which its solver needs.
+
+    Args:
+        predictor: the bank.
+        name: ``epochs`` or ``lr`` (Adam), ``max_iter`` (LBFGS).
+
+    Returns:
+        The option's value.
+
+    Raises:
+        ConfigError: the predictor's options lack it.
     """
     if not hasattr(predictor.config, name):
         raise ConfigError(
@@ -161,10 +100,83 @@ def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
     return getattr(predictor.config, name)
 
 
-def _quiet_lightning() -> None:
-    """Silence Lightning's start-up banners (accelerator lines, tips) for quiet fits."""
-    for name in ("lightning.pytorch.utilities.rank_zero", "lightning.pytorch.accelerators.cuda"):
-        logging.getLogger(name).setLevel(logging.WARNING)
+def check_logger(logger: Logger | str | None, log_dir: str | None) -> None:
+    """Check a fit's ``logger`` argument before any work.
+
+    Args:
+        logger: a Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` or ``None``.
+        log_dir: the trainer's ``log_dir``, where a logger given by name writes.
+
+    Raises:
+        ConfigError: an unknown name, a name without ``log_dir``, or another type.
+    """
+    if logger is None or isinstance(logger, Logger):
+        return
+    if not isinstance(logger, str) or logger not in LOGGER_NAMES:
+        raise ConfigError(
+            f"logger must be a Lightning Logger, 'csv', 'tensorboard' or None, got {logger!r}"
+        )
+    if log_dir is None:
+        raise ConfigError(f"logger={logger!r} needs the trainer option log_dir (where it writes)")
+
+
+def lightning_logger(logger: Logger | str | None, log_dir: str | None) -> Logger | None:
+    """The Lightning logger of a fit.
+
+    Args:
+        logger: a Lightning ``Logger`` (used as it is), ``"csv"`` (``CSVLogger``),
+            ``"tensorboard"`` (``TensorBoardLogger``) or ``None`` (no logging).
+        log_dir: where a logger given by name writes (run name ``progress``).
+
+    Returns:
+        The logger, or ``None``.
+
+    Raises:
+        ConfigError: see :func:`check_logger`.
+    """
+    check_logger(logger, log_dir)
+    if logger is None or isinstance(logger, Logger):
+        return logger
+    if logger == "csv":
+        return CSVLogger(log_dir, name=LOGGER_RUN_NAME)
+    return TensorBoardLogger(log_dir, name=LOGGER_RUN_NAME)
+
+
+@contextlib.contextmanager
+def _lightning_console(show: bool) -> Iterator[None]:
+    """Keep Lightning's start-up INFO lines (accelerator, devices) off the console.
+
+    Unless ``show``, for the length of one fit; the levels are restored afterwards.
+    """
+    loggers = [logging.getLogger(name) for name in _CONSOLE_LOGGERS]
+    levels = [lg.level for lg in loggers]
+    if not show:
+        for lg in loggers:
+            lg.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+
+
+def _callbacks(solver: Solver, cfg: TrainerConfig, monitor: str, logged: bool) -> list[Callback]:
+    """Lightning's callbacks of a fit: early stopping and the learning-rate monitor (Adam)."""
+    if solver != "adam":
+        return []
+    callbacks: list[Callback] = []
+    if cfg.early_stopping:
+        callbacks.append(
+            EarlyStopping(
+                monitor=monitor,
+                min_delta=cfg.early_stopping_min_delta,
+                patience=cfg.early_stopping_patience,
+                mode="min",
+            )
+        )
+    if logged:
+        callbacks.append(LearningRateMonitor(logging_interval="epoch"))
+    return callbacks
 
 
 def fit_predictor(
@@ -172,28 +184,47 @@ def fit_predictor(
     data: list[NodeData],
     trainer: TrainerConfig | None = None,
     seed: int = 0,
+    validation: list[NodeData] | None = None,
+    logger: Logger | str | None = None,
 ) -> dict[str, Any]:
     """Initialise and fit ``predictor`` on every node's data in one Lightning fit.
 
-    The randomness (initial weights) comes from a local generator seeded by ``seed``: the same
-    seed gives the same fit, and the caller's global torch and NumPy random states are left
-    as they were.
+    The randomness (initial weights, mini-batch shuffles) comes from a local generator seeded
+    by ``seed``: the same seed gives the same fit, and the caller's global torch and NumPy
+    random states are left as they were. The fit runs on ``trainer.accelerator`` (one
+    device); the fitted bank is brought back to the CPU.
 
-    Returns a summary: final loss, loss history per epoch, ``epochs`` actually run,
-    ``max_epochs`` (the budget), ``stopped_early`` (the early-stopping rule ended an Adam fit
-    before the budget), wall time [s], solver and predictor facts.
+    Args:
+        predictor: the untrained bank (its feature scaler fitted).
+        data: every node's training data, in the bank's node order.
+        trainer: the trainer's options (``None``: the defaults).
+        seed: the fit's seed.
+        validation: every node's held-out data in the same order (a node may have none), or
+            ``None``; a stateful bank (``dtw``) is not validated per epoch.
+        logger: a Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` (both write into
+            ``trainer.log_dir``) or ``None``.
+
+    Returns:
+        A summary: final ``loss``, ``loss_history`` per epoch, ``val_loss`` and ``val_mae``
+        per epoch (empty without validation data), ``lr_history`` (Adam and LBFGS: the rate
+        of each epoch) and ``val_mae_final`` (the fitted bank's,
+        after :meth:`~cpmp.predictors.ProgressPredictor.finalize`; ``None`` without
+        validation), ``epochs`` actually run, ``max_epochs`` (the budget), ``stopped_early``
+        (early stopping ended an Adam fit before the budget), ``monitor``, ``device``, wall
+        time ``seconds``, ``solver`` and the predictor's facts (and Newton's outcome).
+
+    Raises:
+        ConfigError: a bad logger, or more than one device.
     """
-    import lightning as L
-    from torch.utils.data import DataLoader, TensorDataset
-
     cfg = trainer or TrainerConfig()
+    check_logger(logger, cfg.log_dir)
     generator = torch.Generator().manual_seed(seed)
     start = time.perf_counter()
     predictor.initialize(data, generator)
-    solver = _solver(predictor, cfg)
-    rate: float | None = None
+    solver = solver_for(predictor, cfg)
+    lr = None
     if solver == "adam":
-        rate = cfg.lr if cfg.lr is not None else float(_predictor_option(predictor, "lr"))
+        lr = cfg.lr if cfg.lr is not None else float(_predictor_option(predictor, "lr"))
     if cfg.max_epochs is not None:
         epochs = cfg.max_epochs
     elif solver == "newton":
@@ -202,62 +233,70 @@ def fit_predictor(
         epochs = cfg.lbfgs_epochs
     else:
         epochs = int(_predictor_option(predictor, "epochs"))
-    plateau = None
-    if solver == "adam" and cfg.early_stopping:
-        plateau = LossPlateau(
-            cfg.early_stopping_tol, cfg.early_stopping_patience, cfg.early_stopping_decays
+    datamodule = ProgressDataModule(
+        data,
+        None if predictor.stateful else validation,
+        cfg.batch_size if solver == "adam" else None,
+        generator,
+    )
+    monitor = "train/loss" if datamodule.val is None else "val/loss"
+    max_iter = int(_predictor_option(predictor, "max_iter")) if solver == "lbfgs" else None
+    module = ProgressModule(predictor, cfg, solver, lr, max_iter, monitor)
+    pl_logger = lightning_logger(logger, cfg.log_dir)
+    with _lightning_console(cfg.progress_bar):
+        pl_trainer = L.Trainer(
+            max_epochs=epochs,
+            accelerator=cfg.accelerator,
+            devices=cfg.devices,
+            logger=pl_logger if pl_logger is not None else False,
+            callbacks=_callbacks(solver, cfg, monitor, pl_logger is not None),
+            enable_checkpointing=False,
+            enable_progress_bar=cfg.progress_bar,
+            enable_model_summary=False,
+            log_every_n_steps=1,
+            num_sanity_val_steps=0,
+            limit_val_batches=0 if datamodule.val is None else 1.0,
+            inference_mode=False,
+            default_root_dir=cfg.log_dir,
         )
-    module = _lightning_module(predictor, data, cfg, plateau, rate)
-    logger: Any = False
-    if cfg.logger is not None and cfg.log_dir is not None:
-        Path(cfg.log_dir).mkdir(parents=True, exist_ok=True)
-        if cfg.logger == "csv":
-            logger = L.pytorch.loggers.CSVLogger(cfg.log_dir, name="progress")
-        else:
-            logger = L.pytorch.loggers.TensorBoardLogger(cfg.log_dir, name="progress")
-    if not cfg.progress_bar:
-        _quiet_lightning()
-    pl_trainer = L.Trainer(
-        max_epochs=epochs,
-        accelerator="cpu",
-        devices=1,
-        logger=logger,
-        enable_checkpointing=False,
-        enable_progress_bar=cfg.progress_bar,
-        enable_model_summary=False,
-        log_every_n_steps=1,
-        num_sanity_val_steps=0,
-        default_root_dir=cfg.log_dir,
-    )
-    # the loader draws a base seed per epoch: from its own generator, not the global one
-    loader = DataLoader(
-        TensorDataset(torch.zeros(1)), batch_size=1, generator=torch.Generator().manual_seed(seed)
-    )
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*does not have many workers.*")
-        warnings.filterwarnings("ignore", message=".*number of training batches.*")
-        warnings.filterwarnings("ignore", message=".*LeafSpec.*")
-        warnings.filterwarnings("ignore", message=".*returned `None`.*no optimizer.*")
-        pl_trainer.fit(module, loader)
+        if pl_trainer.num_devices != 1:
+            raise ConfigError(
+                f"a fit runs on one device, trainer.devices={cfg.devices!r} gives "
+                f"{pl_trainer.num_devices}: set trainer.devices=1 (or [index])"
+            )
+        device = str(pl_trainer.strategy.root_device)
+        pl_trainer.fit(module, datamodule=datamodule)
+    predictor.to(torch.device("cpu"))  # the fitted bank is saved and used on the CPU
     predictor.finalize(data, cfg.solver_options())
     with torch.no_grad():
         final = float(predictor.training_loss(data))
+    val_final = _held_out_mae(predictor, datamodule, module.graph_node)
     elapsed = time.perf_counter() - start
+    history = module.history
+    stopped_early = solver == "adam" and len(history.train_loss) < epochs
     log.info(
-        "fitted %s on %d nodes in %.2f s, %d epochs%s (loss %.5f)",
+        "fitted %s on %d nodes in %.2f s on %s, %d epochs%s (loss %.5f%s)",
         predictor.kind,
         len(data),
         elapsed,
-        len(module.history),
-        " (stopped early)" if module.stopped_early else "",
+        device,
+        len(history.train_loss),
+        " (stopped early)" if stopped_early else "",
         final,
+        "" if val_final is None else f", held-out progress MAE {val_final:.4f}",
     )
     out: dict[str, Any] = {
         "loss": final,
-        "loss_history": module.history,
-        "epochs": len(module.history),
+        "loss_history": history.train_loss,
+        "val_loss": history.val_loss,
+        "val_mae": history.val_mae,
+        "val_mae_final": val_final,
+        "lr_history": history.lr,
+        "epochs": len(history.train_loss),
         "max_epochs": epochs,
-        "stopped_early": module.stopped_early,
+        "stopped_early": stopped_early,
+        "monitor": monitor,
+        "device": device,
         "seconds": elapsed,
         "solver": solver,
         **predictor.summary(),
@@ -273,6 +312,28 @@ def fit_predictor(
                 out["newton_iterations"],
             )
     return out
+
+
+def _held_out_mae(
+    predictor: ProgressPredictor, datamodule: ProgressDataModule, graph_node: torch.Tensor
+) -> float | None:
+    """``val/mae`` of the fitted bank (after ``finalize``), as a validation epoch computes it.
+
+    Args:
+        predictor: the fitted bank (on the CPU).
+        datamodule: the fit's data (its validation batches).
+        graph_node: ``(K,)`` which heads count (the graph nodes, not the start heads).
+
+    Returns:
+        The held-out progress MAE, or ``None`` without validation data.
+    """
+    if datamodule.val is None:
+        return None
+    sums = HeldOutSums.zeros(predictor.n_nodes, "cpu")
+    with torch.no_grad():
+        for batch in datamodule.val_dataloader():
+            sums.add(predictor, datamodule.val, batch)
+    return float(sums.mae(graph_node.cpu()))
 
 
 def _newton_summary(infos: list[NewtonInfo]) -> dict[str, Any]:

@@ -12,6 +12,7 @@ demonstrated starts of ``start_rule="joint"``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -20,7 +21,9 @@ from cpmp.data import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
-from cpmp.progress import path_length, path_trajectory, progress_labels
+from cpmp.predictors.datamodule import held_out_split
+from cpmp.progress import expected_progress, path_length, path_trajectory, progress_labels
+from cpmp.sequencer.inputs import checked_demonstrations
 
 
 def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
@@ -89,6 +92,104 @@ def node_training_data(
                 activations=scaled,
                 paths=paths,
                 labels=targets,
+            )
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class FitDemos:
+    """The demonstrations a fit trains on and those it validates on.
+
+    Attributes:
+        train: the training demonstrations.
+        validation: the validation demonstrations (``None``: the fit is not validated).
+    """
+
+    train: list[Demonstration]
+    validation: list[Demonstration] | None
+
+
+def fit_demos(
+    demos: Sequence[Demonstration],
+    validation: Sequence[Demonstration] | None,
+    val_fraction: float,
+    seed: int,
+) -> FitDemos:
+    """Split a fit's demonstrations into training and validation ones.
+
+    Args:
+        demos: the (checked) training demonstrations.
+        validation: demonstrations given for validation (checked here: their features must
+            be the training ones), or ``None``.
+        val_fraction: without ``validation``, the share of ``demos`` held out for it
+            (:func:`cpmp.predictors.datamodule.held_out_split`, drawn with ``seed``); ``0``:
+            none.
+        seed: the fit's seed.
+
+    Returns:
+        The training and the validation demonstrations.
+
+    Raises:
+        DataError: validation demonstrations with other features than the training ones.
+    """
+    demos = list(demos)
+    if validation is not None:
+        val, names = checked_demonstrations(validation, "validation of ConcurrentSequencer.fit")
+        if names != list(demos[0].feature_names):
+            raise DataError(
+                f"the validation demonstrations have features {names[:4]}... but the training "
+                f"ones {list(demos[0].feature_names)[:4]}...; they must match"
+            )
+        return FitDemos(demos, val)
+    if val_fraction <= 0.0:
+        return FitDemos(demos, None)
+    split = held_out_split(len(demos), val_fraction, seed)
+    return FitDemos([demos[i] for i in split.train], [demos[i] for i in split.val])
+
+
+def node_validation_data(
+    graphs: Mapping[str, SequenceGraph],
+    predictor: ProgressPredictor,
+    demos: Sequence[Demonstration],
+) -> list[NodeData]:
+    """Per-node held-out samples (scaled features) and eq. 1 labels, in the predictor's order.
+
+    Every activation in ``demos`` of an MP the ``graphs`` have is scaled with the
+    predictor's scaler and labelled by eq. 1 on its own (:func:`cpmp.progress.
+    expected_progress` of the scaled features: the offline evaluation's label, whatever
+    labels the bank trains on); a start head shares its node's samples. Activations of
+    unknown MPs or variables are left out, so a node may get no rows.
+
+    Args:
+        graphs: the fit's sequence graphs.
+        predictor: the bank (its scaler fitted).
+        demos: the validation demonstrations.
+
+    Returns:
+        One :class:`~cpmp.predictors.NodeData` per head (``x (P, d)``, ``target (P,)``).
+    """
+    samples: dict[tuple[str, str], tuple[list[np.ndarray], list[np.ndarray]]] = {}
+    for demo in demos:
+        scaled = predictor.scaler.transform(demo.features)
+        for v in sorted(graphs):
+            if v not in demo.variables:
+                continue
+            for seg in demo.segments(v):
+                if seg.mp not in graphs[v].nodes:
+                    continue
+                x, y = samples.setdefault((v, seg.mp), ([], []))
+                x.append(scaled[seg.start : seg.stop])
+                y.append(expected_progress(x[-1], seg.time))
+    out = []
+    dt, d = predictor.dtype_, predictor.n_features
+    for v, key_mp in predictor.node_keys:
+        x, y = samples.get((v, key_mp.removeprefix(START_PREFIX)), ([], []))
+        out.append(
+            NodeData(
+                key=(v, key_mp),
+                x=torch.as_tensor(np.concatenate(x) if x else np.zeros((0, d)), dtype=dt),
+                target=torch.as_tensor(np.concatenate(y) if y else np.zeros(0), dtype=dt),
             )
         )
     return out

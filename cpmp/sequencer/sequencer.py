@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from lightning.pytorch.loggers import Logger
 
 from cpmp.config import FitConfig, SequencerConfig
 from cpmp.data import Demonstration
@@ -33,16 +34,18 @@ from cpmp.errors import ConfigError, DataError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
-from cpmp.predictors.training import fit_predictor
+from cpmp.predictors.training import check_logger, fit_predictor
 from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
 from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.fit_data import (
     demo_progress,
+    fit_demos,
     fit_warnings,
     glitch_warnings,
     initial_combinations,
     node_training_data,
+    node_validation_data,
     nonfinite_parameters,
     start_keys,
 )
@@ -139,11 +142,15 @@ class ConcurrentSequencer:
         cls,
         demos: Sequence[Demonstration],
         predictor: str = "klr",
+        *,
+        validation: Sequence[Demonstration] | None = None,
+        logger: Logger | str | None = None,
         **options: Any,
     ) -> ConcurrentSequencer:
-        """Build the sequence graphs and fit every node's progress predictor: the keyword form
-        of :meth:`fit_config`, ``fit_config(demos, FitConfig.from_options(predictor,
-        **options))``.
+        """Build the sequence graphs and fit every node's progress predictor, by keyword.
+
+        The keyword form of :meth:`fit_config`: ``fit_config(demos,
+        FitConfig.from_options(predictor, **options), validation=..., logger=...)``.
 
         Args:
             demos: labelled demonstrations sharing feature names and control variables.
@@ -154,20 +161,52 @@ class ConcurrentSequencer:
                 (:class:`~cpmp.config.TrainerConfig`), ``seed``, ``variables`` and
                 ``subsample`` (:class:`~cpmp.config.FitConfig`); an unknown name raises
                 :class:`~cpmp.errors.ConfigError`.
+            validation: held-out demonstrations: every epoch logs the progress MAE on them
+                (``val/mae``), and early stopping follows their loss (see :meth:`fit_config`).
+            logger: a Lightning ``Logger``, ``"csv"`` or ``"tensorboard"`` (writing into the
+                trainer option ``log_dir``), or ``None``: no logging.
+
+        Returns:
+            The fitted sequencer.
         """
-        return cls.fit_config(demos, FitConfig.from_options(predictor, **options))
+        config = FitConfig.from_options(predictor, **options)
+        return cls.fit_config(demos, config, validation=validation, logger=logger)
 
     @classmethod
     def fit_config(
-        cls, demos: Sequence[Demonstration], config: FitConfig | None = None
+        cls,
+        demos: Sequence[Demonstration],
+        config: FitConfig | None = None,
+        *,
+        validation: Sequence[Demonstration] | None = None,
+        logger: Logger | str | None = None,
     ) -> ConcurrentSequencer:
-        """Build the sequence graphs and fit every node's progress predictor as ``config``
-        says (``None``: cpmp's defaults, the main job's ``predictor=klr_path
-        sequencer=coupled``).
+        """Build the sequence graphs and fit every node's progress predictor as ``config`` says.
+
+        Args:
+            demos: labelled demonstrations sharing feature names and control variables.
+            config: predictor, rule, trainer and seed (``None``: cpmp's defaults, the main
+                job's ``predictor=klr_path sequencer=coupled``).
+            validation: the fit's held-out demonstrations (``None``: the trainer's
+                ``val_fraction`` of ``demos``, none by default): the progress MAE on them is
+                logged every epoch (``fit_summary["val_mae"]``) and Adam fits stop on their
+                loss.
+            logger: a Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` (both writing into
+                the trainer's ``log_dir``) or ``None`` (no logging).
+
+        Returns:
+            The fitted sequencer.
+
+        Raises:
+            DataError: bad demonstrations, or a fit with non-finite parameters.
+            ConfigError: a bad option or logger.
         """
         config = config or FitConfig()
         predictor = config.predictor
         demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
+        check_logger(logger, config.trainer.log_dir)
+        split = fit_demos(demos, validation, config.trainer.val_fraction, config.seed)
+        demos = split.train
         graphs = build_graphs(demos, config.variables)
         node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
         if config.sequencer.start_kernel == "isotropic":
@@ -176,7 +215,10 @@ class ConcurrentSequencer:
         all_x = np.concatenate([d.features for d in demos], axis=0)
         model.scaler.fit(all_x, model.config.feature_scaling)
         data = node_training_data(graphs, model, config.subsample)
-        summary = fit_predictor(model, data, config.trainer, seed=config.seed)
+        val = None
+        if split.validation is not None:
+            val = node_validation_data(graphs, model, split.validation)
+        summary = fit_predictor(model, data, config.trainer, config.seed, val, logger)
         bad = nonfinite_parameters(model)
         if bad:
             raise DataError(

@@ -168,7 +168,7 @@ print(json.dumps({{"failed": failed, "passed": passed, "heavy": heavy}}))
     ("command", "argv", "n_jobs"),
     [
         ("experiment", ["predictor.gamma=2"], 1),  # an integer where the default is a float
-        ("experiment", ["trainer.logger=null"], 1),  # null where the default is a string
+        ("experiment", ["logger.name=null"], 1),  # null where the default is a string
         ("experiment", ["experiment.max_time=5"], 1),  # a null default takes any type
         ("experiment", ["experiment.seeds=[0,1]"], 1),
         ("experiment", ["-m", "predictor=klr,klr_sparse", "predictor.gamma=2,4"], 4),

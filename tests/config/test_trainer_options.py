@@ -7,27 +7,43 @@ import math
 
 import pytest
 
-from cpmp.config import TrainerConfig
+from cpmp.config import SolverOptions, TrainerConfig
 from cpmp.errors import ConfigError
 
 
 @pytest.mark.parametrize(
     ("options", "match"),
     [
-        ({"early_stopping_tol": -1e-3}, "early_stopping_tol must be a finite number >= 0"),
-        ({"early_stopping_tol": math.inf}, "early_stopping_tol"),
-        ({"early_stopping_tol": math.nan}, "early_stopping_tol"),
-        ({"early_stopping_tol": "1e-3"}, "early_stopping_tol"),
+        (
+            {"early_stopping_min_delta": -1e-3},
+            "early_stopping_min_delta must be a finite number >= 0",
+        ),
+        ({"early_stopping_min_delta": math.inf}, "early_stopping_min_delta"),
+        ({"early_stopping_min_delta": math.nan}, "early_stopping_min_delta"),
+        ({"early_stopping_min_delta": "1e-3"}, "early_stopping_min_delta"),
         ({"early_stopping_patience": 0}, "early_stopping_patience must be a whole number >= 1"),
         ({"early_stopping_patience": 2.5}, "early_stopping_patience"),
         ({"early_stopping_patience": True}, "early_stopping_patience"),
         ({"early_stopping": "yes"}, "early_stopping must be true or false"),
         ({"progress_bar": 1}, "progress_bar must be true or false"),
-        ({"early_stopping_decays": -1}, "early_stopping_decays must be a whole number >= 0"),
-        ({"early_stopping_decays": 1.5}, "early_stopping_decays"),
-        ({"early_stopping_lr_factor": 1.0}, "early_stopping_lr_factor must be < 1"),
-        ({"early_stopping_lr_factor": 0.0}, "early_stopping_lr_factor must be a finite number > 0"),
-        ({"early_stopping_lr_factor": math.nan}, "early_stopping_lr_factor"),
+        ({"lr_decay_patience": 0}, "lr_decay_patience must be a whole number >= 1"),
+        ({"lr_decay_patience": 1.5}, "lr_decay_patience"),
+        ({"lr_decay_factor": 1.0}, "lr_decay_factor must be < 1"),
+        ({"lr_decay_factor": 0.0}, "lr_decay_factor must be a finite number > 0"),
+        ({"lr_decay_factor": math.nan}, "lr_decay_factor"),
+        ({"log_every_n_epochs": 0}, "log_every_n_epochs must be a whole number >= 1"),
+        ({"batch_size": 0}, "batch_size must be a whole number >= 1"),
+        ({"batch_size": 2.5}, "batch_size"),
+        ({"val_fraction": 1.0}, "val_fraction must be < 1"),
+        ({"val_fraction": -0.1}, "val_fraction must be a finite number >= 0"),
+        ({"val_fraction": math.nan}, "val_fraction"),
+        ({"accelerator": ""}, "accelerator must be a name"),
+        ({"accelerator": None}, "accelerator must be a name"),
+        ({"devices": 0}, "devices must be 'auto', a count >= 1"),
+        ({"devices": "two"}, "devices"),
+        ({"devices": []}, "devices"),
+        ({"devices": [0, -1]}, "devices"),
+        ({"devices": True}, "devices"),
         ({"lbfgs_epochs": 0}, "lbfgs_epochs must be a whole number >= 1"),
         ({"max_epochs": 1.5}, "max_epochs must be a whole number >= 1"),
         ({"max_epochs": 0}, "max_epochs"),
@@ -62,3 +78,17 @@ def test_whole_number_options_accept_integral_floats():
     cfg = TrainerConfig(max_epochs=7.0, lbfgs_epochs=2.0, early_stopping_patience=4.0)
     assert (cfg.max_epochs, cfg.lbfgs_epochs, cfg.early_stopping_patience) == (7, 2, 4)
     assert all(type(v) is int for v in (cfg.max_epochs, cfg.lbfgs_epochs))
+
+
+def test_device_options_take_lightning_forms():
+    assert TrainerConfig().accelerator == "auto" and TrainerConfig().devices == "auto"
+    assert TrainerConfig(devices=1.0).devices == 1
+    assert TrainerConfig(devices=-1).devices == -1
+    assert TrainerConfig(devices=(0,)).devices == [0]
+    assert TrainerConfig(accelerator="cpu").accelerator == "cpu"
+
+
+def test_solver_options_come_from_the_trainer():
+    options = TrainerConfig(solver="lbfgs", newton_tol=1e-8, newton_max_iter=7).solver_options()
+    assert options == SolverOptions("lbfgs", 1e-8, 7)
+    assert SolverOptions() == TrainerConfig().solver_options()

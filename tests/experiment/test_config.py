@@ -388,7 +388,7 @@ def test_keyword_fit_is_the_typed_fit(tmp_path):
             "klr",
             KLRConfig(gamma=2.0),
             SequencerConfig(threshold=0.7),
-            TrainerConfig(logger=None),
+            TrainerConfig(),
             seed=3,
         ),
     )
@@ -469,7 +469,7 @@ def test_bad_experiment_values_from_a_mapping_raise_config_error(key, value, mat
         "+task.box_colour=red",
         "task.box_height=0.5",
         "sequencer.threshold=1.5",
-        "trainer.logger=wandb",
+        "trainer.val_fraction=1.5",
         "trainer.lbfgs_history_size=0",
     ],
 )
@@ -508,7 +508,7 @@ def test_evaluate_with_missing_demo_file(tmp_path):
     from cpmp.experiment.fitting import fit_sequencer
     from cpmp.worlds.two_point import make_demonstrations
 
-    cfg = compose_cfg("train", ["trainer.logger=null"])
+    cfg = compose_cfg("train", ["logger=none"])
     seq = fit_sequencer(make_demonstrations(2, seed=0), cfg.predictor, None, cfg.trainer)
     checkpoint = seq.save(tmp_path / "model.pt")
     cfg = compose_cfg("evaluate", [f"data.path={tmp_path / 'nope.h5'}", f"checkpoint={checkpoint}"])
@@ -545,7 +545,7 @@ def test_fit_sequencer_with_the_default_trainer_config(predictor):
     from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)
-    overrides = [f"predictor={predictor}", "trainer.logger=null", "trainer.max_epochs=2"]
+    overrides = [f"predictor={predictor}", "logger=none", "trainer.max_epochs=2"]
     cfg = compose_cfg("train", overrides)
     seq = fit_sequencer(demos, cfg.predictor, None, cfg.trainer)
     assert seq.predictor.config.lr == cfg.predictor.lr
