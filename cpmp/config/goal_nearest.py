@@ -1,5 +1,6 @@
-"""The options of the goal-nearest baseline (``conf/sequencer/goal_nearest.yaml``; the baseline
-itself is :mod:`cpmp.baselines.goal_nearest`).
+"""The options of the goal-nearest baseline (``conf/sequencer/goal_nearest.yaml``).
+
+The baseline itself is :mod:`cpmp.baselines.goal_nearest`.
 """
 
 from __future__ import annotations
@@ -59,8 +60,10 @@ class GoalNearestConfig:
 
 
 def goal_nearest_options(options: Mapping[str, Any]) -> GoalNearestConfig:
-    """Validated :class:`GoalNearestConfig` from a mapping; unknown names raise
-    :class:`ConfigError` listing the valid ones.
+    """Validated :class:`GoalNearestConfig` from a mapping.
+
+    Raises:
+        ConfigError: an unknown name (the message lists the valid ones) or a bad value.
     """
     valid = [f.name for f in dataclasses.fields(GoalNearestConfig)]
     unknown = sorted(set(options) - set(valid))

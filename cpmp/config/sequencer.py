@@ -21,9 +21,11 @@ START_RULES = ("independent", "joint")
 
 @dataclass
 class SequencerConfig:
-    """The transition rule's parameters. The defaults are cpmp's recommended configuration
-    (``sequencer=coupled``); ``sequencer=paper`` and :data:`cpmp.sequencer.PAPER_OPTIONS` set
-    ``coupling``, ``recovery``, ``start_rule`` and ``start_kernel`` back to the paper's.
+    """The transition rule's parameters.
+
+    The defaults are cpmp's recommended configuration (``sequencer=coupled``); ``sequencer=paper``
+    and :data:`cpmp.sequencer.PAPER_OPTIONS` set ``coupling``, ``recovery``, ``start_rule`` and
+    ``start_kernel`` back to the paper's.
 
     Attributes:
         threshold: a transition fires only when ``p = φ_current · (1 - φ_next) > threshold``

@@ -190,7 +190,5 @@ class TaskConfig:
 
 
 def as_task_config(cfg: TaskConfig | Mapping[str, Any] | None) -> TaskConfig:
-    """``cfg`` as a :class:`TaskConfig`: itself, built from a mapping, or the defaults for
-    ``None``.
-    """
+    """``cfg`` as a :class:`TaskConfig`: itself, built from a mapping, or the defaults for None."""
     return cfg if isinstance(cfg, TaskConfig) else TaskConfig.from_dict(cfg)

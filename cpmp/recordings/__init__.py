@@ -1,9 +1,10 @@
-"""Rerun recordings of episodes: write with :class:`EpisodeRecorder`
-(:mod:`~cpmp.recordings.writer`), read back offline with :func:`read_recording` and
-:func:`read_views` (:mod:`~cpmp.recordings.reader`). Every name is importable from
-here. The layout below (entity paths, record names, log texts, feature panels, blueprint, 3D
-scene) is written down in :mod:`~cpmp.recordings.layout`, which both sides use; the
-per-tick series are buffered by :mod:`~cpmp.recordings.columns`.
+"""Rerun recordings of episodes: write them, read them back offline.
+
+Write with :class:`EpisodeRecorder` (:mod:`~cpmp.recordings.writer`), read back offline with
+:func:`read_recording` and :func:`read_views` (:mod:`~cpmp.recordings.reader`). Every name is
+importable from here. The layout below (entity paths, record names, log texts, feature
+panels, blueprint, 3D scene) is written down in :mod:`~cpmp.recordings.layout`, which both
+sides use; the per-tick series are buffered by :mod:`~cpmp.recordings.columns`.
 
 Layout of a recording (one ``.rrd`` file per episode). Time-series data sit on two timelines:
 ``time`` (a duration, seconds since the episode start) and ``tick`` (sequence, 0-based index of

@@ -1,6 +1,8 @@
-"""Recording scripted demonstrations: one box (:func:`record_demonstration`) or many together
-(:func:`record_demonstrations`, one batched IK call per tick, the same data as one box at a
-time), and collecting seeded sets of them into the project's HDF5 format.
+"""Recording scripted demonstrations, one box or many together, and saving seeded sets.
+
+One box (:func:`record_demonstration`) or many together (:func:`record_demonstrations`, one
+batched IK call per tick, the same data as one box at a time); seeded sets of them are
+collected into the project's HDF5 format.
 """
 
 from __future__ import annotations
@@ -41,9 +43,9 @@ def record_demonstrations(
     names: Sequence[str | None] | None = None,
     on_result: Callable[[int, Demonstration], None] | None = None,
 ) -> list[Demonstration]:
-    """Run the scripted demonstrator on every box, all together, and record each at the
-    control rate; each result equals :func:`record_demonstration` of its box alone, to the
-    last bit.
+    """Run the scripted demonstrator on every box, all together, recording each at control rate.
+
+    Each result equals :func:`record_demonstration` of its box alone, to the last bit.
 
     Every control tick: one batched pose/Jacobian and IK call over the robots still running
     (:func:`~cpmp.sim.simulation.prepare_steps`), MuJoCo stepping each box's own model and each
@@ -90,8 +92,9 @@ def record_demonstrations(
 
 
 class _Recording:
-    """One box of :func:`record_demonstrations`: its simulation, the scripted demonstrator and
-    the samples so far (the loop of :func:`record_demonstration`, one tick at a time).
+    """One box of :func:`record_demonstrations`: its simulation, demonstrator and samples so far.
+
+    The loop of :func:`record_demonstration`, one tick at a time.
     """
 
     def __init__(self, box: Box, cfg: TaskConfig) -> None:
@@ -112,9 +115,7 @@ class _Recording:
             labels.append(self.active[variable])
 
     def observe(self, t: float) -> None:
-        """After a tick of physics at time ``t`` [s]: the new features and the
-        demonstrator's MPs for them.
-        """
+        """After a tick of physics at time ``t`` [s]: new features, the demonstrator's MPs."""
         self.x = self.sim.features()
         self.active = self.policy.step(t, self.x)
 
@@ -149,8 +150,10 @@ MAX_DRAWS_PER_BOX = 10_000
 
 
 def sample_boxes(rng: np.random.Generator, cfg: TaskConfig, n: int, balanced: bool) -> list[Box]:
-    """``n`` boxes from the configured ranges; with ``balanced``, strategies cycle round-robin
-    over :data:`STRATEGIES` (rejection sampling, deterministic given ``rng``).
+    """``n`` boxes from the configured ranges.
+
+    With ``balanced``, strategies cycle round-robin over :data:`STRATEGIES` (rejection
+    sampling, deterministic given ``rng``).
     """
     if n < 0:
         raise ConfigError(f"n_demos must be >= 0, got {n}")

@@ -114,8 +114,10 @@ class MPController:
     def _twist(
         self, active: Mapping[str, MP], pos: np.ndarray, rot: np.ndarray, box_pos: np.ndarray
     ) -> np.ndarray:
-        """Commanded twists (2, 6) [m/s; rad/s] of both hands, rows (left, right), from the
-        reference poses ``pos`` (2, 3) [m] and ``rot`` (2, 3, 3) and the box centre (3,) [m].
+        """Commanded twists (2, 6) [m/s; rad/s] of both hands, rows (left, right).
+
+        From the reference poses ``pos`` (2, 3) [m] and ``rot`` (2, 3, 3) and the box centre
+        (3,) [m].
         """
         self.ref_pos, self.ref_rot = pos, rot
         twist = np.empty((2, 6))
@@ -176,8 +178,10 @@ class MPController:
             self._latched[mp.variable] = pos[LEFT] - pos[RIGHT]
 
     def _resolve(self, q: np.ndarray, jac: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """One DLS resolved-rate step of both arms of N robots sharing this controller's
-        limits and gains: q (N, 2, 7) [rad], jac (N, 2, 6, 7), twist (N, 2, 6) -> q (N, 2, 7).
+        """One DLS resolved-rate step of both arms of N robots sharing this controller's gains.
+
+        The robots share its limits too: q (N, 2, 7) [rad], jac (N, 2, 6, 7), twist (N, 2, 6)
+        -> q (N, 2, 7).
 
         ``J^T (J J^T + l^2 I)^-1 v + (I - J^T (J J^T + e I)^-1 J) s`` is evaluated as
         ``s + J^T (a - b)``: ``a`` and ``b`` solve each robot's damped and null-space grams
@@ -209,9 +213,10 @@ def update_controllers(
     active: Sequence[Mapping[str, MP]],
     box_pos: np.ndarray,
 ) -> None:
-    """Advance N controllers one control tick together, each exactly as its own
-    :meth:`MPController.update` would: one batched pose/Jacobian call and one batched DLS step
-    for all arms.
+    """Advance N controllers one control tick together, each exactly as it would alone.
+
+    Each as its own :meth:`MPController.update` would: one batched pose/Jacobian call and one
+    batched DLS step for all arms.
 
     controllers: of N simulations of one robot and task config; active: per controller, the
     active MP per variable; box_pos: (N, 3) measured box centres [m].

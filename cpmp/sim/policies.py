@@ -18,8 +18,9 @@ from cpmp.records import BatchedPolicy, Policy
 
 
 class PolicyList:
-    """N single :class:`Policy` objects as one :class:`BatchedPolicy`: each live episode's
-    policy is called in turn with its own row of ``x``.
+    """N single :class:`Policy` objects as one :class:`BatchedPolicy`.
+
+    Each live episode's policy is called in turn with its own row of ``x``.
     """
 
     def __init__(self, policies: Sequence[Policy]) -> None:
@@ -31,11 +32,13 @@ class PolicyList:
     def reset(
         self, t: float, x: np.ndarray, live: np.ndarray | None = None
     ) -> list[Mapping[str, str]]:
+        """Each live episode's policy ``reset`` on its row of ``x`` (N, d)."""
         return self._call("reset", t, x, live)
 
     def step(
         self, t: float, x: np.ndarray, live: np.ndarray | None = None
     ) -> list[Mapping[str, str]]:
+        """Each live episode's policy ``step`` on its row of ``x`` (N, d)."""
         return self._call("step", t, x, live)
 
     def _call(
@@ -48,8 +51,10 @@ class PolicyList:
 
 
 class ReplayPolicy:
-    """Replays a demonstration's labels by time (open-loop); a reference policy for tests and
-    benchmarks. ``reset``/``step`` return the labels of the sample at or before ``t``.
+    """Replays a demonstration's labels by time (open-loop).
+
+    A reference policy for tests and benchmarks: ``reset``/``step`` return the labels of the
+    sample at or before ``t``.
     """
 
     def __init__(self, demo: Demonstration) -> None:
@@ -61,9 +66,11 @@ class ReplayPolicy:
         return {v: str(lab[i]) for v, lab in self.labels.items()}
 
     def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The labels at time ``t`` [s] (``x`` is not read)."""
         return self._at(t)
 
     def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The labels at time ``t`` [s] (``x`` is not read)."""
         return self._at(t)
 
 

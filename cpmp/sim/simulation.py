@@ -48,8 +48,9 @@ _INSTABILITY_WARNINGS = np.array(
 
 @functools.lru_cache(maxsize=2)
 def shared_kinematics(compile: bool = True) -> ArmKinematics:
-    """The arm kinematics (independent of the box), built once per process and ``compile``
-    setting (see :class:`~cpmp.sim.kinematics.ArmKinematics`).
+    """The arm kinematics (independent of the box), built once per process and ``compile``.
+
+    See :class:`~cpmp.sim.kinematics.ArmKinematics`.
     """
     xml = scene_xml_text()
     model = mujoco.MjModel.from_xml_string(xml)
@@ -134,8 +135,10 @@ class Simulation:
     def reset(
         self, arm_posture: np.ndarray | None = None, fingers: dict[str, np.ndarray] | None = None
     ) -> None:
-        """Start posture (default: home) and finger angles (default: ``relax`` goal), box at rest
-        on the plate, ``t = 0``. arm_posture: (2, 7) [rad], rows (left, right).
+        """Reset to a start posture and finger angles, the box at rest on the plate, ``t = 0``.
+
+        The posture defaults to home, the fingers to the ``relax`` goal. arm_posture: (2, 7)
+        [rad], rows (left, right).
         """
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
@@ -269,9 +272,10 @@ class Simulation:
         return out
 
     def goal(self, variable: str, name: str | None = None) -> np.ndarray:
-        """Current world goal of an MP (default: the active one) - position (3,), rotation
-        (3, 3) or finger angles (k,). Held/relative goals use the controller's latched offset
-        (or the current offset if the MP has not run yet).
+        """Current world goal of an MP (default: the active one).
+
+        A position (3,), rotation (3, 3) or finger angles (k,). Held/relative goals use the
+        controller's latched offset (or the current offset if the MP has not run yet).
         """
         mp = self.library[variable][name or self.active[variable]]
         hand = HANDS.index(variable.split("_")[0])
@@ -341,8 +345,9 @@ class Simulation:
 
 
 def prepare_steps(sims: Sequence[Simulation]) -> None:
-    """Compute the next control tick of every simulation in ``sims`` together: one batched
-    pose/Jacobian call and one batched IK step for all of them (see
+    """Compute the next control tick of every simulation in ``sims`` together.
+
+    One batched pose/Jacobian call and one batched IK step for all of them (see
     :func:`~cpmp.sim.control.update_controllers`); each :meth:`Simulation.step` then applies its
     own, exactly what it would have computed alone. The wall time counts as ``kinematics``,
     shared equally. ``sims`` must share one task config (any boxes).
