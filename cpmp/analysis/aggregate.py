@@ -22,12 +22,16 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+import yaml
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
 
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.experiment.report import jsonable, write_json
+from cpmp.experiment.output import jsonable, write_json
+from cpmp.experiment.plots import plot_sweep
 from cpmp.io import atomic_write_text
 
 log = logging.getLogger(__name__)
@@ -78,6 +82,7 @@ class SweepTable:
     swept: list[str]
 
     def to_dict(self) -> dict[str, Any]:
+        """The table as JSON-ready data (``aggregate.json``)."""
         return jsonable(
             {
                 "sweep_dir": str(self.sweep_dir),
@@ -94,10 +99,12 @@ def _natural_key(path: Path) -> list[Any]:
 
 
 def find_job_dirs(sweep_dir: str | Path) -> list[Path]:
-    """Every directory under ``sweep_dir`` (itself included) holding a ``report.json``, in
-    natural order (job ``2`` before ``10``); hidden directories (``.submitit``) are skipped.
+    """Every directory under ``sweep_dir`` (itself included) holding a ``report.json``.
 
-    Raises :class:`CpmpFileError` if ``sweep_dir`` is not a directory or holds no report.
+    In natural order (job ``2`` before ``10``); hidden directories (``.submitit``) are skipped.
+
+    Raises:
+        CpmpFileError: ``sweep_dir`` is not a directory or holds no report.
     """
     root = Path(sweep_dir)
     if not root.is_dir():
@@ -122,10 +129,6 @@ def read_overrides(job_dir: str | Path) -> dict[str, Any]:
     lists and dicts are kept as their override text (``[0,1]``) so they can be table cells.
     The ``+``/``++``/``~`` prefixes are dropped from keys. No file -> ``{}``.
     """
-    import yaml
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import HydraException
-
     path = Path(job_dir) / ".hydra" / "overrides.yaml"
     if not path.is_file():
         log.warning("%s has no .hydra/overrides.yaml; no override columns for it", job_dir)
@@ -206,19 +209,26 @@ def collect_sweep(sweep_dir: str | Path) -> SweepTable:
     return SweepTable(root, jsonable(rows), ["job", *keys, *METRIC_COLUMNS], keys, swept)
 
 
-def plot_axes(table: SweepTable) -> tuple[str, str | None, int | None]:
-    """``(x, hue, only_d)`` of the sweep plot: x is the first swept override (else D); hue a
-    second swept override, else D when several training sizes were run, else none. When D is
-    neither x nor hue but several D were run, only the rows of the largest D (``only_d``) are
-    plotted.
-    """
+class PlotAxes(NamedTuple):
+    """What the sweep plot shows (:func:`plot_axes`)."""
+
+    x: str
+    """The x axis: the first swept override (else D)."""
+    hue: str | None
+    """One line per value of: a second swept override, else D when several were run, else none."""
+    only_d: int | None
+    """When D is neither x nor hue but several D were run: the largest, whose rows are plotted."""
+
+
+def plot_axes(table: SweepTable) -> PlotAxes:
+    """The x axis, hue and training size of the sweep plot (see :class:`PlotAxes`)."""
     sizes = sorted({row["D"] for row in table.rows})
     if not table.swept:
-        return "D", None, None
+        return PlotAxes("D", None, None)
     x = table.swept[0]
     if len(table.swept) > 1:
-        return x, table.swept[1], sizes[-1] if len(sizes) > 1 else None
-    return x, ("D" if len(sizes) > 1 else None), None
+        return PlotAxes(x, table.swept[1], sizes[-1] if len(sizes) > 1 else None)
+    return PlotAxes(x, "D" if len(sizes) > 1 else None, None)
 
 
 def plot_table(table: SweepTable, x: str, hue: str | None, only_d: int | None) -> list[dict]:
@@ -306,11 +316,10 @@ def render_csv(table: SweepTable) -> str:
 
 
 def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Path:
-    """Write :data:`OUTPUT_FILES` atomically into ``out_dir`` (default: the sweep directory);
-    returns the ``aggregate.json`` path. The plot shows C against :func:`plot_axes`.
-    """
-    from cpmp.experiment.plots import plot_sweep
+    """Write :data:`OUTPUT_FILES` atomically into ``out_dir``; returns the ``aggregate.json`` path.
 
+    ``out_dir`` defaults to the sweep directory. The plot shows C against :func:`plot_axes`.
+    """
     out = Path(out_dir) if out_dir is not None else table.sweep_dir
     x, hue, only_d = plot_axes(table)
     plot_rows = plot_table(table, x, hue, only_d)
@@ -329,8 +338,10 @@ def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Pat
 
 
 def aggregate_sweep(cfg: Any, run_dir: str | Path) -> Path:
-    """Job of ``scripts/aggregate.py``: aggregate ``cfg.sweep_dir`` and write the files into
-    it (``run_dir``, the aggregate job's own directory, is not used). Returns aggregate.json.
+    """Job of ``scripts/aggregate.py``: aggregate ``cfg.sweep_dir``; returns aggregate.json.
+
+    The files are written into the sweep directory (``run_dir``, the aggregate job's own
+    directory, is not used).
     """
     sweep_dir = cfg.get("sweep_dir")
     if not sweep_dir:

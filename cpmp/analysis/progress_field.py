@@ -8,7 +8,11 @@ from typing import Any
 
 import numpy as np
 
+from cpmp.evaluation.offline import activation_progress, progress_errors
+from cpmp.experiment.plots import plot_progress_field
 from cpmp.io import atomic_write_text
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.worlds.two_point import curved_trajectories
 
 
 def progress_field_example(
@@ -19,18 +23,14 @@ def progress_field_example(
     predictor: str,
     predictor_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The paper's Fig. 3: fit a progress predictor on curved 2-D trajectories and plot the
-    predicted progress over the plane with the support points marked.
+    """The paper's Fig. 3: a progress predictor's field over the plane, supports marked.
 
-    Writes ``progress_field.png`` and ``progress_field.json`` (support count, training MAE) into
-    ``out_dir``; returns the JSON content plus the PNG path. The defaults of the command
-    (``cpmp-progress-field``) are in ``conf/progress_field.yaml``.
+    The predictor is fitted on curved 2-D trajectories; its predicted progress is plotted over
+    the plane with the support points marked. Writes ``progress_field.png`` and
+    ``progress_field.json`` (support count, training MAE) into ``out_dir``; returns the JSON
+    content plus the PNG path. The defaults of the command (``cpmp-progress-field``) are in
+    ``conf/progress_field.yaml``.
     """
-    from cpmp.evaluation.offline import activation_progress, progress_errors
-    from cpmp.experiment.plots import plot_progress_field
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.worlds.two_point import curved_trajectories
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     demos = curved_trajectories(n_trajectories, seed=seed)

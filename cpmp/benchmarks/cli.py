@@ -1,7 +1,9 @@
-"""The command lines of the benchmark scripts (``scripts/bench*.py`` are two-line wrappers of
-these): each parses its arguments, runs its benchmark and prints JSON (and the path it wrote,
-for ``bench.py``). A :class:`~cpmp.errors.CpmpError` (a bad option, a missing file) becomes one
-``<name>: error:`` line on stderr and exit status 2.
+"""The command lines of the benchmark scripts (``scripts/bench*.py`` are two-line wrappers).
+
+Each parses its arguments, runs its benchmark and prints JSON (and the path it wrote, for
+``bench.py``). A :class:`~cpmp.errors.CpmpError` (a bad option, a missing file) becomes one
+``<name>: error:`` line on stderr and exit status 2. The benchmark modules (torch, MuJoCo,
+scikit-learn) are imported inside each command, after its arguments are parsed.
 """
 
 from __future__ import annotations
@@ -16,12 +18,15 @@ from pathlib import Path
 from typing import Any
 
 from cpmp.benchmarks.settings import SECTIONS, BenchSettings
+from cpmp.config import TaskConfig
 from cpmp.errors import CpmpError
+from cpmp.io import atomic_write_text
 
 
 def _print_json(name: str, measure: Callable[[], Any]) -> int:
-    """Print ``measure()`` as indented JSON and return 0, or print ``<name>: error: ...`` to
-    stderr and return 2 when it raises a :class:`CpmpError`.
+    """Print ``measure()`` as indented JSON and return 0.
+
+    When it raises a :class:`CpmpError`, print ``<name>: error: ...`` to stderr and return 2.
     """
     try:
         result = measure()
@@ -33,6 +38,7 @@ def _print_json(name: str, measure: Callable[[], Any]) -> int:
 
 
 def _ints(text: str) -> list[int]:
+    """Comma-separated integers (an ``argparse`` type)."""
     try:
         return [int(v) for v in text.split(",") if v.strip()]
     except ValueError as err:
@@ -42,12 +48,12 @@ def _ints(text: str) -> list[int]:
 
 
 def bench_main(argv: list[str] | None = None) -> int:
-    """``scripts/bench.py``: benchmark cpmp: convex fit vs scikit-learn, sequencer cost,
-    real-time factor, main-job stages, scaling, gradient-trained predictors. Writes bench.json,
-    bench.md and bench_scaling.png; prints the path of bench.json.
-    """
-    from cpmp.benchmarks.suite import run_bench
+    """``scripts/bench.py``: benchmark cpmp; prints the path of bench.json.
 
+    The sections: convex fit vs scikit-learn, sequencer cost, real-time factor, main-job
+    stages, scaling, gradient-trained predictors. Writes bench.json, bench.md and
+    bench_scaling.png.
+    """
     parser = argparse.ArgumentParser(
         description=(
             "Benchmark cpmp: convex fit vs scikit-learn, sequencer cost, real-time factor, "
@@ -102,6 +108,8 @@ def bench_main(argv: list[str] | None = None) -> int:
     if args.lbfgs:
         options["lbfgs"] = True
     out = Path(args.out or f"logs/bench/{time.strftime('%Y-%m-%d_%H-%M-%S')}")
+    from cpmp.benchmarks.suite import run_bench  # lazy: torch, MuJoCo after the arguments
+
     try:
         settings = BenchSettings.quick(**options) if args.quick else BenchSettings(**options)
         path = run_bench(settings, out)
@@ -113,14 +121,10 @@ def bench_main(argv: list[str] | None = None) -> int:
 
 
 def bench_sequencer_main(argv: list[str] | None = None) -> int:
-    """``scripts/bench_sequencer.py``: benchmark fitting and per-tick cost of the sequencer for
-    each predictor, on 6 synthetic demos or ``--data`` (your own or collected demos); prints
-    JSON.
+    """``scripts/bench_sequencer.py``: fit and per-tick cost of the sequencer per predictor.
+
+    On 6 synthetic demos or ``--data`` (your own or collected demos); prints JSON.
     """
-    import torch
-
-    from cpmp.benchmarks.sequencer import bench_sequencer
-
     parser = argparse.ArgumentParser(
         description=(
             "Benchmark fitting and per-tick cost of the sequencer for each predictor; prints JSON."
@@ -132,16 +136,18 @@ def bench_sequencer_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ticks", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
+    import torch  # lazy: torch after the arguments
+
+    from cpmp.benchmarks.sequencer import bench_sequencer  # lazy: torch after the arguments
+    from cpmp.data.datafile import load_demonstrations  # lazy: h5py after the arguments
+    from cpmp.worlds.two_point import make_demonstrations  # lazy: torch after the arguments
+
     torch.set_num_threads(args.threads)
 
     def measure() -> dict[str, Any]:
         if args.data:
-            from cpmp.data.datafile import load_demonstrations
-
             demos = load_demonstrations(args.data, split=args.split)
         else:
-            from cpmp.worlds.two_point import make_demonstrations
-
             demos = make_demonstrations(6, seed=0)
         return bench_sequencer(demos, args.predictors.split(","), n_ticks=args.ticks)
 
@@ -149,15 +155,12 @@ def bench_sequencer_main(argv: list[str] | None = None) -> int:
 
 
 def bench_sim_main(argv: list[str] | None = None) -> int:
-    """``scripts/bench_sim.py``: print a JSON speed report of the simulation with IK control and
-    a policy in the loop: ``replay`` times physics + IK + features (the demonstration's labels
-    replayed); ``learned`` times the full loop with a sequencer fitted on ``--demos``
-    demonstrations (0 skips it).
-    """
-    from cpmp.benchmarks.sim_speed import benchmark
-    from cpmp.config import TaskConfig
-    from cpmp.sim import Box
+    """``scripts/bench_sim.py``: a JSON speed report of the simulation with a policy in the loop.
 
+    ``replay`` times physics + IK + features (the demonstration's labels replayed);
+    ``learned`` times the full loop with a sequencer fitted on ``--demos`` demonstrations (0
+    skips it).
+    """
     parser = argparse.ArgumentParser(
         description=(
             "Print a JSON speed report of the simulation with IK control and a policy in the loop."
@@ -169,6 +172,9 @@ def bench_sim_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--demos", type=int, default=6, help="demos for the learned policy")
     parser.add_argument("--seed", type=int, default=1, help="seed of the training boxes")
     args = parser.parse_args(argv)
+    from cpmp.benchmarks.sim_speed import benchmark  # lazy: torch, MuJoCo after the arguments
+    from cpmp.sim import Box  # lazy: MuJoCo after the arguments
+
     cfg = TaskConfig()
 
     def measure() -> dict[str, Any]:
@@ -179,16 +185,12 @@ def bench_sim_main(argv: list[str] | None = None) -> int:
 
 
 def bench_start_main(argv: list[str] | None = None) -> int:
-    """``scripts/bench_start.py``: wrong starts of cpmp's start rules against classifiers
-    handed the true box size, scored on many fresh boxes (the start depends only on the first
-    feature vector). Prints the JSON (the Markdown table on stderr); ``--out`` also writes
-    both.
+    """``scripts/bench_start.py``: wrong starts of cpmp's start rules against classifiers.
+
+    The classifiers are handed the true box size; all are scored on many fresh boxes (the
+    start depends only on the first feature vector). Prints the JSON (the Markdown table on
+    stderr); ``--out`` also writes both.
     """
-    import torch
-
-    from cpmp.benchmarks.start import analyse_starts, markdown
-    from cpmp.io import atomic_write_text
-
     parser = argparse.ArgumentParser(
         description=(
             "Wrong starts of cpmp's start rules against classifiers handed the true box "
@@ -200,6 +202,10 @@ def bench_start_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--boxes", type=int, default=200, help="scored boxes per seed")
     parser.add_argument("--out", default=None, help="write the JSON here (and .md beside it)")
     args = parser.parse_args(argv)
+    import torch  # lazy: torch after the arguments
+
+    from cpmp.benchmarks.start import analyse_starts, markdown  # lazy: MuJoCo, scikit-learn
+
     torch.set_num_threads(1)
     result = analyse_starts(args.seeds, args.sizes, args.boxes)
     text = json.dumps(result, indent=2)
@@ -213,14 +219,14 @@ def bench_start_main(argv: list[str] | None = None) -> int:
 
 
 def bench_synthetic_main(argv: list[str] | None = None) -> int:
-    """``scripts/bench_synthetic.py``: closed-loop outcomes on the two synthetic tasks (no
-    simulator): cpmp's defaults, the paper's method and single options switched off, over
+    """``scripts/bench_synthetic.py``: closed-loop outcomes on the two synthetic tasks.
+
+    No simulator: cpmp's defaults, the paper's method and single options switched off, over
     training sizes and seeds. Prints JSON (each row on stderr as it is done).
     """
-    import torch
+    import torch  # lazy: the command's own dependency (its choices need the configs below)
 
-    from cpmp.benchmarks.sequencer import synthetic_configs, synthetic_outcomes
-    from cpmp.io import atomic_write_text
+    from cpmp.benchmarks.sequencer import synthetic_configs, synthetic_outcomes  # lazy: torch
 
     configs = list(synthetic_configs())
     parser = argparse.ArgumentParser(

@@ -1,6 +1,7 @@
-"""The ``fit`` and ``scaling`` sections of ``scripts/bench.py``: cpmp's convex ``klr`` fit
-against scikit-learn's ``LogisticRegression(solver="newton-cholesky")`` on the same kernel
-features (:func:`sklearn_peer`, :func:`bench_fit`), and fit time and tick cost as
+"""The ``fit`` and ``scaling`` sections of ``scripts/bench.py``.
+
+Cpmp's convex ``klr`` fit against scikit-learn's ``LogisticRegression(solver="newton-cholesky")`` on
+the same kernel features (:func:`sklearn_peer`, :func:`bench_fit`), and fit time and tick cost as
 demonstrations and features grow (:func:`bench_scaling`, on the synthetic relay task). Every
 function returns a JSON-ready dict of measurements; nothing here asserts a speed.
 """
@@ -11,29 +12,31 @@ import statistics
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+import torch
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.linear_model import LogisticRegression
+from threadpoolctl import threadpool_limits
 
 from cpmp.benchmarks.report import package_version
 from cpmp.benchmarks.sequencer import bench_ticks
 from cpmp.benchmarks.settings import check_count
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.predictors.newton import NEWTON_TOL, newton_fit, penalised_loss
+from cpmp.sequencer.fit_data import node_training_data
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.worlds.relay.demonstrator import make_demonstrations
 
 
 def node_kernels(seq: ConcurrentSequencer, demos: Sequence[Demonstration]) -> dict[str, Any]:
-    """The convex problems of a fitted kernel predictor (``klr``, ``klr_full``): per node the
-    kernel matrix ``(n_i, S_i)`` of its training samples against its real supports, the soft
-    labels ``(n_i,)``, and the shared ``l2`` and ``bias`` options.
+    """The convex problems of a fitted kernel predictor (``klr``, ``klr_full``).
+
+    Per node the kernel matrix ``(n_i, S_i)`` of its training samples against its real supports, the
+    soft labels ``(n_i,)``, and the shared ``l2`` and ``bias`` options.
     """
-    import torch
-
-    from cpmp.sequencer.fit_data import node_training_data
-
     predictor = seq.predictor
     if not hasattr(predictor, "support_mask"):
         raise ConfigError(f"predictor {predictor.kind!r} has no kernel; use klr or klr_full")
@@ -52,13 +55,10 @@ def node_kernels(seq: ConcurrentSequencer, demos: Sequence[Demonstration]) -> di
 
 
 def problem_loss(problems: Mapping[str, Any], solutions: Sequence[tuple[Any, float]]) -> float:
-    """Sum over nodes of the mean soft-label BCE plus ``½ l2 ||w||²`` at ``solutions``
-    (per node ``(w (S_i,), b)``): the loss both solvers minimise.
+    """The loss both solvers minimise, at ``solutions`` (per node ``(w (S_i,), b)``).
+
+    The sum over nodes of the mean soft-label BCE plus ``½ l2 ||w||²``.
     """
-    import torch
-
-    from cpmp.predictors.newton import penalised_loss
-
     total = 0.0
     for kernel, target, (w, b) in zip(
         problems["kernels"], problems["targets"], solutions, strict=True
@@ -74,11 +74,11 @@ def problem_loss(problems: Mapping[str, Any], solutions: Sequence[tuple[Any, flo
 def newton_solve_all(
     problems: Mapping[str, Any], tol: float | None = None
 ) -> tuple[list[tuple[Any, float]], float]:
-    """Cpmp's Newton solver (:func:`~cpmp.predictors.newton.newton_fit`) on every node from
-    zero; returns the solutions and the wall time [s].
-    """
-    from cpmp.predictors.newton import NEWTON_TOL, newton_fit
+    """Cpmp's Newton solver (:func:`~cpmp.predictors.newton.newton_fit`) on every node from zero.
 
+    Returns:
+        The solutions and the wall time [s].
+    """
     start = time.perf_counter()
     solutions, _ = newton_fit(
         problems["kernels"],
@@ -93,20 +93,15 @@ def newton_solve_all(
 def sklearn_peer(
     problems: Mapping[str, Any], tol: float | None = None, max_iter: int = 100
 ) -> dict[str, Any]:
-    """scikit-learn's ``LogisticRegression(solver="newton-cholesky")`` on every node's kernel
-    features: soft labels ``y`` as two weighted copies of each sample (class 1 with weight
+    """scikit-learn's ``LogisticRegression(solver="newton-cholesky")`` on every node's kernels.
+
+    Soft labels ``y`` as two weighted copies of each sample (class 1 with weight
     ``y``, class 0 with weight ``1 - y``) and ``C = 1 / (l2 n)``, so that its objective
     (``1/n Σ weighted log-loss + l2/2 ||w||²``, intercept unpenalised) is cpmp's loss exactly.
 
     Returns per node ``(w, b)`` as ``solutions``, the wall time [s] of building the copies and
     fitting (one BLAS thread), the largest iteration count and whether every node converged.
     """
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import LogisticRegression
-    from threadpoolctl import threadpool_limits
-
-    from cpmp.predictors.newton import NEWTON_TOL
-
     solutions: list[tuple[Any, float]] = []
     iterations, converged, seconds = 0, True, 0.0
     with threadpool_limits(1), warnings.catch_warnings(record=True) as caught:
@@ -144,8 +139,9 @@ def sklearn_peer(
 def bench_fit(
     demos: Sequence[Demonstration], repeats: int = 3, seed: int = 0, lbfgs: bool = False
 ) -> dict[str, Any]:
-    """Fit ``klr`` (cpmp's defaults) on ``demos`` ``repeats`` times and time it against
-    :func:`sklearn_peer` on the same kernel features.
+    """Fit ``klr`` (cpmp's defaults) on ``demos`` ``repeats`` times, timed against the peer.
+
+    The peer is :func:`sklearn_peer` on the same kernel features.
 
     Returns ``klr``: ``fit_seconds`` (the predictor's Lightning fit: supports, kernels, Newton),
     ``sequencer_fit_seconds`` (all of :meth:`ConcurrentSequencer.fit`), ``solve_seconds``
@@ -153,8 +149,6 @@ def bench_fit(
     loss; ``sklearn``: its time, iterations and loss; ``ratio`` of the times (klr / sklearn,
     < 1: klr is faster) and the relative loss difference; with ``lbfgs`` the LBFGS fit too.
     """
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-
     check_count("repeats", repeats)
     fits, totals, solves, peers = [], [], [], []
     for _ in range(repeats):
@@ -217,12 +211,11 @@ def timing_stats(values: Sequence[float]) -> dict[str, float]:
 
 # ------------------------------------------------------------------------------- scaling
 def pad_features(demos: Sequence[Demonstration], d: int) -> list[Demonstration]:
-    """``demos`` with constant zero columns appended up to ``d`` features. Path lengths, and
-    so the support points, stay the same; the kernel's feature dimension grows (with
-    ``feature_weighting=path`` the moving features' weights ``d · share`` grow with it).
-    """
-    from cpmp.data.demonstration import Demonstration
+    """``demos`` with constant zero columns appended up to ``d`` features.
 
+    Path lengths, and so the support points, stay the same; the kernel's feature dimension grows
+    (with ``feature_weighting=path`` the moving features' weights ``d · share`` grow with it).
+    """
     out = []
     for demo in demos:
         extra = d - demo.n_features
@@ -250,14 +243,13 @@ def bench_scaling(
     batch: int = 20,
     ticks: int = 100,
 ) -> dict[str, Any]:
-    """Fit time (``klr`` and the scikit-learn peer) and tick cost as the training set grows
-    (``demo_counts`` demonstrations of the synthetic relay task, padded to the smallest
-    feature count) and as features grow (``feature_counts``, at the middle demonstration
-    count). Each point: one fit, support count, samples, Newton solve and peer times [s],
-    single and batched tick cost [ms per episode-tick].
-    """
-    from cpmp.worlds.relay.demonstrator import make_demonstrations
+    """Fit time (``klr`` and the scikit-learn peer) and tick cost as demos and features grow.
 
+    The training set grows (``demo_counts`` demonstrations of the synthetic relay task, padded to
+    the smallest feature count) and as features grow (``feature_counts``, at the middle
+    demonstration count). Each point: one fit, support count, samples, Newton solve and peer times
+    [s], single and batched tick cost [ms per episode-tick].
+    """
     base_d = min(feature_counts)
     base_n = sorted(demo_counts)[len(demo_counts) // 2]
     pool = make_demonstrations(max(max(demo_counts), base_n) + batch, seed=seed)
@@ -289,8 +281,7 @@ def bench_scaling(
 
 
 def _fit_point(demos: Sequence[Demonstration], seed: int) -> dict[str, Any]:
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-
+    """One scaling point: ``klr`` fitted on ``demos``, its Newton solve and the peer's, timed."""
     seq = ConcurrentSequencer.fit(list(demos), "klr", seed=seed, logger=None)
     problems = node_kernels(seq, demos)
     _, solve = newton_solve_all(problems)

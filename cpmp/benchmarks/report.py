@@ -1,6 +1,7 @@
-"""What ``scripts/bench.py`` writes besides the numbers: the machine it ran on
-(:func:`machine_facts`, :func:`load_average`, :func:`package_version`), ``bench.md``
-(:func:`bench_markdown`) and ``bench_scaling.png`` (:func:`plot_scaling`).
+"""What ``scripts/bench.py`` writes besides the numbers: the machine, the table, the plot.
+
+The machine it ran on (:func:`machine_facts`, :func:`load_average`, :func:`package_version`),
+``bench.md`` (:func:`bench_markdown`) and ``bench_scaling.png`` (:func:`plot_scaling`).
 """
 
 from __future__ import annotations
@@ -11,7 +12,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from cpmp.benchmarks.sequencer import TICK_TARGET_MS
+from cpmp.experiment.plots import new_figure, save_figure
 
 
 # ------------------------------------------------------------------------- machine facts
@@ -32,11 +36,11 @@ def load_average() -> list[float] | None:
 
 
 def machine_facts(threads: int) -> dict[str, Any]:
-    """Cores, ``threads`` (torch and BLAS), Python, torch and scikit-learn versions, platform
-    and the load average at the start, for ``bench.json``.
-    """
-    import torch
+    """The machine, for ``bench.json``: cores, threads, versions, platform, load average.
 
+    ``threads`` (torch and BLAS), the Python, torch and scikit-learn versions, and the load
+    average at the start.
+    """
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
@@ -56,11 +60,11 @@ def machine_facts(threads: int) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------ plot, markdown
 def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
-    """Log-log plot of the ``scaling`` section: fit time (klr fit, Newton solve, scikit-learn
-    peer) [s] and tick cost (single, batched) [ms] against demonstrations and features.
-    """
-    from cpmp.experiment.plots import new_figure, save_figure
+    """Log-log plot of the ``scaling`` section; returns ``path``.
 
+    Fit time (klr fit, Newton solve, scikit-learn peer) [s] and tick cost (single, batched)
+    [ms] against demonstrations and features.
+    """
     figure = new_figure(10, 7)
     axes = figure.subplots(2, 2)
     for col, (key, label) in enumerate((("demos", "n_demos"), ("features", "n_features"))):

@@ -1,25 +1,28 @@
-"""The sequencer's cost without the simulator: each predictor fitted and stepped
-(:func:`bench_sequencer`, ``scripts/bench_sequencer.py``), one episode at a time against
-batched episodes (:func:`bench_ticks`, the ``sequencer`` section of ``scripts/bench.py``), the
-Adam-trained predictors (:func:`bench_gradient`, the ``gradient`` section), and the
-closed-loop outcomes on the synthetic tasks (:func:`synthetic_outcomes`,
-``scripts/bench_synthetic.py``). Every function returns a JSON-ready dict; nothing here
-asserts a speed.
+"""The sequencer's cost without the simulator, and closed-loop outcomes on synthetic tasks.
+
+Each predictor fitted and stepped (:func:`bench_sequencer`, ``scripts/bench_sequencer.py``), one
+episode at a time against batched episodes (:func:`bench_ticks`, the ``sequencer`` section of
+``scripts/bench.py``), the Adam-trained predictors (:func:`bench_gradient`, the ``gradient``
+section), and the closed-loop outcomes on the synthetic tasks (:func:`synthetic_outcomes`,
+``scripts/bench_synthetic.py``). Every function returns a JSON-ready dict; nothing here asserts a
+speed.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+import torch
 
-from cpmp.benchmarks.settings import check_count
-
-if TYPE_CHECKING:
-    from cpmp.benchmarks.settings import BenchSettings
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.benchmarks.settings import BenchSettings, check_count
+from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demos
+from cpmp.worlds.relay.evaluation import evaluate as evaluate_relay
+from cpmp.worlds.two_point import evaluate as evaluate_two_point
+from cpmp.worlds.two_point import make_demonstrations as two_point_demos
 
 TICK_TARGET_MS = 0.1
 """Issue #9's target for the sequencer: <= 0.1 ms per episode-tick with 20 episodes batched."""
@@ -32,18 +35,15 @@ def bench_sequencer(
     seed: int = 0,
     options: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """Fit each predictor on ``demos`` and time :meth:`ConcurrentSequencer.step` over the first
-    demo's feature stream (``n_ticks`` ticks, cycling).
+    """Fit each predictor on ``demos`` and time :meth:`ConcurrentSequencer.step`.
+
+    The steps run over the first demo's feature stream (``n_ticks`` ticks, cycling).
 
     ``options``: per predictor kind, extra :meth:`ConcurrentSequencer.fit` options.
 
     Returns per predictor: fit time [s], epochs run (the fit summary's ``epochs``), final
     loss, step latency mean/p95 [ms], nodes, support points, parameter count and bytes.
     """
-    import torch
-
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-
     out: dict[str, Any] = {
         "n_demos": len(demos),
         "n_features": int(demos[0].n_features),
@@ -87,10 +87,11 @@ def bench_ticks(
     ticks: int,
     dt: float = 0.01,
 ) -> dict[str, Any]:
-    """Cost of the sequencer per episode-tick: ``len(streams)`` episodes of ``ticks`` ticks,
-    episode ``i`` fed ``streams[i] (n_i, d)`` (its last row once it ends), first one episode at
-    a time with :meth:`ConcurrentSequencer.step`, then all together with one
-    :class:`~cpmp.sequencer.batch.BatchedSequencer` call per tick.
+    """Cost of the sequencer per episode-tick, one episode at a time and batched.
+
+    ``len(streams)`` episodes of ``ticks`` ticks, episode ``i`` fed ``streams[i] (n_i, d)`` (its
+    last row once it ends), first one episode at a time with :meth:`ConcurrentSequencer.step`, then
+    all together with one :class:`~cpmp.sequencer.batch.BatchedSequencer` call per tick.
 
     Returns ``single`` and ``batched`` cost [ms per episode-tick] (mean; single also p95) and
     whether both made the same transitions (``same_decisions``).
@@ -133,12 +134,11 @@ def bench_ticks(
 
 
 def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
-    """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations
-    (:func:`bench_sequencer`): fit time, epochs run, loss, step cost.
-    """
-    from cpmp.worlds.two_point import make_demonstrations
+    """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations.
 
-    demos = make_demonstrations(settings.gradient_demos, seed=settings.seed)
+    As :func:`bench_sequencer`: fit time, epochs run, loss, step cost.
+    """
+    demos = two_point_demos(settings.gradient_demos, seed=settings.seed)
     epochs = settings.gradient_epochs
     options = {
         kind: {} if epochs is None else {"epochs": epochs} for kind in settings.gradient_predictors
@@ -150,12 +150,11 @@ def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
 
 # ------------------------------------------------------------------- synthetic closed loop
 def synthetic_configs() -> dict[str, dict[str, Any]]:
-    """The sequencer options :func:`synthetic_outcomes` compares, by name: cpmp's defaults,
-    single options switched off, and the paper's method (as :meth:`ConcurrentSequencer.fit`
-    options).
-    """
-    from cpmp.sequencer.sequencer import PAPER_OPTIONS
+    """The sequencer options :func:`synthetic_outcomes` compares, by name.
 
+    Cpmp's defaults, single options switched off, and the paper's method (as
+    :meth:`ConcurrentSequencer.fit` options).
+    """
     return {
         "defaults": {},
         "coupling=none": {"coupling": "none"},
@@ -172,7 +171,9 @@ def synthetic_outcomes(
     configs: Sequence[str],
     on_row: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Closed-loop outcomes on the two synthetic tasks (no simulator): for each task
+    """Closed-loop outcomes on the two synthetic tasks (no simulator).
+
+    For each task
     (``two_point``, ``relay``), training size D in ``sizes``, seed and named config of
     :func:`synthetic_configs`, ``klr`` fitted on D demonstrations and run on ``episodes``
     episodes (seeded ``1000 + seed``).
@@ -181,12 +182,6 @@ def synthetic_outcomes(
     ``config`` and the counts ``complete``, ``wrong_start``, ``incomplete``; ``on_row`` is
     called with each row as it is done.
     """
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demos
-    from cpmp.worlds.relay.evaluation import evaluate as evaluate_relay
-    from cpmp.worlds.two_point import evaluate as evaluate_two_point
-    from cpmp.worlds.two_point import make_demonstrations as two_point_demos
-
     options = synthetic_configs()
     tasks = {
         "two_point": (two_point_demos, evaluate_two_point),

@@ -1,5 +1,6 @@
-"""The sizes of ``scripts/bench.py`` (:class:`BenchSettings`) and the benchmark's sections
-(:data:`SECTIONS`), checked on construction; nothing here runs a measurement.
+"""The sizes of ``scripts/bench.py`` (:class:`BenchSettings`) and its sections (:data:`SECTIONS`).
+
+They are checked on construction; nothing here runs a measurement.
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ SECTIONS = ("fit", "sequencer", "realtime", "stages", "scaling", "gradient")
 
 @dataclass
 class BenchSettings:
-    """Sizes of :func:`~cpmp.benchmarks.suite.run_bench` (the defaults are the issue's;
-    :meth:`quick` is small).
+    """Sizes of :func:`~cpmp.benchmarks.suite.run_bench`.
+
+    The defaults are the issue's; :meth:`quick` is small.
 
     Attributes:
         sections: which of :data:`SECTIONS` to run.
@@ -80,7 +82,7 @@ class BenchSettings:
                 raise ConfigError(f"{name} needs at least one value")
             for value in values:
                 check_count(name, value)
-        from cpmp.worlds.relay.world import FEATURE_NAMES
+        from cpmp.worlds.relay.world import FEATURE_NAMES  # lazy: torch; the CLI parses first
 
         if min(self.scaling_features) < len(FEATURE_NAMES):
             raise ConfigError(
@@ -90,8 +92,9 @@ class BenchSettings:
 
     @classmethod
     def quick(cls, **overrides: Any) -> BenchSettings:
-        """Small sizes: 3 demonstrations, 4 episodes, ``experiment=tiny`` (run time: see
-        docs/benchmarks.md).
+        """Small sizes: 3 demonstrations, 4 episodes, ``experiment=tiny``.
+
+        The run time is in docs/benchmarks.md.
         """
         small = {
             "fit_demos": 3,
@@ -110,8 +113,10 @@ class BenchSettings:
 
 
 def check_count(name: str, value: Any) -> None:
-    """Raise :class:`ConfigError` unless ``value`` is a whole number >= 1 (``name``: the
-    option, for the message).
+    """Check that option ``name`` holds a whole number >= 1.
+
+    Raises:
+        ConfigError: ``value`` is not, naming ``name``.
     """
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}")

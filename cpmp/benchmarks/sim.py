@@ -1,7 +1,8 @@
-"""The sections of ``scripts/bench.py`` that need the simulator: the real-time factor of
-closed-loop episodes (:func:`bench_realtime`, on the data :class:`SimData` makes once) and the
-main job in a fresh process with its stage timings (:func:`bench_stages`). Every function
-returns a JSON-ready dict of measurements; nothing here asserts a speed.
+"""The sections of ``scripts/bench.py`` that need the simulator.
+
+The real-time factor of closed-loop episodes (:func:`bench_realtime`, on the data :class:`SimData`
+makes once) and the main job in a fresh process with its stage timings (:func:`bench_stages`). Every
+function returns a JSON-ready dict of measurements; nothing here asserts a speed.
 """
 
 from __future__ import annotations
@@ -13,44 +14,42 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from cpmp.benchmarks.settings import BenchSettings
+from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, time_rollouts
+from cpmp.config import TaskConfig
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError
-
-if TYPE_CHECKING:
-    from cpmp.benchmarks.settings import BenchSettings
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.experiment.strategies import balanced_subset
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sim import Box, record_demonstration, sample_box
+from cpmp.sim.collect import sample_boxes
 
 ROOT = Path(__file__).resolve().parents[2]
 """The repository (``scripts/experiment.py`` for the ``stages`` section)."""
 
 
 class SimData:
-    """The simulated data the ``fit``, ``sequencer`` and ``realtime`` sections share, made
-    once on first use: training demonstrations, the fitted sequencer, reproduction boxes and
-    their expected demonstrations.
+    """The simulated data the ``fit``, ``sequencer`` and ``realtime`` sections share.
+
+    Made once on first use: training demonstrations, the fitted sequencer, reproduction boxes
+    and their expected demonstrations.
     """
 
     def __init__(self, settings: BenchSettings) -> None:
-        from cpmp.config import TaskConfig
-
         self.settings = settings
         self.task = TaskConfig()
         self._train: list[Demonstration] | None = None
         self._seq: ConcurrentSequencer | None = None
-        self._boxes: tuple[list[Any], list[Demonstration]] | None = None
+        self._boxes: tuple[list[Box], list[Demonstration]] | None = None
 
     @property
     def train(self) -> list[Demonstration]:
         """The main job's training demonstrations of seed ``seed`` at D = ``fit_demos``."""
         if self._train is None:
-            from cpmp.experiment.strategies import balanced_subset
-            from cpmp.sim import record_demonstration
-            from cpmp.sim.collect import sample_boxes
-
             s = self.settings
             rng = np.random.default_rng(s.seed)
             boxes = sample_boxes(rng, self.task, s.fit_demos, balanced=True)
@@ -63,22 +62,20 @@ class SimData:
 
     @property
     def sequencer(self) -> ConcurrentSequencer:
+        """``klr`` fitted on :attr:`train` with the settings' seed."""
         if self._seq is None:
-            from cpmp.sequencer.sequencer import ConcurrentSequencer
-
             self._seq = ConcurrentSequencer.fit(
                 self.train, "klr", seed=self.settings.seed, logger=None
             )
         return self._seq
 
     @property
-    def boxes(self) -> tuple[list[Any], list[Demonstration]]:
-        """``batch`` reproduction boxes (the main job's, seed ``seed``) and the demonstrator's
-        recording of each.
+    def boxes(self) -> tuple[list[Box], list[Demonstration]]:
+        """``batch`` reproduction boxes and the demonstrator's recording of each.
+
+        The boxes are the main job's of seed ``seed``.
         """
         if self._boxes is None:
-            from cpmp.sim import record_demonstration, sample_box
-
             rng = np.random.default_rng(self.settings.seed + 1000)
             boxes = [sample_box(rng, self.task) for _ in range(self.settings.batch)]
             self._boxes = boxes, [record_demonstration(b, self.task) for b in boxes]
@@ -86,11 +83,10 @@ class SimData:
 
 
 def bench_realtime(sim: SimData) -> dict[str, Any]:
-    """Real-time factor of ``batch`` closed-loop episodes with the fitted sequencer, one at a
-    time and batched (:func:`cpmp.benchmarks.sim_speed.time_rollouts`).
-    """
-    from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, time_rollouts
+    """Real-time factor of ``batch`` closed-loop episodes, one at a time and batched.
 
+    The episodes run the fitted sequencer (:func:`cpmp.benchmarks.sim_speed.time_rollouts`).
+    """
     boxes, expected = sim.boxes
     seq, task, max_time = sim.sequencer, sim.task, sim.settings.max_time
     single = time_rollouts(boxes, seq, task, expected, batched=False, max_time=max_time)
@@ -108,10 +104,11 @@ def bench_realtime(sim: SimData) -> dict[str, Any]:
 def bench_stages(
     experiment: str, threads: int = 1, overrides: Sequence[str] = ()
 ) -> dict[str, Any]:
-    """Run the main job ``scripts/experiment.py experiment=<experiment> [overrides]`` in a
-    fresh process (as a user does) and report its wall time and its ``timings.json``: seconds
-    per stage (kinematics set-up, collect, expected, train, evaluate, reproduce, strategy map,
-    plots).
+    """Run the main job in a fresh process; its wall time and the seconds of every stage.
+
+    ``scripts/experiment.py experiment=<experiment> [overrides]`` runs as a user runs it; the
+    report has its wall time and its ``timings.json``: seconds per stage (kinematics set-up,
+    collect, expected, train, evaluate, reproduce, strategy map, plots).
     """
     script = ROOT / "scripts" / "experiment.py"
     if not script.is_file():

@@ -14,6 +14,7 @@ from cpmp.config.task import TaskConfig
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim.collect import record_demonstration, sample_boxes
 from cpmp.sim.policies import ReplayPolicy
 from cpmp.sim.runner import run_episode, run_episodes
@@ -38,8 +39,10 @@ def time_rollouts(
     batched: bool = False,
     max_time: float | None = None,
 ) -> dict[str, Any]:
-    """Run one closed-loop episode per box and time them: one at a time with
-    :func:`run_episode`, or all together with :func:`run_episodes` (``batched``).
+    """Run one closed-loop episode per box and time them.
+
+    One at a time with :func:`run_episode`, or all together with :func:`run_episodes`
+    (``batched``).
 
     ``policy``: a fitted sequencer (batched with ``policy.batched(N)``), or one
     single-episode policy per box (a sequence); ``expected[i]``: the demonstrator's recording
@@ -139,8 +142,6 @@ def benchmark(
         "replay": _time_episode(box, ReplayPolicy(demo), cfg, demo),
     }
     if n_demos > 0:
-        from cpmp.sequencer.sequencer import ConcurrentSequencer
-
         boxes = sample_boxes(np.random.default_rng(seed), cfg, n_demos, balanced=True)
         demos = [record_demonstration(b, cfg) for b in boxes]
         options = dict(LEARNED_POLICY)

@@ -19,7 +19,12 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from sklearn.linear_model import LogisticRegression
+from sklearn.neighbors import KNeighborsClassifier
+from sklearn.svm import SVC
+from sklearn.tree import DecisionTreeClassifier
 
+from cpmp.config.task import TaskConfig
 from cpmp.data.demonstration import Demonstration
 from cpmp.experiment.strategies import (
     balanced_subset,
@@ -29,6 +34,10 @@ from cpmp.experiment.strategies import (
     strategy_signatures,
 )
 from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+from cpmp.sim import record_demonstration, sample_box
+from cpmp.sim.collect import sample_boxes
+from cpmp.sim.scene import correct_strategy
+from cpmp.sim.simulation import Simulation
 
 SEQUENCER_RULES: dict[str, dict[str, Any]] = {
     "cpmp defaults": {},
@@ -39,11 +48,6 @@ SEQUENCER_RULES: dict[str, dict[str, Any]] = {
 
 
 def _classifiers(seed: int) -> dict[str, Callable[[], Any]]:
-    from sklearn.linear_model import LogisticRegression
-    from sklearn.neighbors import KNeighborsClassifier
-    from sklearn.svm import SVC
-    from sklearn.tree import DecisionTreeClassifier
-
     return {
         "oracle size: nearest training box": lambda: KNeighborsClassifier(n_neighbors=1),
         "oracle size: logistic regression": lambda: LogisticRegression(C=1e4, max_iter=5000),
@@ -123,11 +127,6 @@ def analyse_starts(
     Returns ``{"rows": [{"seed", "D", "rule", "wrong", "per_20"}...], "mean_per_20":
     {D: {rule: W per 20 averaged over seeds}}, "n_boxes": n_boxes}``.
     """
-    from cpmp.sim import TaskConfig, record_demonstration, sample_box
-    from cpmp.sim.collect import sample_boxes
-    from cpmp.sim.scene import correct_strategy
-    from cpmp.sim.simulation import Simulation
-
     task = task if task is not None else TaskConfig()
     scale = (
         task.width_range[1] - task.width_range[0],

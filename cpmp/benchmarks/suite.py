@@ -1,5 +1,6 @@
-"""``scripts/bench.py``: benchmarks of fitting, the sequencer, the simulated closed loop and the
-main job. :func:`run_bench` runs the sections picked in
+"""``scripts/bench.py``: benchmarks of fitting, the sequencer, the closed loop and the main job.
+
+:func:`run_bench` runs the sections picked in
 :class:`~cpmp.benchmarks.settings.BenchSettings` and writes ``bench.json``, ``bench.md``
 and ``bench_scaling.png`` atomically. Every section returns a JSON-ready dict of
 measurements; nothing here asserts a speed.
@@ -35,25 +36,28 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import torch
+from threadpoolctl import threadpool_limits
+
 from cpmp.benchmarks.fit import bench_fit, bench_scaling
 from cpmp.benchmarks.report import bench_markdown, load_average, machine_facts, plot_scaling
 from cpmp.benchmarks.sequencer import bench_gradient, bench_ticks
 from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.benchmarks.sim import SimData, bench_realtime, bench_stages
+from cpmp.experiment.output import write_json
+from cpmp.io import atomic_write_text
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.worlds.two_point import make_demonstrations
 
 log = logging.getLogger(__name__)
 
 
 def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
-    """Run the sections of ``settings`` and write ``bench.json``, ``bench.md`` and (with the
-    ``scaling`` section) ``bench_scaling.png`` into ``out_dir``; returns ``bench.json``.
+    """Run the sections of ``settings``; returns the path of ``bench.json``.
+
+    Writes ``bench.json``, ``bench.md`` and (with the ``scaling`` section)
+    ``bench_scaling.png`` into ``out_dir``.
     """
-    import torch
-    from threadpoolctl import threadpool_limits
-
-    from cpmp.experiment.report import write_json
-    from cpmp.io import atomic_write_text
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(settings.threads)
@@ -108,14 +112,10 @@ def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
 
 
 def _warm_up(seed: int) -> float:
-    """One small untimed fit, so that no section pays for importing Lightning and
-    scikit-learn; returns its wall time [s].
+    """One small untimed fit, so that no section pays for Lightning's first fit; returns [s].
+
+    The modules the sections use (Lightning, scikit-learn) are imported with this one.
     """
-    import sklearn.linear_model  # noqa: F401
-
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.worlds.two_point import make_demonstrations
-
     start = time.perf_counter()
     ConcurrentSequencer.fit(make_demonstrations(2, seed=seed), "klr", seed=seed, logger=None)
     return time.perf_counter() - start

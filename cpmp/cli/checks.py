@@ -1,5 +1,4 @@
-"""Checking a cpmp command line before anything heavy is imported (used by
-:mod:`cpmp.cli.main`).
+"""Checking a cpmp command line before anything heavy is imported (used by :mod:`cpmp.cli.main`).
 
 :func:`check_command_line` parses the command line with Hydra's own parser and composes the
 configuration as Hydra will (for a multirun: every job of the sweep) with Hydra, OmegaConf and
@@ -19,6 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
 from cpmp.cli.compose import (
     CONF_DIR,
     compose_config,
@@ -33,8 +35,10 @@ from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 
 @dataclass(frozen=True)
 class Command:
-    """A Hydra command: its config ``conf/<name>.yaml`` (also the job's name, so runs go to
-    ``logs/<name>/<timestamp>/``), the job and the checks that run before it.
+    """A Hydra command: its config, its job and the checks that run before it.
+
+    The config is ``conf/<name>.yaml``; ``name`` is also the job's name, so runs go to
+    ``logs/<name>/<timestamp>/``.
 
     Attributes:
         name: config and job name.
@@ -70,11 +74,11 @@ _ACCEPTS = {
 
 
 def _kind(value: Any) -> str | None:
-    """The kind of a config value (``None`` for null): a YAML default written as an integer is
-    an integer option, one written with a decimal point a number.
-    """
-    from omegaconf import DictConfig, ListConfig
+    """The kind of a config value (``None`` for null).
 
+    A YAML default written as an integer is an integer option, one written with a decimal
+    point a number.
+    """
     if value is None:
         return None
     if isinstance(value, (list, tuple, ListConfig)):
@@ -85,9 +89,13 @@ def _kind(value: Any) -> str | None:
 
 
 def _check_type(key: str, value: Any, default: Any) -> None:
-    """``value`` (set on the command line) must be of the kind of ``default``: an integer
-    where the default is an integer, a number where it is a float, and so on; null is always
-    accepted (the job's own checks say whether null is allowed).
+    """``value`` (set on the command line) must be of the kind of ``default``.
+
+    An integer where the default is an integer, a number where it is a float, and so on; null
+    is always accepted (the job's own checks say whether null is allowed).
+
+    Raises:
+        ConfigError: ``value`` (or an element of it) is of another kind.
     """
     want, got = _kind(default), _kind(value)
     if want is None or got is None:
@@ -107,6 +115,7 @@ def _check_type(key: str, value: Any, default: Any) -> None:
 
 
 def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
+    """``(found, value)`` of the dotted ``key`` in ``cfg``."""
     node: Any = cfg
     for part in key.split("."):
         if not isinstance(node, dict) or part not in node:
@@ -116,10 +125,10 @@ def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
 
 
 def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
-    """The overridden values, as written on the command line, against the kinds of the
-    defaults (``base``: the config composed with the same group options and no value
-    override; ``parsed``: the value overrides); an interpolation is checked once resolved, by
-    the schema.
+    """The overridden values, as written on the command line, against the kinds of the defaults.
+
+    ``base`` is the config composed with the same group options and no value override,
+    ``parsed`` the value overrides; an interpolation is checked once resolved, by the schema.
     """
     for override in parsed:
         if override.is_delete() or override.is_hydra_override():
@@ -134,8 +143,11 @@ def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
 
 
 def _check_values(command: Command, job: dict[str, Any]) -> None:
-    """The seed and counts of the composed job, then the command's required paths, files and
-    directories.
+    """The seed and counts of the composed job, then the command's required paths.
+
+    Raises:
+        ConfigError: a bad seed or count, an unset required path.
+        CpmpFileError: a file or directory that does not exist.
     """
     if "seed" in job:
         seed = job["seed"]
@@ -173,8 +185,9 @@ class CheckedJob:
 
 
 def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob]:
-    """Compose and check the configuration of ``command`` for the command line ``argv``
-    (without the program name) with light imports only (Hydra, OmegaConf; never torch,
+    """Compose and check the configuration of ``command`` for the command line ``argv``.
+
+    ``argv`` is without the program name. Only light imports (Hydra, OmegaConf; never torch,
     Lightning or MuJoCo). Returns one :class:`CheckedJob` per job (several for a multirun
     sweep); none for ``--help``, ``--cfg``, ``--info`` and the like, which run no job (the
     configuration of ``--cfg`` and ``--info`` is composed, not checked further).
@@ -184,8 +197,6 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
             type, an interpolation that does not resolve, an unset required path.
         CpmpFileError: a path that names no file or directory.
     """
-    from omegaconf import OmegaConf
-
     args = parse_command_line(argv)
     if args.help or args.hydra_help or args.shell_completion or args.experimental_rerun:
         return []
@@ -242,12 +253,13 @@ def _in_job(err: CpmpError, overrides: list[str], n_jobs: int) -> CpmpError:
 
 
 def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
-    """Run ``command``'s own value checks on every job (imports torch; MuJoCo for the
-    task); raises the job's :class:`CpmpError`, naming the override it is about and the job
-    of a sweep.
-    """
-    from omegaconf.errors import OmegaConfBaseException
+    """Run ``command``'s own value checks on every job.
 
+    A check may import torch (MuJoCo for the task).
+
+    Raises:
+        CpmpError: the job's error, naming the override it is about and the job of a sweep.
+    """
     check = command.check
     if check is None:
         return
@@ -267,8 +279,9 @@ def check_jobs(command: Command, jobs: Sequence[CheckedJob]) -> None:
 
 
 def _with_override(err: CpmpError, overrides: Sequence[str]) -> CpmpError:
-    """``err`` prefixed with the one override whose key it names by its last part only
-    (``task.max_time=-1: max_time must be ...``).
+    """``err`` prefixed with the one override whose key it names by its last part only.
+
+    For example ``task.max_time=-1: max_time must be ...``.
     """
     text = str(err)
     named = []

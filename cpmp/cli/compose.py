@@ -1,7 +1,8 @@
-"""Composing a cpmp command line's configuration as Hydra will, with Hydra and OmegaConf only
-(used by :mod:`cpmp.cli.checks`): the command line parsed by Hydra's own parser, the
-job override lists of a multirun sweep, the composed config with its interpolations resolved,
-and every Hydra/OmegaConf error turned into a one-line :class:`~cpmp.errors.ConfigError` /
+"""Composing a cpmp command line's configuration as Hydra will, with Hydra and OmegaConf only.
+
+Used by :mod:`cpmp.cli.checks`: the command line parsed by Hydra's own parser, the job
+override lists of a multirun sweep, the composed config with its interpolations resolved, and
+every Hydra/OmegaConf error turned into a one-line :class:`~cpmp.errors.ConfigError` /
 :class:`~cpmp.errors.CpmpFileError` naming the override (with a "did you mean" for a misspelt
 group option or key).
 """
@@ -15,6 +16,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from hydra import compose, initialize_config_dir
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra._internal.utils import get_args_parser
+from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException, MissingConfigException
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from cpmp.compare.settings import register_compare
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.experiment.config import register_configs
 
@@ -23,10 +34,11 @@ CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 
 def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
-    """``argv`` parsed by Hydra's own command-line parser; a bad flag is a :class:`ConfigError`
-    (argparse would print its usage and exit).
+    """``argv`` parsed by Hydra's own command-line parser.
+
+    Raises:
+        ConfigError: a bad flag (argparse would print its usage and exit).
     """
-    from hydra._internal.utils import get_args_parser
 
     def error(message: str) -> None:
         raise ConfigError(f"{message} (see --help)")
@@ -37,8 +49,10 @@ def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def one_line(text: str) -> str:
-    """A Hydra/OmegaConf message as one line: search paths, documentation links and
-    OmegaConf's ``full_key``/``object_type`` trailers dropped, option lists joined.
+    """A Hydra/OmegaConf message as one line.
+
+    Search paths, documentation links and OmegaConf's ``full_key``/``object_type`` trailers are
+    dropped, option lists joined.
     """
     lines: list[str] = []
     options: list[str] = []
@@ -61,12 +75,11 @@ def one_line(text: str) -> str:
 
 
 def parse_overrides(overrides: Sequence[str]) -> list[Any]:
-    """``overrides`` parsed by Hydra's override parser (one ``Override`` each); an override it
-    cannot parse is a :class:`ConfigError` that shows the syntax.
-    """
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import HydraException
+    """``overrides`` parsed by Hydra's override parser (one ``Override`` each).
 
+    Raises:
+        ConfigError: an override it cannot parse (the message shows the syntax).
+    """
     parser = OverridesParser.create()
     parsed = []
     for line in overrides:
@@ -84,8 +97,6 @@ def _composition_error(
     err: Exception, overrides: Sequence[Any], config_name: str, config_dir: str | None
 ) -> ConfigError:
     """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
-    from hydra.errors import MissingConfigException
-
     text = str(err)
     missing = re.search(r"Could not find '([^']+)/([^']+)'", text)
     if isinstance(err, MissingConfigException) and missing:
@@ -135,11 +146,11 @@ def _composition_error(
 
 
 def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
-    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it in the config
-    composed with ``groups`` (the overrides of groups and top-level keys).
-    """
-    from omegaconf import DictConfig, OmegaConf
+    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it.
 
+    The keys are those of the config composed with ``groups`` (the overrides of groups and
+    top-level keys).
+    """
     parent, _, leaf = key.rpartition(".")
     try:
         cfg = compose_config(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
@@ -152,14 +163,14 @@ def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | N
 
 
 def compose_config(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
-    """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``, raising
-    :class:`ConfigError` for anything Hydra cannot compose.
-    """
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
+    """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``.
 
-    register_configs()  # the schema of conf/, in case Hydra's ConfigStore was cleared
+    Raises:
+        ConfigError: anything Hydra cannot compose.
+        CpmpFileError: ``config_dir`` is not a directory.
+    """
+    register_configs()  # the schemas of conf/, in case Hydra's ConfigStore was cleared
+    register_compare()
     overrides = list(overrides)
     if config_dir is not None:
         overrides = _with_search_path(overrides, config_dir)
@@ -187,11 +198,11 @@ def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:
 
 
 def resolved_job(cfg: Any) -> dict[str, Any]:
-    """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved."""
-    from hydra.core.hydra_config import HydraConfig
-    from omegaconf import OmegaConf
-    from omegaconf.errors import OmegaConfBaseException
+    """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved.
 
+    Raises:
+        ConfigError: an interpolation that does not resolve.
+    """
     hydra_config = HydraConfig.instance()  # for ${hydra:...}; restored after
     previous = hydra_config.cfg
     hydra_config.set_config(cfg)
@@ -206,10 +217,11 @@ def resolved_job(cfg: Any) -> dict[str, Any]:
 
 
 def sweep_jobs(parsed: list[Any]) -> list[list[str]]:
-    """The job override lists of a multirun (Hydra's basic sweeper: every combination)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.errors import HydraException
+    """The job override lists of a multirun (Hydra's basic sweeper: every combination).
 
+    Raises:
+        ConfigError: a sweep of Hydra's own settings, or a sweep Hydra cannot split.
+    """
     hydra_lines, task = [], []
     for o in parsed:
         if o.is_hydra_override():

@@ -1,6 +1,10 @@
-"""The command-line entry points: ``cpmp-experiment``, ``cpmp-train``, ``cpmp-evaluate``,
-``cpmp-collect``, ``cpmp-aggregate``, ``cpmp-progress-field`` (Hydra jobs) and
-``cpmp-inspect-rrd``; ``scripts/*.py`` call the same functions.
+"""The command-line entry points: one per job, the Hydra jobs checked before they run.
+
+``cpmp-experiment``, ``cpmp-compare``, ``cpmp-train``, ``cpmp-evaluate``, ``cpmp-collect``,
+``cpmp-aggregate``, ``cpmp-progress-field`` (Hydra jobs) and ``cpmp-inspect-rrd``;
+``scripts/*.py`` call the same functions. ``cpmp-experiment experiment=compare`` (or any
+``experiment`` option with a ``compare`` node) is an alias of ``cpmp-compare``: the command
+line dispatches it to the comparison's checks and job.
 
 A Hydra command checks its configuration before it imports anything heavy
 (:mod:`cpmp.cli.checks`):
@@ -20,53 +24,85 @@ A Hydra command checks its configuration before it imports anything heavy
 A failed check prints one ``error: ...`` line on stderr and exits with status 2. The commands
 read their configs from the repository's ``conf/`` (next to the installed, editable, package);
 ``--config-dir DIR`` adds a directory of your own config group options.
+
+The job functions below are the one place where heavy modules (torch, Lightning, MuJoCo,
+rerun, matplotlib) are imported: inside the function, after the command line was checked.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import hydra
+from hydra.core.hydra_config import HydraConfig
+
 from cpmp.cli.checks import CheckedJob, Command, check_command_line, check_jobs
 from cpmp.cli.compose import CONF_DIR
+from cpmp.compare.settings import CompareJob
+from cpmp.config import TaskConfig
 from cpmp.errors import CpmpError, CpmpFileError
+from cpmp.experiment.config import (
+    experiment_job,
+    job_fit_settings,
+    predictor_from_cfg,
+    predictor_options,
+)
 
 log = logging.getLogger("cpmp")
 
 
 # ------------------------------------------------------------------------------- the jobs
+def _is_compare(cfg: Any) -> bool:
+    """Whether a composed config is the comparison's (it has a ``compare`` node)."""
+    return cfg.get("compare") is not None
+
+
 def _experiment_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.experiment.jobs import run_experiment
+    """The main job (:func:`~cpmp.experiment.jobs.run_experiment`), or the comparison's alias."""
+    if _is_compare(cfg):
+        return _compare_job(cfg, run_dir)
+    from cpmp.experiment.jobs import run_experiment  # lazy: torch, MuJoCo after the checks
 
     return run_experiment(cfg, run_dir)
 
 
+def _compare_job(cfg: Any, run_dir: Path) -> Path:
+    """The comparison (:func:`~cpmp.compare.job.run_compare`); returns ``compare.json``."""
+    from cpmp.compare.job import run_compare  # lazy: torch, MuJoCo after the checks
+
+    return run_compare(cfg, run_dir)
+
+
 def _train_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.experiment.checkpoint_jobs import train_from_file
+    """Train a sequencer from a demonstration file; returns the checkpoint's path."""
+    from cpmp.experiment.checkpoint_jobs import train_from_file  # lazy: torch after the checks
 
     return train_from_file(cfg, run_dir)
 
 
 def _evaluate_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint
+    """Evaluate a checkpoint offline; returns the report's path."""
+    from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint  # lazy: torch after checks
 
     return evaluate_checkpoint(cfg, run_dir)
 
 
 def _aggregate_job(cfg: Any, run_dir: Path) -> Path:
-    from cpmp.analysis.aggregate import aggregate_sweep
+    """One table and plot of a multirun; returns the table's path."""
+    from cpmp.analysis.aggregate import aggregate_sweep  # lazy: matplotlib after the checks
 
     return aggregate_sweep(cfg, run_dir)
 
 
 def _collect_job(cfg: Any, run_dir: Path) -> Path:
     """Record ``n_demos`` scripted demonstrations into ``run_dir / output`` (HDF5)."""
-    from cpmp.config import TaskConfig
-    from cpmp.sim.collect import collect_demonstrations
+    from cpmp.sim.collect import collect_demonstrations  # lazy: MuJoCo after the checks
 
     task = TaskConfig.from_dict(cfg.task)
     out = run_dir / str(cfg.output)
@@ -76,8 +112,7 @@ def _collect_job(cfg: Any, run_dir: Path) -> Path:
 
 def _progress_field_job(cfg: Any, run_dir: Path) -> Path:
     """The paper's Fig. 3 on synthetic trajectories; returns the PNG path."""
-    from cpmp.analysis.progress_field import progress_field_example
-    from cpmp.experiment.config import predictor_options
+    from cpmp.analysis.progress_field import progress_field_example  # lazy: torch, matplotlib
 
     kind, options = predictor_options(cfg.predictor)
     result = progress_field_example(
@@ -95,27 +130,31 @@ def _progress_field_job(cfg: Any, run_dir: Path) -> Path:
 # Each converts the config into the typed configs the job will build from it, which validate
 # themselves (cpmp.experiment.config); only the goal_nearest baseline's options import torch.
 def _check_experiment(cfg: Any) -> None:
-    """The main job's settings, predictor, sequencer, trainer and task."""
-    from cpmp.experiment.config import experiment_job
+    """The main job's settings, predictor, sequencer, trainer and task (or the comparison's)."""
+    if _is_compare(cfg):
+        _check_compare(cfg)
+    else:
+        experiment_job(cfg)
 
-    experiment_job(cfg)
+
+def _check_compare(cfg: Any) -> None:
+    """The comparison's settings, task and ``compare`` node, and the groups its rows share."""
+    CompareJob.from_cfg(cfg)
+    job_fit_settings(cfg)
 
 
 def _check_train(cfg: Any) -> None:
-    from cpmp.experiment.config import job_fit_settings
-
+    """The predictor, sequencer and trainer groups."""
     job_fit_settings(cfg)
 
 
 def _check_collect(cfg: Any) -> None:
-    from cpmp.config import TaskConfig
-
+    """The task."""
     TaskConfig.from_dict(cfg.task)
 
 
 def _check_progress_field(cfg: Any) -> None:
-    from cpmp.experiment.config import predictor_from_cfg
-
+    """The predictor group."""
     predictor_from_cfg(cfg.predictor)
 
 
@@ -127,6 +166,12 @@ COMMANDS: dict[str, Command] = {
             "the main job (collect, train, evaluate, report)",
             _experiment_job,
             _check_experiment,
+        ),
+        Command(
+            "compare",
+            "every predictor and baseline on the same demonstrations and boxes",
+            _compare_job,
+            _check_compare,
         ),
         Command(
             "train",
@@ -171,8 +216,9 @@ COMMANDS: dict[str, Command] = {
 
 
 def check_command(name: str, argv: Sequence[str]) -> list[CheckedJob]:
-    """Compose and check the configuration of command ``name`` for the command line ``argv``
-    with light imports only (no torch, Lightning or MuJoCo); see
+    """Compose and check the configuration of command ``name`` for the command line ``argv``.
+
+    Light imports only (no torch, Lightning or MuJoCo); see
     :func:`~cpmp.cli.checks.check_command_line`.
     """
     return check_command_line(COMMANDS[name], argv)
@@ -185,10 +231,12 @@ def _fail(err: CpmpError) -> None:
 
 
 def run_job(job: Callable[[Any, Path], Path], cfg: Any, run_dir: str | Path) -> Path:
-    """Run ``job(cfg, run_dir)``; print its output path last. A user error (:class:`CpmpError`)
-    is logged as one line and exits with status 2 instead of a traceback.
+    """Run ``job(cfg, run_dir)``; print its output path last.
+
+    A user error (:class:`CpmpError`) is logged as one line and exits with status 2 instead of
+    a traceback.
     """
-    import torch
+    import torch  # lazy: the jobs' heavy dependency, after the command line was checked
 
     torch.set_num_threads(max(1, int(cfg.get("threads", 1) or 1)))
     try:
@@ -212,17 +260,15 @@ class _Task:
         self.__module__ = name
 
     def __call__(self, cfg: Any) -> Path:
-        from hydra.core.hydra_config import HydraConfig
-
+        """Run the command's job on ``cfg`` in Hydra's output directory."""
         return run_job(COMMANDS[self.name].job, cfg, HydraConfig.get().runtime.output_dir)
 
 
 def run_command(name: str) -> None:
-    """Run Hydra command ``name`` on ``sys.argv``: check, then run the job(s) under
-    ``hydra.main``. Exits with status 2 and one ``error:`` line on a bad configuration.
-    """
-    import hydra
+    """Run Hydra command ``name`` on ``sys.argv``: check, then run the job(s) under Hydra.
 
+    Exits with status 2 and one ``error:`` line on a bad configuration.
+    """
     try:
         jobs = check_command(name, sys.argv[1:])
         check_jobs(COMMANDS[name], jobs)
@@ -243,6 +289,7 @@ def _entry_point(name: str) -> Callable[[], None]:
 
 
 experiment_main = _entry_point("experiment")
+compare_main = _entry_point("compare")
 train_main = _entry_point("train")
 evaluate_main = _entry_point("evaluate")
 collect_main = _entry_point("collect")
@@ -251,14 +298,15 @@ progress_field_main = _entry_point("progress_field")
 
 
 def inspect_rrd_main(argv: Sequence[str] | None = None) -> int:
-    """``cpmp-inspect-rrd FILE.rrd [...] [--json]``: summarise episode recordings (episode,
-    ticks, duration, transitions, notes, outcome). Returns the exit status: 2 if any file could
-    not be read (one ``error:`` line per bad file on stderr; the other files are still
-    summarised).
-    """
-    import json
+    """``cpmp-inspect-rrd FILE.rrd [...] [--json]``: summarise episode recordings.
 
-    from cpmp.recordings import format_summary, read_recording
+    Each summary has the episode, ticks, duration, transitions, notes and outcome.
+
+    Returns:
+        The exit status: 2 if any file could not be read (one ``error:`` line per bad file on
+        stderr; the other files are still summarised), else 0.
+    """
+    from cpmp.recordings import format_summary, read_recording  # lazy: rerun, for this command
 
     parser = argparse.ArgumentParser(
         prog="inspect_rrd",

@@ -1,6 +1,8 @@
-"""The results of ``experiment=compare``: rows pooled over seeds (``compare.json``), the
-episodes and timings of every job, the Markdown table (``compare.md``) and the two figures
-(``compare_c_vs_d.png``, ``compare_supports.png``).
+"""The results of the comparison (``cpmp-compare``).
+
+The rows pooled over seeds (``compare.json``), the episodes and timings of every job, the
+Markdown table (``compare.md``) and the two figures (``compare_c_vs_d.png``,
+``compare_supports.png``).
 """
 
 from __future__ import annotations
@@ -8,14 +10,17 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from cpmp.experiment.report import PAPER_TABLE_I, jsonable, mean_std
+from matplotlib import colormaps
+from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+from cpmp.compare.rows import FitJob, RowSpec
+from cpmp.compare.runs import RowResult
+from cpmp.experiment.collection import SeedData
+from cpmp.experiment.output import PAPER_TABLE_I, jsonable, mean_std
+from cpmp.experiment.plots import new_figure, save_figure
 from cpmp.experiment.settings import ExperimentSettings
-
-if TYPE_CHECKING:
-    from cpmp.compare.job import RowSpec
-    from cpmp.experiment.collection import SeedData
 
 ROW_FIELDS: tuple[str, ...] = (
     "predictor",
@@ -34,20 +39,21 @@ ROW_FIELDS: tuple[str, ...] = (
 
 # ---------------------------------------------------------------------------- pooling
 def aggregate_rows(
-    specs: Sequence[RowSpec], settings: ExperimentSettings, results: Mapping[str, dict[str, Any]]
+    specs: Sequence[RowSpec], settings: ExperimentSettings, results: Mapping[str, RowResult]
 ) -> list[dict[str, Any]]:
-    """One row per spec and D: the :data:`ROW_FIELDS` as means over the seeds whose fit
-    succeeded (W/I/C: boxes of ``n_boxes``; mae in [0, 1]; fit_s [s]; tick_ms [ms]), their
-    population std (``*_std``), the per-seed values and any refused fits (``errors``).
+    """One row per spec and D: the :data:`ROW_FIELDS` as means over the seeds whose fit succeeded.
+
+    The means (W/I/C: boxes of ``n_boxes``; mae in [0, 1]; fit_s [s]; tick_ms [ms]) come with
+    their population std (``*_std``), the per-seed values and any refused fits (``errors``).
     """
     rows = []
     for spec in specs:
         for d in spec.train_sizes:
             per_seed = [results[spec.fit_key(seed, d)] for seed in settings.seeds]
-            ok = [r for r in per_seed if not r["error"]]
+            ok = [r for r in per_seed if not r.error]
             row: dict[str, Any] = {"predictor": spec.predictor, "sequencer": spec.sequencer, "D": d}
             for key in ("mae", "W", "I", "C", "fit_s", "tick_ms", "supports", "diverged"):
-                row[key], std = mean_std([r.get(key) for r in ok])
+                row[key], std = mean_std([r.number(key) for r in ok])
                 if key in ("mae", "W", "I", "C"):
                     row[f"{key}_std"] = std
             row.update(
@@ -57,13 +63,13 @@ def aggregate_rows(
                 seeds=list(settings.seeds),
                 n_seeds=len(ok),
                 per_seed={
-                    key: [r.get(key) for r in per_seed]
+                    key: [r.number(key) for r in per_seed]
                     for key in ("W", "I", "C", "mae", "supports")
                 },
                 errors=[
-                    f"seed {seed}: {r['error']}"
+                    f"seed {seed}: {r.error}"
                     for seed, r in zip(settings.seeds, per_seed, strict=True)
-                    if r["error"]
+                    if r.error
                 ],
             )
             rows.append(jsonable(row))
@@ -71,10 +77,11 @@ def aggregate_rows(
 
 
 def job_episodes(
-    results: Mapping[str, dict[str, Any]], jobs: Mapping[str, tuple[RowSpec, int, int]]
+    results: Mapping[str, RowResult], jobs: Mapping[str, FitJob]
 ) -> list[dict[str, Any]]:
-    """Every reproduction episode of every job, labelled with its row, seed and D (a fit
-    shared by two rows is listed once, under the first).
+    """Every reproduction episode of every job, labelled with its row, seed and D.
+
+    A fit shared by two rows is listed once, under the first.
     """
     out = []
     for key, (spec, seed, d) in jobs.items():
@@ -85,19 +92,20 @@ def job_episodes(
             "seed": seed,
             "D": d,
         }
-        out += [{**label, **episode} for episode in results[key]["episodes"]]
+        out += [{**label, **episode} for episode in results[key].episodes]
     return out
 
 
 def job_timings(
     collected: Mapping[int, SeedData],
-    results: Mapping[str, dict[str, Any]],
-    jobs: Mapping[str, tuple[RowSpec, int, int]],
+    results: Mapping[str, RowResult],
+    jobs: Mapping[str, FitJob],
     seconds: float,
     workers: int,
 ) -> dict[str, Any]:
-    """Wall time of the run; wall and CPU seconds of every stage of every job (to scale the
-    run's cost to other box or seed counts).
+    """Wall time of the run; wall and CPU seconds of every stage of every job.
+
+    These scale the run's cost to other box or seed counts.
     """
     tasks = []
     for key, (spec, seed, d) in jobs.items():
@@ -110,9 +118,9 @@ def job_timings(
                 "support_scale": spec.support_scale,
                 "seed": seed,
                 "D": d,
-                "seconds": r["seconds"],
-                "cpu_seconds": r["cpu_seconds"],
-                "boxes": len(r["episodes"]),
+                "seconds": r.seconds,
+                "cpu_seconds": r.cpu_seconds,
+                "boxes": len(r.episodes),
             }
         )
     return {
@@ -126,6 +134,7 @@ def job_timings(
 
 # ------------------------------------------------------------------------------ reporting
 def _fmt(value: float | None, digits: int = 1) -> str:
+    """``value`` with ``digits`` decimals, ``–`` for ``None``."""
     return "–" if value is None else f"{value:.{digits}f}"
 
 
@@ -140,8 +149,9 @@ def _wic(row: Mapping[str, Any] | None) -> str:
 def render_compare(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, seconds: float, workers: int
 ) -> str:
-    """``compare.md``: the rows by predictor with W / I / C per D beside the paper's Table I,
-    progress MAE, fit and tick time, support points; then the support sweep.
+    """``compare.md``: the rows by predictor beside the paper's Table I, then the support sweep.
+
+    Each row shows W / I / C per D, progress MAE, fit and tick time and support points.
     """
     sizes = list(settings.train_sizes)
     largest = max(sizes)
@@ -216,8 +226,7 @@ def render_compare(
 
 
 def _figure(width: float, height: float, ncols: int = 1) -> tuple[Any, Any]:
-    from cpmp.experiment.plots import new_figure  # matplotlib only when plotting
-
+    """A new figure of ``width`` x ``height`` inches and its row of ``ncols`` axes."""
     figure = new_figure(width, height)
     return figure, figure.subplots(1, ncols, squeeze=False)[0]
 
@@ -227,21 +236,21 @@ _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "<", ">", "*")
 
 def _colours(n: int) -> list[Any]:
     """``n`` distinguishable colours (tab10, then tab20)."""
-    from matplotlib import colormaps
-
     cmap = colormaps["tab10" if n <= 10 else "tab20"]
     return [cmap(i % cmap.N) for i in range(n)]
 
 
 def _percent(value: float | None, n: int) -> float:
+    """``value`` as a percentage of ``n`` (nan for ``None``)."""
     return math.nan if value is None else 100.0 * value / n
 
 
 def plot_c_vs_d(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
 ) -> Path:
-    """Complete episodes [% of boxes] against D, one line per predictor/sequencer (error bars:
-    std over seeds), the paper's Table I dashed.
+    """Complete episodes [% of boxes] against D, one line per predictor/sequencer.
+
+    Error bars are the std over seeds; the paper's Table I is dashed.
     """
     figure, (ax,) = _figure(8.5, 4.5)
     table = [r for r in rows if r["group"] != "support_sweep"]
@@ -280,16 +289,15 @@ def plot_c_vs_d(
     ax.set_ylim(-5, 105)
     ax.set_title(f"Closed-loop reproduction, seeds {settings.seeds}, {settings.n_boxes} boxes")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    from cpmp.experiment.plots import save_figure
-
     return save_figure(figure, path)
 
 
 def plot_supports(
     rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
 ) -> Path:
-    """The support sweep: complete episodes [% of boxes] and progress MAE against the number
-    of support points (log scale), one line per D.
+    """The support sweep: complete episodes and progress MAE against the support points.
+
+    Complete episodes are in % of boxes, the support points on a log scale; one line per D.
     """
     figure, (left, right) = _figure(9.0, 3.8, ncols=2)
     sweep = [r for r in rows if r["group"] == "support_sweep" and r["supports"] is not None]
@@ -316,8 +324,6 @@ def plot_supports(
                 textcoords="offset points",
             )
     name = sweep[0]["predictor"] if sweep else "–"
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
-
     for ax in (left, right):
         ax.set_xscale("log")
         ax.xaxis.set_major_formatter(ScalarFormatter())
@@ -330,6 +336,4 @@ def plot_supports(
     right.set_title(f"{name}: progress error (labels: support_scale)")
     if sweep:
         left.legend(fontsize=8)
-    from cpmp.experiment.plots import save_figure
-
     return save_figure(figure, path)

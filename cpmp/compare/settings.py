@@ -1,10 +1,12 @@
-"""The ``compare`` config node of ``experiment=compare``, typed: :class:`CompareSettings` with its
-``sweep`` (:class:`SweepSettings`). The dataclasses are the node's schema (``schema_compare``,
-registered by :func:`cpmp.experiment.config.register_configs`) and hold its only defaults; the
-``conf/experiment/compare*.yaml`` options hold what differs from them.
+"""The ``compare`` config node of ``cpmp-compare``, typed.
 
-Importing this module costs nothing beyond the standard library (the config registration
-imports it before Hydra composes anything).
+:class:`CompareSettings` with its ``sweep`` (:class:`SweepSettings`). The dataclasses are the
+node's schema (``schema_compare``, stored in Hydra's ConfigStore by :func:`register_compare`,
+run on import) and hold its only defaults; the ``conf/experiment/compare*.yaml`` options hold
+what differs from them.
+
+Importing this module costs Hydra and OmegaConf only (the command line imports it before
+Hydra composes anything).
 """
 
 from __future__ import annotations
@@ -14,7 +16,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from cpmp.config import TaskConfig
+from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
+from cpmp.experiment.config import store_schema
+from cpmp.experiment.settings import ExperimentSettings, to_dict
+
+SCHEMA = "schema_compare"
+"""The name of the ``compare`` node's schema in Hydra's ConfigStore."""
 
 
 @dataclass
@@ -50,15 +59,14 @@ class CompareSettings:
 
     @classmethod
     def from_cfg(cls, cfg: Any, train_sizes: Sequence[int]) -> CompareSettings:
-        """From the ``compare`` node (or a mapping; missing keys take the defaults above),
-        validated against the experiment's ``train_sizes``; ``sweep.train_sizes`` ``None``
-        becomes the largest D.
+        """From the ``compare`` node, validated against the experiment's ``train_sizes``.
+
+        ``cfg`` may be a mapping; missing keys take the defaults above. ``sweep.train_sizes``
+        ``None`` becomes the largest D.
 
         Raises:
             ConfigError: an unknown key or a bad value, naming the option to fix.
         """
-        from cpmp.experiment.config import to_dict
-
         options = to_dict(cfg)
         sweep = to_dict(options.pop("sweep", None))
         sweep_keys = [f.name for f in dataclasses.fields(SweepSettings)]
@@ -96,3 +104,46 @@ class CompareSettings:
                 f"{list(train_sizes)}, got {sizes!r}"
             )
         return out
+
+
+@dataclass(frozen=True)
+class CompareJob:
+    """The comparison's composed config, typed (the groups every row shares).
+
+    Attributes:
+        settings: the ``experiment`` group (seeds, demonstrations, boxes, workers).
+        task: the ``task`` group.
+        compare: the ``compare`` node.
+    """
+
+    settings: ExperimentSettings
+    task: TaskConfig
+    compare: CompareSettings
+
+    @classmethod
+    def from_cfg(cls, cfg: Any) -> CompareJob:
+        """From a composed config (``experiment``, ``task`` and ``compare`` nodes), validated.
+
+        The job's ``sequencer`` must be a learned one: the predictor rows run with it.
+
+        Raises:
+            ConfigError: a bad option of any of them, or ``sequencer=goal_nearest``.
+        """
+        if to_dict(cfg.get("sequencer")).get("kind") == GOAL_NEAREST:
+            raise ConfigError(
+                "the comparison runs the predictors with the job's sequencer, which must be a "
+                "learned one (e.g. sequencer=coupled); goal_nearest is listed in "
+                "compare.baselines"
+            )
+        settings = ExperimentSettings.from_cfg(cfg.experiment)
+        task = TaskConfig.from_dict(cfg.task)
+        compare = CompareSettings.from_cfg(cfg.get("compare"), settings.train_sizes)
+        return cls(settings, task, compare)
+
+
+def register_compare() -> None:
+    """Store the ``compare`` node's schema (:data:`SCHEMA`) in Hydra's ConfigStore (idempotent)."""
+    store_schema(SCHEMA, CompareSettings)
+
+
+register_compare()

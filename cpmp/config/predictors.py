@@ -90,16 +90,18 @@ class PredictorConfig:
 
     @property
     def torch_dtype(self) -> torch.dtype:
-        import torch
+        """The torch dtype of :attr:`dtype`."""
+        import torch  # lazy: cpmp.config is read before Hydra composition, without torch
 
         return torch.float64 if self.dtype == "float64" else torch.float32
 
 
 @dataclass
 class KLRConfig(PredictorConfig):
-    """Options of ``klr`` / ``klr_full``. The defaults are cpmp's (``predictor=klr_path``);
-    the paper's ``predictor=klr`` sets ``feature_weighting: none`` and ``feature_scaling:
-    none``.
+    """Options of ``klr`` / ``klr_full``.
+
+    The defaults are cpmp's (``predictor=klr_path``); the paper's ``predictor=klr`` sets
+    ``feature_weighting: none`` and ``feature_scaling: none``.
 
     Attributes:
         gamma: RBF kernel parameter γ in ``exp(-γ ||s - x||²)`` (the paper's "kernel width 4.0").
@@ -187,8 +189,9 @@ class SparseKLRConfig(KLRConfig):
 
 @dataclass
 class SklearnKLRConfig(KLRConfig):
-    """Options of ``sklearn_klr`` (on top of :class:`KLRConfig`, whose ``gamma``, support rule,
-    ``l2``, ``bias`` and feature weighting mean the same).
+    """Options of ``sklearn_klr``, on top of those of :class:`KLRConfig`.
+
+    ``gamma``, the support rule, ``l2``, ``bias`` and feature weighting mean the same as there.
 
     ``l2`` becomes scikit-learn's ``C = 1 / (n · l2)`` for a node of ``n`` samples (``C = inf``,
     no penalty, for ``l2 = 0``): scikit-learn minimises ``C Σ_i s_i ℓ_i + ½ ||w||²``, which for
@@ -218,16 +221,18 @@ class SklearnKLRConfig(KLRConfig):
 
 @dataclass
 class RegressionClipConfig(KLRConfig):
-    """Options of ``regression_clip``: those of :class:`KLRConfig`, with ``l2`` the ridge
-    penalty: each node minimises ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (the intercept ``b``
+    """Options of ``regression_clip``: those of :class:`KLRConfig`, ``l2`` the ridge penalty.
+
+    Each node minimises ``½ mean (K w + b − φ)² + ½ l2 ||w||²`` (the intercept ``b``
     unpenalised).
     """
 
 
 @dataclass
 class TimePhaseConfig(KLRConfig):
-    """Options of ``time_phase``: exactly those of :class:`KLRConfig`; only the labels differ
-    (normalised elapsed time).
+    """Options of ``time_phase``: exactly those of :class:`KLRConfig`.
+
+    Only the labels differ (normalised elapsed time).
     """
 
 

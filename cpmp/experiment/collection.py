@@ -1,20 +1,31 @@
-"""Stage 1 of the main job, per seed: the scripted demonstrations (train/test split, saved with
-the split) and the demonstrator's run on every reproduction box.
+"""Stage 1 of the main job, per seed: the scripted demonstrations and the reproduction boxes.
+
+The demonstrations are split into train and test (saved with the split); the demonstrator
+runs every reproduction box once, as the expected result.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cpmp.config.task import TaskConfig
+from cpmp.data.augment import add_feature_noise
+from cpmp.data.datafile import save_demonstrations
+from cpmp.data.demonstration import Demonstration
 from cpmp.experiment.config import experiment_job
 from cpmp.experiment.console import progress_bar, timed
 from cpmp.experiment.settings import ExperimentJob
 from cpmp.experiment.strategies import split_by_strategy, strategy_signatures
+from cpmp.recordings.demos import record_demo_rrd
+from cpmp.sim import Box, record_demonstrations, sample_box
+from cpmp.sim.collect import sample_boxes
+from cpmp.sim.simulation import shared_kinematics
 
 
 @dataclass
@@ -33,24 +44,27 @@ class SeedData:
     """
 
     seed: int
-    train: list[Any]
-    test: list[Any]
-    boxes: list[Any]
-    expected: list[Any]
+    train: list[Demonstration]
+    test: list[Demonstration]
+    boxes: list[Box]
+    expected: list[Demonstration]
     signatures: dict[str, dict[str, str]]
     seconds: dict[str, float] = field(default_factory=dict)
 
 
 def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> SeedData:
-    """Stage 1 of one seed: record its demonstrations (saved as ``seed_<s>/demos.h5`` with the
-    train/test split) and the demonstrator's run on every reproduction box. ``job``: the
-    typed job (or its composed config, converted here).
-    """
-    from cpmp.data.datafile import save_demonstrations
-    from cpmp.sim import sample_box
-    from cpmp.sim.collect import sample_boxes
-    from cpmp.sim.simulation import shared_kinematics
+    """Stage 1 of one seed: its demonstrations and the demonstrator on every reproduction box.
 
+    The demonstrations are saved as ``seed_<s>/demos.h5`` with the train/test split.
+
+    Args:
+        job: the typed job (or its composed config, converted here).
+        run_dir: the run directory.
+        seed: the seed of the demonstrations' boxes (and, offset, of the reproduction boxes).
+
+    Raises:
+        RuntimeError: the scripted demonstrator failed on a box.
+    """
     job = experiment_job(job)
     settings, task = job.settings, job.task
     seed_dir = Path(run_dir) / f"seed_{seed}"
@@ -68,8 +82,6 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
         if failed:
             raise RuntimeError(f"the scripted demonstrator failed on {failed}")
         if settings.record_demos:
-            from cpmp.recordings.demos import record_demo_rrd
-
             (seed_dir / "recordings").mkdir(exist_ok=True)
             for demo, box in zip(demos, boxes, strict=True):
                 record_demo_rrd(demo, box, task, seed_dir / "recordings" / f"{demo.name}.rrd")
@@ -86,19 +98,17 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
         expected = _record_together(repro_boxes, task, None, "expected")
     signatures = strategy_signatures(train)
     if settings.feature_noise > 0:
-        from cpmp.data.augment import add_feature_noise
-
         train = add_feature_noise(train, settings.feature_noise, seed=seed)
     return SeedData(seed, train, test, repro_boxes, expected, signatures, seconds)
 
 
-def _record_together(boxes: list[Any], task: Any, names: list[str] | None, desc: str) -> list[Any]:
-    """The scripted demonstrations of ``boxes``, all boxes run together
-    (:func:`cpmp.sim.record_demonstrations`, the same data as one at a time), with a progress
-    bar.
-    """
-    from cpmp.sim import record_demonstrations
+def _record_together(
+    boxes: Sequence[Box], task: TaskConfig, names: list[str] | None, desc: str
+) -> list[Demonstration]:
+    """The scripted demonstrations of ``boxes``, all boxes run together, with a progress bar.
 
+    :func:`cpmp.sim.record_demonstrations` gives the same data as one box at a time.
+    """
     bar = progress_bar(boxes, desc)
     try:
         return record_demonstrations(boxes, task, names, on_result=lambda i, demo: bar.update(1))

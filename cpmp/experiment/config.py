@@ -1,14 +1,15 @@
 """The Hydra side of cpmp's one config schema: registration and conversion.
 
 **Registration** (:func:`register_configs`, run on import): the option dataclasses of
-:mod:`cpmp.config` (and :class:`~cpmp.experiment.settings.ExperimentSettings`,
-:class:`~cpmp.compare.settings.CompareSettings`) are stored in Hydra's ConfigStore
-as ``schema_task``, ``schema_trainer``, ``schema_sequencer``, ``schema_experiment``,
-``schema_compare``, ``schema_sequencer_goal_nearest`` (the baseline's options and its ``kind``)
-and one ``schema_predictor_<kind>`` per predictor kind (its options and ``kind``). Each option
-of ``conf/`` starts from one of them (``defaults: [/schema_..., _self_]``) and holds only what
-differs from the dataclass's defaults; the dataclass's docstring says what each option means.
-Hydra then checks the type of every override against the schema.
+:mod:`cpmp.config` (and :class:`~cpmp.experiment.settings.ExperimentSettings`) are stored in
+Hydra's ConfigStore as ``schema_task``, ``schema_trainer``, ``schema_sequencer``,
+``schema_experiment``, ``schema_sequencer_goal_nearest`` (the baseline's options and its
+``kind``) and one ``schema_predictor_<kind>`` per predictor kind (its options and ``kind``);
+:func:`store_schema` stores one more (the comparison registers ``schema_compare`` with it,
+:mod:`cpmp.compare.settings`). Each option of ``conf/`` starts from one of them
+(``defaults: [/schema_..., _self_]``) and holds only what differs from the dataclass's
+defaults; the dataclass's docstring says what each option means. Hydra then checks the type of
+every override against the schema.
 
 **Conversion** (:func:`fit_settings`, :func:`experiment_job`): a job turns its composed
 ``cfg`` into the typed configs of :mod:`cpmp.experiment.settings` once, at its start; those
@@ -23,11 +24,11 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-from collections.abc import Mapping
 from dataclasses import field
-from typing import Any
+from typing import Any, Literal, NamedTuple
 
-from cpmp.compare.settings import CompareSettings
+from hydra.core.config_store import ConfigStore
+
 from cpmp.config import (
     PREDICTOR_CONFIGS,
     FitConfig,
@@ -41,63 +42,107 @@ from cpmp.config import (
 )
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
-from cpmp.experiment.settings import ExperimentJob, ExperimentSettings, FitSettings
+from cpmp.experiment.settings import (
+    ExperimentJob,
+    ExperimentSettings,
+    FitSettings,
+    to_dict,
+)
+
+__all__ = [
+    "PredictorChoice",
+    "PredictorOptions",
+    "experiment_job",
+    "fit_settings",
+    "job_fit_settings",
+    "logger_spec",
+    "predictor_from_cfg",
+    "predictor_options",
+    "register_configs",
+    "schema_of",
+    "store_schema",
+    "to_dict",
+    "validate_common",
+]
 
 
 # ----------------------------------------------------------------------------- registration
-def _schema(cls: type, **first: Any) -> type:
-    """A plain dataclass with the fields (types, defaults) of ``cls``, after the fields
-    ``first`` (name -> default string), as Hydra's schema of ``cls``: no validation of its own
-    (``cls`` validates at the job boundary) and never frozen (Hydra merges into it).
+def schema_of(cls: type, **first: Any) -> type:
+    """Hydra's schema of the dataclass ``cls``: a plain dataclass with the same fields.
+
+    The fields ``first`` (name -> default string) come first. The schema has no validation of
+    its own (``cls`` validates at the job boundary) and is never frozen (Hydra merges into
+    it). A field typed with a ``Literal`` of strings
+    (:data:`~cpmp.experiment.settings.RecordMode`) is a string in the schema (OmegaConf has no
+    ``Literal``): ``cls`` checks the value.
+
+    Args:
+        cls: a dataclass of options.
+        **first: extra string fields put before ``cls``'s, with their defaults.
+
+    Returns:
+        The schema dataclass, named as ``cls``.
     """
     hints = typing.get_type_hints(cls)
     fields: list[tuple[str, Any, Any]] = [(k, str, field(default=v)) for k, v in first.items()]
     for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        if typing.get_origin(hint) is Literal:
+            hint = str
         if f.default_factory is not dataclasses.MISSING:
             default = field(default_factory=f.default_factory)
         else:
             default = field(default=f.default)
-        fields.append((f.name, hints[f.name], default))
+        fields.append((f.name, hint, default))
     return dataclasses.make_dataclass(cls.__name__, fields)
 
 
-def register_configs() -> None:
-    """Store the schema of every config group in Hydra's ConfigStore (idempotent)."""
-    from hydra.core.config_store import ConfigStore
+def store_schema(name: str, cls: type, **first: Any) -> None:
+    """Store :func:`schema_of` ``(cls, **first)`` in Hydra's ConfigStore as ``name``."""
+    ConfigStore.instance().store(name=name, node=schema_of(cls, **first))
 
-    store = ConfigStore.instance()
+
+def register_configs() -> None:
+    """Store the schema of every config group of the main job in Hydra's ConfigStore.
+
+    Idempotent: storing a schema again replaces it with the same one.
+    """
     for name, cls in (
         ("schema_task", TaskConfig),
         ("schema_trainer", TrainerConfig),
         ("schema_sequencer", SequencerConfig),
         ("schema_experiment", ExperimentSettings),
-        ("schema_compare", CompareSettings),
     ):
-        store.store(name=name, node=_schema(cls))
-    store.store(
-        name=f"schema_sequencer_{GOAL_NEAREST}", node=_schema(GoalNearestConfig, kind=GOAL_NEAREST)
-    )
+        store_schema(name, cls)
+    store_schema(f"schema_sequencer_{GOAL_NEAREST}", GoalNearestConfig, kind=GOAL_NEAREST)
     for kind, cls in PREDICTOR_CONFIGS.items():
-        store.store(name=f"schema_predictor_{kind}", node=_schema(cls, kind=kind))
+        store_schema(f"schema_predictor_{kind}", cls, kind=kind)
 
 
 # ------------------------------------------------------------------------------- conversion
-def to_dict(cfg: Any) -> dict[str, Any]:
-    """A plain dict from an OmegaConf node or mapping (``None`` -> ``{}``)."""
-    if cfg is None:
-        return {}
-    from omegaconf import DictConfig, OmegaConf
+class PredictorChoice(NamedTuple):
+    """A ``predictor`` group entry, validated: its kind and typed options."""
 
-    if isinstance(cfg, DictConfig):
-        return OmegaConf.to_container(cfg, resolve=True)  # type: ignore[return-value]
-    if isinstance(cfg, Mapping):
-        return dict(cfg)
-    raise ConfigError(f"expected a mapping of options, got {type(cfg).__name__}")
+    kind: str
+    """The predictor kind (a key of :data:`~cpmp.config.PREDICTOR_CONFIGS`)."""
+    config: PredictorConfig
+    """The kind's options."""
 
 
-def predictor_from_cfg(cfg: Any) -> tuple[str, PredictorConfig]:
-    """``(kind, options)`` of a ``predictor`` group entry (``kind`` plus the kind's options),
-    validated.
+class PredictorOptions(NamedTuple):
+    """A ``predictor`` group entry, validated: its kind and every option as a dict."""
+
+    kind: str
+    """The predictor kind."""
+    options: dict[str, Any]
+    """Every option of the kind (defaults filled in)."""
+
+
+def predictor_from_cfg(cfg: Any) -> PredictorChoice:
+    """The kind and typed options of a ``predictor`` group entry (``kind`` plus its options).
+
+    Raises:
+        ConfigError: an unknown kind or a bad option.
     """
     options = to_dict(cfg)
     kind = options.pop("kind", None)
@@ -106,15 +151,17 @@ def predictor_from_cfg(cfg: Any) -> tuple[str, PredictorConfig]:
             f"predictor.kind must be one of {', '.join(PREDICTOR_CONFIGS)}, got {kind!r} "
             f"(choose with predictor=<name>)"
         )
-    return kind, predictor_config(kind, **options)
+    return PredictorChoice(kind, predictor_config(kind, **options))
 
 
-def predictor_options(cfg: Any) -> tuple[str, dict[str, Any]]:
-    """``(kind, options)`` of a ``predictor`` group entry as a dict of every option, validated
-    (:func:`predictor_from_cfg`).
+def predictor_options(cfg: Any) -> PredictorOptions:
+    """The kind and every option of a ``predictor`` group entry, validated.
+
+    Raises:
+        ConfigError: as :func:`predictor_from_cfg`.
     """
     kind, config = predictor_from_cfg(cfg)
-    return kind, dataclasses.asdict(config)
+    return PredictorOptions(kind, dataclasses.asdict(config))
 
 
 def fit_settings(
@@ -126,6 +173,9 @@ def fit_settings(
     baseline needs no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a predictor
     that has one (the Adam-trained ones), so that the saved model says which rate it was
     trained with. ``logger_cfg`` (the ``logger`` group) is checked by :func:`logger_spec`.
+
+    Raises:
+        ConfigError: a bad option of any group.
     """
     sequencer = to_dict(sequencer_cfg)
     goal_nearest = None
@@ -178,22 +228,23 @@ def logger_spec(cfg: Any) -> dict[str, Any] | None:
 
 def job_fit_settings(cfg: Any) -> FitSettings:
     """:func:`fit_settings` of a job's composed config."""
-    return fit_settings(
-        cfg.predictor, cfg.get("sequencer"), cfg.get("trainer"), cfg.get("logger")
-    )
+    return fit_settings(cfg.predictor, cfg.get("sequencer"), cfg.get("trainer"), cfg.get("logger"))
 
 
-def validate_common(cfg: Any) -> tuple[str, dict[str, Any]]:
-    """Check the predictor, sequencer and trainer groups of a composed config
-    (:func:`job_fit_settings`); returns the predictor's kind and all its options.
+def validate_common(cfg: Any) -> PredictorOptions:
+    """Check the predictor, sequencer and trainer groups of a composed config.
+
+    Returns:
+        The predictor's kind and all its options (:func:`job_fit_settings`).
     """
     settings = job_fit_settings(cfg)
-    return settings.predictor, dataclasses.asdict(settings.fit.predictor_config)
+    return PredictorOptions(settings.predictor, dataclasses.asdict(settings.fit.predictor_config))
 
 
 def experiment_job(cfg: Any) -> ExperimentJob:
-    """The main job's composed config as an :class:`ExperimentJob` (an :class:`ExperimentJob`
-    is returned as it is); every group validated, the settings first.
+    """The main job's composed config as an :class:`ExperimentJob`, every group validated.
+
+    The settings are validated first; an :class:`ExperimentJob` is returned as it is.
     """
     if isinstance(cfg, ExperimentJob):
         return cfg

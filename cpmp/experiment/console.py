@@ -8,13 +8,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from tqdm import tqdm
+
 log = logging.getLogger(__name__)
 
 
 def progress_bar(items: list, desc: str) -> Any:
     """A tqdm progress bar over ``items`` on stderr (cleared when done)."""
-    from tqdm import tqdm
-
     return tqdm(items, desc=desc, leave=False, dynamic_ncols=True)
 
 

@@ -1,5 +1,7 @@
-"""The main job, stage by stage: collect each seed's demonstrations
-(:mod:`~cpmp.experiment.collection`), then per training size D fit
+"""The main job (``cpmp-experiment``), stage by stage.
+
+Collect each seed's demonstrations (:mod:`~cpmp.experiment.collection`), then per training
+size D fit
 (:mod:`~cpmp.experiment.fitting`), evaluate offline
 (:func:`cpmp.evaluation.offline.evaluate_offline`), reproduce
 (:mod:`~cpmp.experiment.reproduction`) and draw the strategy map
@@ -13,6 +15,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import defaultdict
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,28 +36,62 @@ from cpmp.experiment.report import (
 )
 from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
 from cpmp.experiment.settings import ExperimentJob
-from cpmp.experiment.strategies import balanced_subset, strategy_map
-from cpmp.experiment.workers import default_workers, run_parallel
+from cpmp.experiment.strategies import StrategyMap, balanced_subset, strategy_map
+from cpmp.experiment.workers import JobResults, default_workers, run_parallel
 
 log = logging.getLogger(__name__)
 
 
+@dataclass
+class TrainSizeResult:
+    """What one seed and training size D gives the report (:func:`run_train_size`).
+
+    Attributes:
+        row: the report's per-seed numbers at D (``progress``, ``replay``, ``reproduction``,
+            ``fit``, and at the largest D ``strategy_map_accuracy``).
+        pairs: Fig. 6's ``(expected (n,), predicted (n,))`` progress per held-out activation.
+        episodes: one dict per reproduction episode, with its seed and D.
+        strategy_map: the strategy map (at the largest D only, else ``None``).
+        train_boxes: (width, depth) [m] of the training demonstrations.
+        seconds: wall time [s] per stage.
+    """
+
+    row: dict[str, Any]
+    pairs: list[tuple[np.ndarray, np.ndarray]]
+    episodes: list[dict[str, Any]]
+    strategy_map: StrategyMap | None
+    train_boxes: list[tuple[float, float]]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class _Gathered:
+    """The jobs' results in seed and D order (:func:`_gather`).
+
+    Attributes:
+        per_seed: the report's per-seed rows.
+        pairs_by_d: the Fig. 6 pairs by D.
+        episodes: every episode.
+        stage_seconds: wall seconds per stage, summed over seeds and training sizes.
+    """
+
+    per_seed: list[dict[str, Any]]
+    pairs_by_d: dict[int, list[tuple[np.ndarray, np.ndarray]]]
+    episodes: list[dict[str, Any]]
+    stage_seconds: dict[str, float]
+
+
 def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
-    """Collect demos in the simulator, train on D = train_sizes, evaluate progress prediction,
-    reproduction (Table I) and the strategy map; write the report. Returns ``report.json``.
+    """Run the main job; returns the path of ``report.json``.
+
+    Collect demos in the simulator, train on D = train_sizes, evaluate progress prediction,
+    reproduction (Table I) and the strategy map; write the report.
 
     Each seed's collection and each (seed, D) training size is a job; with
     ``experiment.workers > 1`` they run in that many worker processes (one torch thread
     each, logs prefixed with their seed and D), and every number in the report is the same as
     in a serial run. ``timings.json`` holds the wall time of every stage.
-
-    A config with a ``compare`` node (``experiment=compare``) runs
-    :func:`cpmp.compare.job.run_compare` instead and returns ``compare.json``.
     """
-    if cfg.get("compare") is not None:
-        from cpmp.compare.job import run_compare
-
-        return run_compare(cfg, run_dir)
     run_dir = Path(run_dir)
     job = experiment_job(cfg)
     settings = job.settings
@@ -63,34 +100,40 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
     workers = min(workers, len(settings.seeds) * len(settings.train_sizes))
     if workers > 1:
         log.info("running seeds %s on %d worker processes", settings.seeds, workers)
-        collected, results = run_parallel(job, run_dir, workers, collect_seed, run_train_size)
+        ran = run_parallel(job, run_dir, workers, collect_seed, run_train_size)
     else:
-        collected, results = _run_serial(job, run_dir)
-    per_seed, pairs_by_d, episodes, stage_seconds = _gather(job, collected, results)
+        ran = _run_serial(job, run_dir)
+    gathered = _gather(job, ran)
 
     files = experiment_files(job)
-    first = results[settings.seeds[0], max(settings.train_sizes)]
-    with timed(stage_seconds, "plots", "plots"):
-        smap = {**first["strategy_map"], "train_boxes": first["train_boxes"]}
-        files.update(write_figures(job, run_dir, pairs_by_d, smap))
-    write_json(run_dir / "episodes.json", episodes)
-    report = pool_seeds(job, per_seed)
+    first = ran.results[settings.seeds[0], max(settings.train_sizes)]
+    assert first.strategy_map is not None  # drawn at the largest D
+    with timed(gathered.stage_seconds, "plots", "plots"):
+        figures = write_figures(
+            job, run_dir, gathered.pairs_by_d, first.strategy_map, first.train_boxes
+        )
+        files.update(figures)
+    write_json(run_dir / "episodes.json", gathered.episodes)
+    report = pool_seeds(job, gathered.per_seed)
     report["files"] = files
     report["seconds"] = time.perf_counter() - started
-    write_timings(run_dir, report["seconds"], workers, stage_seconds)
+    write_timings(run_dir, report["seconds"], workers, gathered.stage_seconds)
     return write_report(report, run_dir)
 
 
 def run_train_size(
     job: ExperimentJob | Any, run_dir: str | Path, data: SeedData, d: int
-) -> dict[str, Any]:
-    """Stage 2 of one seed and training size ``d``: train (``seed_<s>/model_D<d>.pt``), evaluate
-    progress offline, reproduce the boxes closed-loop and, at the largest D, the strategy map.
+) -> TrainSizeResult:
+    """Stage 2 of one seed and training size ``d``: train, evaluate, reproduce, map.
 
-    Returns ``row`` (the report's per-seed numbers), ``pairs`` (Fig. 6 ``(expected,
-    predicted)`` arrays), ``episodes`` (dicts), ``strategy_map`` (or ``None``), ``train_boxes``
-    ((width, depth) of the training demos) and ``seconds`` per stage. ``job``: the typed job
-    (or its composed config, converted here).
+    Train (``seed_<s>/model_D<d>.pt``), evaluate progress offline, reproduce the boxes
+    closed-loop and, at the largest D, draw the strategy map.
+
+    Args:
+        job: the typed job (or its composed config, converted here).
+        run_dir: the run directory.
+        data: the seed's collected data.
+        d: the training size.
     """
     job = experiment_job(job)
     settings, task, kind = job.settings, job.task, job.fit.predictor
@@ -130,43 +173,30 @@ def run_train_size(
     if d == max(settings.train_sizes):
         with timed(seconds, "strategy_map", f"seed {seed}: strategy map"):
             smap = strategy_map(seq, task, data.signatures, settings.strategy_grid)
-        row["strategy_map_accuracy"] = smap["accuracy"]
-    return {
-        "row": row,
-        "pairs": offline["pairs"],
-        "episodes": [{"seed": seed, "D": d, **e.to_dict()} for e in episodes],
-        "strategy_map": smap,
-        "train_boxes": [(s.metadata["box_width"], s.metadata["box_depth"]) for s in subset],
-        "seconds": seconds,
-    }
+        row["strategy_map_accuracy"] = smap.accuracy
+    return TrainSizeResult(
+        row=row,
+        pairs=offline["pairs"],
+        episodes=[{"seed": seed, "D": d, **e.to_dict()} for e in episodes],
+        strategy_map=smap,
+        train_boxes=[(s.metadata["box_width"], s.metadata["box_depth"]) for s in subset],
+        seconds=seconds,
+    )
 
 
-def _run_serial(
-    job: ExperimentJob, run_dir: Path
-) -> tuple[dict[int, SeedData], dict[tuple[int, int], dict[str, Any]]]:
+def _run_serial(job: ExperimentJob, run_dir: Path) -> JobResults:
     """Every seed's collection and each of its training sizes in this process, in order."""
-    collected: dict[int, SeedData] = {}
-    results: dict[tuple[int, int], dict[str, Any]] = {}
+    ran = JobResults({}, {})
     for seed in job.settings.seeds:
-        collected[seed] = collect_seed(job, run_dir, seed)
+        ran.collected[seed] = collect_seed(job, run_dir, seed)
         for d in job.settings.train_sizes:
-            results[seed, d] = run_train_size(job, run_dir, collected[seed], d)
-    return collected, results
+            ran.results[seed, d] = run_train_size(job, run_dir, ran.collected[seed], d)
+    return ran
 
 
-def _gather(
-    job: ExperimentJob,
-    collected: dict[int, SeedData],
-    results: dict[tuple[int, int], dict[str, Any]],
-) -> tuple[
-    list[dict[str, Any]],
-    dict[int, list[tuple[np.ndarray, np.ndarray]]],
-    list[dict[str, Any]],
-    dict[str, float],
-]:
-    """The jobs' results in seed and D order: the per-seed rows, the Fig. 6 pairs by D, every
-    episode, and the wall seconds per stage summed over seeds and training sizes.
-    """
+def _gather(job: ExperimentJob, ran: JobResults) -> _Gathered:
+    """The jobs' results in seed and D order, with the wall seconds per stage summed."""
+    collected, results = ran
     per_seed: list[dict[str, Any]] = []
     pairs_by_d: dict[int, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     episodes: list[dict[str, Any]] = []
@@ -177,10 +207,10 @@ def _gather(
         seed_row: dict[str, Any] = {"seed": seed, "by_train_size": {}}
         for d in job.settings.train_sizes:
             result = results[seed, d]
-            pairs_by_d[d] += result["pairs"]
-            episodes += result["episodes"]
-            seed_row["by_train_size"][str(d)] = result["row"]
-            for key, value in result["seconds"].items():
+            pairs_by_d[d] += result.pairs
+            episodes += result.episodes
+            seed_row["by_train_size"][str(d)] = result.row
+            for key, value in result.seconds.items():
                 stage_seconds[key] += value
         per_seed.append(seed_row)
-    return per_seed, pairs_by_d, episodes, stage_seconds
+    return _Gathered(per_seed, pairs_by_d, episodes, stage_seconds)

@@ -1,5 +1,6 @@
-"""The paper's figures as PNG files: progress field (Fig. 3), progress curves (Fig. 6), strategy
-map (Fig. 7), and a plot of aggregated sweep results.
+"""The paper's figures as PNG files, and a plot of aggregated sweep results.
+
+The progress field (Fig. 3), progress curves (Fig. 6) and strategy map (Fig. 7).
 
 Figures are built as :class:`matplotlib.figure.Figure` objects rendered by the Agg canvas, not
 through ``pyplot``: no global backend is switched, no figure is left registered (nothing to
@@ -10,11 +11,13 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
@@ -24,11 +27,6 @@ from matplotlib.patches import Patch, Rectangle
 
 from cpmp.errors import ConfigError, DataError
 from cpmp.io import atomic_path
-
-if TYPE_CHECKING:
-    import os
-
-    from matplotlib.axes import Axes
 
 CURVE_KEYS = ("time", "predicted_mean", "predicted_std", "expected_mean")
 """Keys :func:`plot_progress_curves` needs in each curves dict (see
@@ -155,8 +153,10 @@ def plot_progress_curves(
     path: str | os.PathLike[str],
     title: str | None = None,
 ) -> Path:
-    """Fig. 6: mean predicted progress over normalised time with a ±2 std band, the mean
-    expected progress (dashed) and the ideal diagonal; one panel per label (e.g. "3 demos").
+    """Fig. 6: mean predicted progress over normalised time, one panel per label.
+
+    Each panel (e.g. "3 demos") has a ±2 std band, the mean expected progress (dashed) and the
+    ideal diagonal.
 
     Each value is a dict from :func:`cpmp.evaluation.offline.progress_curves` (needs
     :data:`CURVE_KEYS`).

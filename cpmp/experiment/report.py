@@ -1,60 +1,35 @@
-"""The main job's report: its seeds pooled (mean ± std), ``report.json`` (machine-readable),
-``report.md``, the figures, ``timings.json``, and the helpers other reports share.
+"""The main job's report: its seeds pooled (mean ± std), written as JSON, Markdown, figures.
+
+``report.json`` (machine-readable), ``report.md``, the figures and ``timings.json``; the
+helpers other reports share are in :mod:`~cpmp.experiment.output` (and importable from here).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from cpmp.io import atomic_write_text, to_builtin
-
-if TYPE_CHECKING:
-    from cpmp.experiment.settings import ExperimentJob
-
-PAPER_TABLE_I: dict[str, dict[str, float]] = {
-    "3": {"W": 3, "I": 4, "C": 13, "distance_mean": 0.13, "distance_std": 0.08},
-    "6": {"W": 3, "I": 2, "C": 15, "distance_mean": 0.07, "distance_std": 0.04},
-    "9": {"W": 2, "I": 2, "C": 16, "distance_mean": 0.06, "distance_std": 0.03},
-}
-"""The paper's Table I (20 random boxes per D)."""
-
-
-jsonable = to_builtin
-"""Recursively convert numpy values and tuples to JSON types (NaN -> None)."""
-
-
-def write_json(path: str | Path, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON, atomically."""
-    atomic_write_text(path, json.dumps(jsonable(obj), indent=2) + "\n")
-    return Path(path)
-
-
-def mean_std(values: list[float | None]) -> tuple[float | None, float | None]:
-    """Mean and (population) std of the non-missing values."""
-    xs = [v for v in values if v is not None]
-    if not xs:
-        return None, None
-    return float(np.mean(xs)), float(np.std(xs))
+from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
+from cpmp.evaluation.offline import progress_curves
+from cpmp.experiment.output import PAPER_TABLE_I, jsonable, mean_std, write_json
+from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map
+from cpmp.experiment.settings import ExperimentJob
+from cpmp.experiment.strategies import StrategyMap
+from cpmp.io import atomic_write_text
 
 
 def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
+    """``mean`` (``± std`` when given) with ``digits`` decimals, ``–`` for ``None``."""
     if mean is None:
         return "–"
     if std is None:
         return f"{mean:.{digits}f}"
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
-
-GOAL_NEAREST = "goal_nearest"
-"""The ``sequencer.kind`` of the baseline without a progress predictor
-(:mod:`cpmp.baselines.goal_nearest`; kept as a string here so that writing a report imports no
-model code)."""
 
 NEAREST_PROGRESS_NOTE = (
     "sequencer=goal_nearest trains no progress predictor (the predictor group is not used); "
@@ -65,18 +40,17 @@ NEAREST_PROGRESS_NOTE = (
 
 
 def is_goal_nearest(sequencer: Mapping[str, Any] | None) -> bool:
-    """Whether a ``sequencer`` config (a mapping, possibly empty) selects the goal-nearest
-    baseline.
-    """
+    """Whether a ``sequencer`` config (a mapping, maybe empty) selects the goal-nearest baseline."""
     return bool(sequencer) and sequencer.get("kind") == GOAL_NEAREST
 
 
 def predictor_entry(
     kind: str, predictor: Mapping[str, Any], sequencer: Mapping[str, Any] | None
 ) -> dict[str, Any]:
-    """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran, or
-    for ``sequencer=goal_nearest`` (which runs none) ``kind: "none"``, the progress estimate it
-    reports instead (``nearest_sample``) and a note saying so.
+    """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran.
+
+    For ``sequencer=goal_nearest`` (which runs none) it is ``kind: "none"``, the progress
+    estimate it reports instead (``nearest_sample``) and a note saying so.
     """
     if is_goal_nearest(sequencer):
         return {
@@ -90,8 +64,10 @@ def predictor_entry(
 
 # ------------------------------------------------------------------------- seed pooling
 def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, Any]:
-    """The report of the main job from its per-seed rows: mean ± std over seeds of every
-    number, distances pooled over all complete episodes, the configs that ran.
+    """The report of the main job from its per-seed rows.
+
+    Every number is the mean ± std over seeds; distances are pooled over all complete
+    episodes; the configs that ran are listed.
 
     Args:
         job: the typed job.
@@ -166,9 +142,7 @@ def _configs(job: ExperimentJob) -> dict[str, Any]:
     """The report's ``predictor``, ``sequencer`` and ``task`` sections: every option used."""
     fit = job.fit
     if fit.goal_nearest is not None:
-        from cpmp.config.goal_nearest import KIND
-
-        sequencer = {"kind": KIND, **dataclasses.asdict(fit.goal_nearest)}
+        sequencer = {"kind": GOAL_NEAREST, **dataclasses.asdict(fit.goal_nearest)}
     else:
         sequencer = dataclasses.asdict(fit.fit.sequencer)
     return {
@@ -203,21 +177,21 @@ def write_figures(
     job: ExperimentJob,
     run_dir: Path,
     pairs_by_d: Mapping[int, list[tuple[np.ndarray, np.ndarray]]],
-    strategy_map: Mapping[str, Any],
+    strategy_map: StrategyMap,
+    train_boxes: Sequence[tuple[float, float]],
 ) -> dict[str, str]:
-    """Fig. 6 (progress curves per training size) and Fig. 7 (the strategy map of the first
-    seed at the largest D) into ``run_dir``; returns their entries of the report's files.
+    """Fig. 6 (progress curves per D) and Fig. 7 (the strategy map) into ``run_dir``.
 
     Args:
         job: the typed job.
         run_dir: the run directory.
         pairs_by_d: ``(expected (n,), predicted (n,))`` per held-out activation, by D.
-        strategy_map: :func:`cpmp.experiment.strategies.strategy_map`'s result with
-            ``train_boxes``, (width, depth) of the training demonstrations.
-    """
-    from cpmp.evaluation.offline import progress_curves
-    from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map
+        strategy_map: the first seed's strategy map at the largest D.
+        train_boxes: (width, depth) [m] of its training demonstrations.
 
+    Returns:
+        The figures' entries of the report's files.
+    """
     settings = job.settings
     curves = {f"D={d}": progress_curves(pairs_by_d[d]) for d in settings.train_sizes}
     plot_progress_curves(
@@ -226,12 +200,12 @@ def write_figures(
         title="Predicted vs expected progress on held-out demos",
     )
     plot_strategy_map(
-        strategy_map["widths"],
-        strategy_map["depths"],
-        strategy_map["chosen"],
-        strategy_map["correct"],
+        strategy_map.widths,
+        strategy_map.depths,
+        strategy_map.chosen,
+        strategy_map.correct,
         run_dir / "fig7_strategy_map.png",
-        training_boxes=strategy_map["train_boxes"],
+        training_boxes=list(train_boxes),
         title=f"Initial strategy, D={max(settings.train_sizes)}, seed {settings.seeds[0]}",
     )
     return {
@@ -243,8 +217,9 @@ def write_figures(
 def write_timings(
     run_dir: Path, seconds: float, workers: int, stage_seconds: Mapping[str, float]
 ) -> Path:
-    """``timings.json``: the run's wall time [s], its worker count and the wall seconds of
-    every stage, summed over seeds and training sizes.
+    """``timings.json``: the run's wall time [s], its worker count and the seconds per stage.
+
+    The stage seconds are wall seconds summed over seeds and training sizes.
     """
     return write_json(
         run_dir / "timings.json",
@@ -285,6 +260,7 @@ def _method_line(report: Mapping[str, Any]) -> str:
 
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The human-readable report: Table I beside the paper's, progress errors, strategy map.
+
     The header names what ran: the predictor and the learned sequencer's rules, or the
     ``goal_nearest`` baseline's options (whose progress numbers are labelled as a
     nearest-sample lookup it does not switch on).

@@ -1,6 +1,9 @@
-"""Reproduction (Table I): a fitted sequencer closed-loop on the reproduction boxes, each
-episode classified (wrong start, incomplete, complete) with its switch-state distances, rerun
-recordings of the episodes worth looking at, and the counts of one set of episodes.
+"""Reproduction (Table I): a fitted sequencer closed-loop on the reproduction boxes.
+
+Each episode is classified (:data:`~cpmp.sim.runner.Outcome`: wrong start, incomplete,
+complete) with its switch-state distances; rerun recordings keep the episodes worth looking at
+(:data:`~cpmp.experiment.settings.RecordMode`); :func:`summarize_episodes` counts one set of
+episodes.
 """
 
 from __future__ import annotations
@@ -9,31 +12,48 @@ import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from cpmp.config.task import TaskConfig
+from cpmp.data.demonstration import Demonstration
 from cpmp.evaluation.offline import continuous_features, switch_distances
+from cpmp.experiment.collection import SeedData
 from cpmp.experiment.console import progress_bar
+from cpmp.experiment.settings import RecordMode
 from cpmp.experiment.strategies import classify_start
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.experiment.collection import SeedData
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.sim import Box, TaskConfig
+from cpmp.recordings import EpisodeRecorder
+from cpmp.records import TickInfo
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sim import Box, Simulation, correct_strategy
+from cpmp.sim.runner import Outcome, run_episodes
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class EpisodeRecord:
-    """One reproduction episode, summarised for the report."""
+    """One reproduction episode, summarised for the report.
+
+    Attributes:
+        box: (width, depth) [m] of the box.
+        correct: the box's correct strategy.
+        chosen: the strategy the sequencer started with (``other`` if none).
+        outcome: how the episode ended.
+        reason: why, in words.
+        duration: simulated time [s].
+        distances: switch-state distances of a complete episode.
+        distances_continuous: the same over the continuous features only.
+        recoveries: stalls the sequencer resolved.
+        holds: switches the sequencer held back.
+        rrd: the episode's recording, if kept.
+    """
 
     box: tuple[float, float]
     correct: str
     chosen: str
-    outcome: str
+    outcome: Outcome
     reason: str
     duration: float
     distances: list[float]
@@ -43,11 +63,17 @@ class EpisodeRecord:
     rrd: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields as a dict (``episodes.json``)."""
         return dict(self.__dict__)
 
 
 class EpisodeLogger:
-    """``on_tick`` callback that writes a rerun recording of a sequencer-driven episode."""
+    """``on_tick`` callback that writes a rerun recording of a sequencer-driven episode.
+
+    Args:
+        recorder: the episode's :class:`~cpmp.recordings.EpisodeRecorder`.
+        seq: the sequencer driving the episode (its events and notes are logged).
+    """
 
     def __init__(self, recorder: Any, seq: ConcurrentSequencer) -> None:
         self.recorder = recorder
@@ -55,7 +81,8 @@ class EpisodeLogger:
         self._n_events = 0
         self._n_notes = 0
 
-    def __call__(self, info: Any) -> None:
+    def __call__(self, info: TickInfo) -> None:
+        """Log one tick: features, progress, active MPs, and the new transitions and notes."""
         tick = self.seq.last_tick
         self.recorder.log_tick(
             info.t,
@@ -82,7 +109,7 @@ def reproduce(
     task: TaskConfig,
     signatures: Mapping[str, Mapping[str, str]],
     *,
-    record: str,
+    record: RecordMode,
     record_dir: Path | None = None,
     max_time: float | None = None,
     label: str = "",
@@ -92,13 +119,8 @@ def reproduce(
     ``expected[i]`` is the demonstrator's recording of ``boxes[i]``: its switch states are the
     "desired states" of Table Ib. All boxes run together (:func:`cpmp.sim.runner.run_episodes`
     with ``seq.batched``); every number equals a run of one box at a time. ``record``: which
-    episodes are written into ``record_dir`` as ``.rrd`` (the choices of
-    :attr:`~cpmp.experiment.settings.ExperimentSettings.record`; nothing without ``record_dir``).
+    episodes are written into ``record_dir`` as ``.rrd`` (nothing without ``record_dir``).
     """
-    from cpmp.recordings import EpisodeRecorder
-    from cpmp.sim import Simulation, correct_strategy
-    from cpmp.sim.runner import run_episodes
-
     out: list[EpisodeRecord] = []
     if not boxes:
         return out
@@ -147,17 +169,16 @@ def reproduce(
         bar.close()
     for i, (box, demo, result) in enumerate(zip(boxes, expected, results, strict=True)):
         rrd, recorder, episode = paths[i], recorders[i], batch.episodes[i]
-        if recorder is not None and record == "failures" and i > 0 and result.outcome == "complete":
+        complete = result.outcome == "complete"
+        if recorder is not None and record == "failures" and i > 0 and complete:
             recorder.abort()  # nothing to look at: keep the disk for the failures
             rrd = None
         elif recorder is not None:
-            recorder.log_outcome(
-                result.duration, result.outcome, result.reason, success=result.outcome == "complete"
-            )
+            recorder.log_outcome(result.duration, result.outcome, result.reason, success=complete)
             recorder.close()
         distances: list[float] = []
         continuous: list[float] = []
-        if result.outcome == "complete":
+        if complete:
             columns = continuous_features([demo])
             for v in seq.graphs:
                 distances += switch_distances(result.transitions, demo, v) or []
@@ -184,16 +205,19 @@ def reproduce(
 def reproduce_seed(
     seq: ConcurrentSequencer, data: SeedData, task: TaskConfig, **options: Any
 ) -> list[EpisodeRecord]:
-    """:func:`reproduce` on one seed's reproduction boxes: ``data.boxes`` against the
-    demonstrator's runs ``data.expected``, the chosen strategies told apart by
-    ``data.signatures``. ``options``: the keywords of :func:`reproduce`.
+    """:func:`reproduce` on one seed's reproduction boxes.
+
+    ``data.boxes`` run against the demonstrator's runs ``data.expected``, the chosen strategies
+    told apart by ``data.signatures``. ``options``: the keywords of :func:`reproduce`.
     """
     return reproduce(seq, data.boxes, data.expected, task, data.signatures, **options)
 
 
 def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
-    """Table I for one set of episodes: counts W/I/C (diverged counted apart, also in I) and
-    the mean/std switch-state distance over all complete episodes.
+    """Table I for one set of episodes: the W/I/C counts and the switch-state distances.
+
+    Diverged episodes are counted apart and also in I; the distance mean/std is over all
+    complete episodes.
     """
     counts = {k: 0 for k in ("W", "I", "C", "diverged")}
     for e in episodes:
@@ -204,8 +228,9 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
         else:
             counts["I"] += 1
             counts["diverged"] += e.outcome == "diverged"
-    distances = [d for e in episodes if e.outcome == "complete" for d in e.distances]
-    continuous = [d for e in episodes if e.outcome == "complete" for d in e.distances_continuous]
+    complete = [e for e in episodes if e.outcome == "complete"]
+    distances = [d for e in complete for d in e.distances]
+    continuous = [d for e in complete for d in e.distances_continuous]
     return {
         **counts,
         "n": len(episodes),
@@ -216,6 +241,6 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
         "distance_continuous_std": float(np.std(continuous)) if continuous else None,
         "recoveries": sum(e.recoveries for e in episodes),
         "recovered_episodes": sum(e.recoveries > 0 for e in episodes),
-        "recovered_complete": sum(e.recoveries > 0 and e.outcome == "complete" for e in episodes),
+        "recovered_complete": sum(e.recoveries > 0 for e in complete),
         "holds": sum(e.holds for e in episodes),
     }

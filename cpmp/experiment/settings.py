@@ -1,28 +1,53 @@
-"""What a job of the main experiment is, typed: :class:`ExperimentSettings` (the ``experiment``
-group), :class:`FitSettings` (the ``predictor``, ``sequencer`` and ``trainer`` groups) and
-:class:`ExperimentJob` (all of them with the ``task``). Each validates itself on construction;
+"""What a job of the main experiment is, typed.
+
+:class:`ExperimentSettings` is the ``experiment`` group (its ``record`` a :data:`RecordMode`),
+:class:`FitSettings` the ``predictor``, ``sequencer`` and ``trainer`` groups, and
+:class:`ExperimentJob` all of them with the ``task``. Each validates itself on construction;
 :mod:`cpmp.experiment.config` registers them with Hydra and converts a composed ``cfg`` into
-them.
+them. :func:`to_dict` turns a config node into a plain dict.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, get_args
 
-from cpmp.config import FitConfig, TaskConfig
+from omegaconf import DictConfig, OmegaConf
+
+from cpmp.config import FitConfig, GoalNearestConfig, TaskConfig
 from cpmp.errors import ConfigError
 
-RECORD_CHOICES = ("failures", "all", "first", "none")
+RecordMode = Literal["failures", "all", "first", "none"]
+"""Which reproduction episodes keep an ``.rrd`` (``experiment.record``): ``failures`` (every
+episode that did not complete, plus the first one per training size), ``all``, ``first`` (the
+first per training size) or ``none``."""
+RECORD_CHOICES: tuple[RecordMode, ...] = get_args(RecordMode)
 """Values of ``experiment.record``."""
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    """A plain dict from an OmegaConf node or mapping (``None`` -> ``{}``).
+
+    Raises:
+        ConfigError: ``cfg`` is neither a mapping nor ``None``.
+    """
+    if cfg is None:
+        return {}
+    if isinstance(cfg, DictConfig):
+        return OmegaConf.to_container(cfg, resolve=True)  # type: ignore[return-value]
+    if isinstance(cfg, Mapping):
+        return dict(cfg)
+    raise ConfigError(f"expected a mapping of options, got {type(cfg).__name__}")
 
 
 @dataclass
 class ExperimentSettings:
-    """Sizes of the evaluation (``experiment`` config group). The defaults are
-    ``experiment=quick``, a small run (its time: see docs/benchmarks.md).
+    """Sizes of the evaluation (``experiment`` config group).
+
+    The defaults are ``experiment=quick``, a small run (its time: see docs/benchmarks.md).
 
     Attributes:
         name: label of the settings (``quick``, ``full``, ...).
@@ -33,9 +58,9 @@ class ExperimentSettings:
         n_boxes: random boxes reproduced per D and seed (paper: 20).
         box_seed_offset: boxes for reproduction are drawn from ``seed + box_seed_offset``.
         strategy_grid: (widths, depths) cells of the strategy map (Fig. 7).
-        record: which reproduction episodes keep an ``.rrd``: ``failures`` (every episode that
-            did not complete, plus the first one per training size), ``all``, ``first`` or
-            ``none``.
+        record: which reproduction episodes keep an ``.rrd`` (:data:`RecordMode`):
+            ``failures`` (every episode that did not complete, plus the first one per training
+            size), ``all``, ``first`` or ``none``.
         record_demos: also write the collected demonstrations as ``.rrd``.
         max_time: episode time limit [s] (``None``: the task's ``max_time``).
         feature_noise: std of Gaussian noise added to the training demonstrations' features,
@@ -54,7 +79,7 @@ class ExperimentSettings:
     n_boxes: int = 6
     box_seed_offset: int = 1000
     strategy_grid: list[int] = field(default_factory=lambda: [8, 6])
-    record: str = "failures"
+    record: RecordMode = "failures"
     record_demos: bool = False
     max_time: float | None = None
     feature_noise: float = 0.0
@@ -117,8 +142,6 @@ class ExperimentSettings:
     @classmethod
     def from_cfg(cls, cfg: Any) -> ExperimentSettings:
         """From the ``experiment`` node (or a mapping); unknown keys raise :class:`ConfigError`."""
-        from cpmp.experiment.config import to_dict  # config imports this module
-
         options = to_dict(cfg)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(options) - known)
@@ -145,7 +168,7 @@ class FitSettings:
     """
 
     fit: FitConfig
-    goal_nearest: Any | None = None
+    goal_nearest: GoalNearestConfig | None = None
     logger: dict[str, Any] | None = None
 
     @property

@@ -1,23 +1,24 @@
-"""The task's strategies: which one a demonstration used, train/test splits and training
-subsets balanced over them, the initial MPs of each (its signature), which one a sequencer
-chose at the start of an episode, and the strategy map (Fig. 7).
+"""The task's strategies: which one a demonstration used, splits, and the strategy map.
+
+Train/test splits and training subsets are balanced over the strategies; each strategy's
+initial MPs are its signature, which tells which strategy a sequencer chose at the start of an
+episode; the strategy map (Fig. 7) shows that choice over a grid of boxes.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
 
 import numpy as np
 
+from cpmp.config.task import TaskConfig
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import DataError
 from cpmp.experiment.console import progress_bar
-
-if TYPE_CHECKING:
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.sim import TaskConfig
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sim import Box, Simulation, correct_strategy
 
 OTHER = "other"
 """Strategy label of an initial MP set that matches no demonstrated strategy."""
@@ -42,7 +43,14 @@ def by_strategy(demos: Sequence[Demonstration]) -> dict[str, list[Demonstration]
 def split_by_strategy(
     demos: Sequence[Demonstration], train_per_strategy: int
 ) -> tuple[list[Demonstration], list[Demonstration]]:
-    """First ``train_per_strategy`` demos of each strategy train, the rest test."""
+    """First ``train_per_strategy`` demos of each strategy train, the rest test.
+
+    Returns:
+        ``(train, test)``.
+
+    Raises:
+        DataError: a strategy has no more than ``train_per_strategy`` demos.
+    """
     train, test = [], []
     for strategy, group in by_strategy(demos).items():
         if len(group) <= train_per_strategy:
@@ -84,15 +92,39 @@ def classify_start(initial: Mapping[str, str], signatures: Mapping[str, Mapping[
     return OTHER
 
 
+@dataclass
+class StrategyMap:
+    """The initial strategy chosen over a width x depth grid of boxes (Fig. 7).
+
+    Attributes:
+        widths: box widths [m], shape (n_widths,).
+        depths: box depths [m], shape (n_depths,).
+        chosen: the strategy the sequencer chose, shape (n_depths, n_widths).
+        correct: the correct strategy of each box, shape (n_depths, n_widths).
+        accuracy: the fraction of cells where the two agree.
+    """
+
+    widths: np.ndarray
+    depths: np.ndarray
+    chosen: np.ndarray
+    correct: np.ndarray
+    accuracy: float
+
+
 def strategy_map(
     seq: ConcurrentSequencer,
     task: TaskConfig,
     signatures: Mapping[str, Mapping[str, str]],
     grid: Sequence[int],
-) -> dict[str, Any]:
-    """Fig. 7: the initial strategy chosen over a width x depth grid against the correct one."""
-    from cpmp.sim import Box, Simulation, correct_strategy
+) -> StrategyMap:
+    """Fig. 7: the initial strategy chosen over a width x depth grid against the correct one.
 
+    Args:
+        seq: the fitted sequencer (``reset`` on each box's first features).
+        task: the task (box size ranges and height).
+        signatures: initial MP per variable of each strategy (:func:`strategy_signatures`).
+        grid: ``(n_widths, n_depths)``.
+    """
     widths = np.linspace(*task.width_range, grid[0])
     depths = np.linspace(*task.depth_range, grid[1])
     chosen = np.empty((len(depths), len(widths)), dtype=object)
@@ -103,10 +135,10 @@ def strategy_map(
             x0 = Simulation(task, box).features()
             chosen[j, i] = classify_start(seq.reset(0.0, x0), signatures)
             correct[j, i] = correct_strategy(box, task)
-    return {
-        "widths": widths,
-        "depths": depths,
-        "chosen": chosen.astype(str),
-        "correct": correct.astype(str),
-        "accuracy": float(np.mean(chosen == correct)),
-    }
+    return StrategyMap(
+        widths=widths,
+        depths=depths,
+        chosen=chosen.astype(str),
+        correct=correct.astype(str),
+        accuracy=float(np.mean(chosen == correct)),
+    )

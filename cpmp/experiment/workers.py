@@ -1,7 +1,9 @@
-"""The main job's worker processes: a spawned process pool running each seed's collection and
-then each of its training sizes, one torch thread per worker, every worker's log records sent to
-the main process (prefixed with their job) and handed to its handlers. :func:`spawned_pool`
-is the pool itself, shared with the comparison's scheduler (:mod:`cpmp.compare.runs`).
+"""The main job's worker processes: a spawned pool running each seed's stages.
+
+Each seed's collection and then each of its training sizes run on the pool, one torch thread
+per worker, every worker's log records sent to the main process (prefixed with their job) and
+handed to its handlers. :func:`spawned_pool` is the pool itself, shared with the comparison's
+scheduler (:mod:`cpmp.compare.runs`).
 """
 
 from __future__ import annotations
@@ -9,12 +11,25 @@ from __future__ import annotations
 import contextlib
 import logging
 import logging.handlers
+import multiprocessing
 import os
 from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
+
+import torch
 
 from cpmp.experiment.settings import ExperimentJob
+
+
+class JobResults(NamedTuple):
+    """What the main job's stages gave: each seed's collection and each training size's result."""
+
+    collected: dict[int, Any]
+    """What the collection returned, by seed."""
+    results: dict[tuple[int, int], Any]
+    """What each training size returned, by (seed, D)."""
 
 
 def default_workers(n_seeds: int) -> int:
@@ -41,8 +56,9 @@ class _JobPrefix(logging.Filter):
 
 
 class _Dispatch(logging.Handler):
-    """Hands a worker's record to the main process's logger of the same name (and so to the
-    handlers Hydra configured: console and job log).
+    """Hands a worker's record to the main process's logger of the same name.
+
+    So the record reaches the handlers Hydra configured: console and job log.
     """
 
     def emit(self, record: logging.LogRecord) -> None:
@@ -55,16 +71,14 @@ class _Dispatch(logging.Handler):
 def spawned_pool(
     workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
 ) -> Iterator[Any]:
-    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, each started with
-    ``initializer(*initargs)`` (default: one torch thread), shut down on exit.
+    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, shut down on exit.
+
+    Each worker starts with ``initializer(*initargs)`` (default: one torch thread).
 
     Workers show no progress bars (two would overwrite each other; the main process reports
     their progress): tqdm reads ``TQDM_DISABLE`` when imported, so it is set while the pool
     starts its workers and restored afterwards.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
     bars = os.environ.get("TQDM_DISABLE")
     os.environ["TQDM_DISABLE"] = "1"
     context = multiprocessing.get_context("spawn")
@@ -82,11 +96,10 @@ def spawned_pool(
 
 
 def one_thread() -> None:
-    """Worker start-up: one torch thread (a second busy thread per process on a machine of few
-    cores slows every process down).
-    """
-    import torch
+    """Worker start-up: one torch thread.
 
+    A second busy thread per process on a machine of few cores slows every process down.
+    """
     torch.set_num_threads(1)
 
 
@@ -112,10 +125,12 @@ def run_parallel(
     run_dir: Path,
     workers: int,
     collect: Callable[[ExperimentJob, Path, int], Any],
-    train_size: Callable[[ExperimentJob, Path, Any, int], dict[str, Any]],
-) -> tuple[dict[int, Any], dict[tuple[int, int], dict[str, Any]]]:
-    """Every seed's collection, then each of its training sizes (largest first), as jobs on
-    ``workers`` spawned processes.
+    train_size: Callable[[ExperimentJob, Path, Any, int], Any],
+) -> JobResults:
+    """Every seed's collection, then each of its training sizes, on spawned processes.
+
+    The training sizes of a seed are submitted largest first, as soon as its collection is
+    done.
 
     Args:
         job: the typed job.
@@ -129,15 +144,12 @@ def run_parallel(
     Returns:
         The collections by seed and the results by (seed, D).
     """
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, Future, wait
-
     settings = job.settings
     queue = multiprocessing.get_context("spawn").Queue()
     listener = logging.handlers.QueueListener(queue, _Dispatch())
     level = logging.getLogger("cpmp").getEffectiveLevel()
     collected: dict[int, Any] = {}
-    results: dict[tuple[int, int], dict[str, Any]] = {}
+    results: dict[tuple[int, int], Any] = {}
     listener.start()
     try:
         with spawned_pool(workers, _init_worker, (queue, level)) as pool:
@@ -159,4 +171,4 @@ def run_parallel(
                         pending[pool.submit(_labelled, *args)] = (seed, size)
     finally:
         listener.stop()
-    return collected, results
+    return JobResults(collected, results)

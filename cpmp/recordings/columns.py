@@ -1,9 +1,8 @@
-"""The per-tick series of a recording: :class:`ColumnBuffer` makes, checks and names the entity
-paths of a row layout once, keeps one row per tick for each tuple of entity paths (scalars) and
-of bodies (poses), and sends each entity's column with one ``send_columns`` call (why:
-:mod:`cpmp.recordings`).
+"""The per-tick series of a recording, buffered and sent column-wise.
 
-``rerun`` is imported inside the functions, so importing this module is cheap.
+:class:`ColumnBuffer` makes, checks and names the entity paths of a row layout once, keeps one
+row per tick for each tuple of entity paths (scalars) and of bodies (poses), and sends each
+entity's column with one ``send_columns`` call (why: :mod:`cpmp.recordings`).
 """
 
 from __future__ import annotations
@@ -12,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from cpmp.recordings.layout import check_mp, entity
 
@@ -40,8 +40,6 @@ class ColumnBuffer:
 
     def name_series(self, path: str, name: str) -> None:
         """Give the series at ``path`` its legend ``name`` (a static ``SeriesLines``), once."""
-        import rerun as rr
-
         if path not in self._named_series:
             self._named_series.add(path)
             self._rec.log(path, rr.SeriesLines(names=[name]), static=True)
@@ -86,9 +84,11 @@ class ColumnBuffer:
         checks: Sequence[tuple[str, str | None]],
         series: Sequence[tuple[tuple[str, ...], str | None]],
     ) -> None:
-        """Check the (variable, MP or ``None``) pairs ``checks``, then make the entity path of
-        each of ``series`` (path parts, series name or ``None``), name its series and keep the
-        paths as layout ``key``.
+        """The entity paths of layout ``key``: checked, made and named once.
+
+        Checks the (variable, MP or ``None``) pairs ``checks``, then makes the entity path of
+        each of ``series`` (path parts, series name or ``None``), names its series and keeps
+        the paths as layout ``key``.
         """
         for variable, mp in checks:
             check_mp(self._mp_names, variable, mp)
@@ -121,11 +121,11 @@ class ColumnBuffer:
         quat_rows.append(quats)
 
     def send(self) -> None:
-        """Send every buffered column to the recording stream (scalars to their
-        entity, poses as ``Transform3D`` to ``world/<body>``, on the ``time`` and ``tick``
-        timelines) and empty the buffers.
+        """Send every buffered column to the recording stream and empty the buffers.
+
+        Scalars go to their entity, poses as ``Transform3D`` to ``world/<body>``, on the
+        ``time`` and ``tick`` timelines.
         """
-        import rerun as rr
 
         def indexes(ticks: list[int], times: list[float]) -> list[Any]:
             return [

@@ -1,6 +1,7 @@
-"""Rerun recordings of demonstrations: replay a recorded demonstration's MP labels in the
-simulator and write the episode as an ``.rrd`` in the layout of
-:mod:`cpmp.recordings` (``experiment.record_demos=true``).
+"""Rerun recordings of demonstrations, replayed in the simulator (``experiment.record_demos``).
+
+A recorded demonstration's MP labels are replayed in the simulator and the episode written as
+an ``.rrd`` in the layout of :mod:`cpmp.recordings`.
 
 The recording has the robot and box geometry, the features, the active MP per variable and
 the body poses at every control tick. There are no progress values (no predictor is involved:
@@ -11,15 +12,18 @@ outcome at the end.
 
 from __future__ import annotations
 
+import os
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    import os
-
-    from cpmp.data.demonstration import Demonstration
-    from cpmp.recordings import EpisodeRecorder, TransitionEvent
-    from cpmp.sim import Box, TaskConfig, TickInfo
+from cpmp.config.task import TaskConfig
+from cpmp.data.demonstration import Demonstration
+from cpmp.errors import DataError
+from cpmp.recordings.writer import EpisodeRecorder
+from cpmp.records import TickInfo, TransitionEvent
+from cpmp.sim import Box, Simulation, run_episode
+from cpmp.sim.policies import ReplayPolicy
 
 DEMO_TRANSITION_PROBABILITY = 1.0
 """Probability logged with a demonstrated switch (it is a label, not a prediction)."""
@@ -30,12 +34,11 @@ on the ``control_dt`` grid, so only float round-off needs absorbing."""
 
 
 def label_switches(demo: Demonstration) -> list[TransitionEvent]:
-    """Every label change of ``demo`` (:meth:`~cpmp.data.Demonstration.transitions`) with
-    probability :data:`DEMO_TRANSITION_PROBABILITY`; in time order (variables in
+    """Every label change of ``demo`` with probability :data:`DEMO_TRANSITION_PROBABILITY`.
+
+    The changes are :meth:`~cpmp.data.Demonstration.transitions`, in time order (variables in
     ``demo.variables`` order at equal times).
     """
-    from dataclasses import replace
-
     return [replace(e, probability=DEMO_TRANSITION_PROBABILITY) for e in demo.transitions()]
 
 
@@ -47,6 +50,7 @@ class _DemoLogger:
         self.pending = list(switches)
 
     def __call__(self, info: TickInfo) -> None:
+        """Log the tick, then the switches due by its time."""
         self.recorder.log_tick(info.t, info.features, {}, info.active, None, info.body_poses)
         self.flush(info.t)
 
@@ -73,12 +77,10 @@ def record_demo_rrd(
     (a failed replay leaves none); returns ``path``. The replay's outcome (normally
     ``complete``) and reason are logged at the end; switches the replay did not reach (it
     ended early) are not logged.
-    """
-    from cpmp.errors import DataError
-    from cpmp.recordings import EpisodeRecorder
-    from cpmp.sim import Simulation, run_episode
-    from cpmp.sim.policies import ReplayPolicy
 
+    Raises:
+        DataError: ``demo``'s feature names are not the simulator's.
+    """
     sim = Simulation(task, box)
     if list(demo.feature_names) != list(sim.feature_names):
         raise DataError(
@@ -107,7 +109,10 @@ def record_demo_rrd(
         )
         logger.flush(result.duration)
         recorder.log_outcome(
-            result.duration, result.outcome, result.reason, success=result.outcome == "complete"
+            result.duration,
+            result.outcome,
+            result.reason,
+            success=result.outcome == "complete",
         )
     except BaseException:
         recorder.abort()

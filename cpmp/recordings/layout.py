@@ -1,10 +1,9 @@
-"""The layout of an episode recording, shared by the writer and the reader (the table is in
-:mod:`cpmp.recordings`): entity paths and the names of the machine-readable records,
-the text of the log lines and of the ``status`` document, the feature panels
+"""The layout of an episode recording, shared by the writer and the reader.
+
+The table is in :mod:`cpmp.recordings`: entity paths and the names of the machine-readable
+records, the text of the log lines and of the ``status`` document, the feature panels
 (:func:`group_features`), the viewer's default blueprint (:func:`blueprint`) and the 3D scene
 (static geoms, per-tick body poses).
-
-``rerun`` is imported inside the functions, so importing this module is cheap.
 """
 
 from __future__ import annotations
@@ -14,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
 
 from cpmp.errors import ConfigError, CpmpError, DataError, UnknownMPError
 
@@ -48,14 +49,14 @@ _TOKEN = re.compile(r"[^._\-/\s]+")
 
 def entity(*parts: str) -> str:
     """The entity path of ``parts``, each escaped (a part may hold ``/``, spaces, ...)."""
-    import rerun as rr
-
     return "/".join(rr.escape_entity_path_part(part) for part in parts)
 
 
 def check_mp(mp_names: Mapping[str, Sequence[str]], variable: str, mp: str | None = None) -> None:
-    """Raise :class:`UnknownMPError` unless ``variable`` is a control variable of ``mp_names``
-    and ``mp`` (when given) one of its MPs.
+    """Check that ``variable`` is a control variable of ``mp_names`` and ``mp`` one of its MPs.
+
+    Raises:
+        UnknownMPError: ``variable`` or ``mp`` (when given) is unknown.
     """
     if variable not in mp_names:
         raise UnknownMPError(f"unknown control variable {variable!r}; known: {sorted(mp_names)}")
@@ -85,8 +86,10 @@ def status_markdown(
     last_transition: str = "",
     outcome: str = "",
 ) -> str:
-    """The ``status`` document at ``t`` [s]: the active MP of each of ``variables`` (``-``
-    when none yet), the last transition and the outcome text, as markdown.
+    """The ``status`` document at ``t`` [s], as markdown.
+
+    It shows the active MP of each of ``variables`` (``-`` when none yet), the last
+    transition and the outcome text.
     """
     lines = [f"**{episode}** · t = {t:.2f} s", "", "| variable | active MP |", "|---|---|"]
     lines += [f"| {var} | {active.get(var, '-')} |" for var in variables]
@@ -206,13 +209,12 @@ def check_feature_groups(
 
 # -------------------------------------------------------------------------------- blueprint
 def blueprint(feature_groups: Mapping[str, Sequence[str]], variables: Sequence[str]) -> Any:
-    """The viewer's default layout (an ``rrb.Blueprint``): scene and status | feature panels
-    (one per group of ``feature_groups``) and per-variable probabilities (a tab per control
-    variable of ``variables``) | active MPs and events. Every plot has few series (rerun's
-    legend sits in its bottom-right corner).
-    """
-    import rerun.blueprint as rrb
+    """The viewer's default layout (an ``rrb.Blueprint``).
 
+    Scene and status | feature panels (one per group of ``feature_groups``) and per-variable
+    probabilities (a tab per control variable of ``variables``) | active MPs and events. Every
+    plot has few series (rerun's legend sits in its bottom-right corner).
+    """
     unit = rrb.ScalarAxis(range=(0.0, 1.0))
     feature_views = [
         rrb.TimeSeriesView(
@@ -303,9 +305,10 @@ def _wxyz_to_xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
 
 
 def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
-    """Geom ``index`` of the recorder's ``geoms`` validated and completed with its defaults:
-    ``body``, ``name``, ``type``, ``size`` (list), ``pos`` (3,) [m], ``quat`` (4,) wxyz and
-    ``rgba`` (4,) uint8.
+    """Geom ``index`` of the recorder's ``geoms``, validated and completed with its defaults.
+
+    The result has ``body``, ``name``, ``type``, ``size`` (list), ``pos`` (3,) [m], ``quat``
+    (4,) wxyz and ``rgba`` (4,) uint8.
     """
     where = f"geoms[{index}]"
     kind = geom.get("type")
@@ -334,11 +337,10 @@ def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:
-    """The static ``Transform3D`` (pose in the body frame) and shape of a :func:`parse_geom`
-    geom, logged at ``world/<body>/<name>``.
-    """
-    import rerun as rr
+    """The static ``Transform3D`` (pose in the body frame) and shape of a parsed geom.
 
+    Both are logged at ``world/<body>/<name>`` for a geom of :func:`parse_geom`.
+    """
     size, color = geom["size"], geom["rgba"]
     kind = geom["type"]
     if kind == "box":
@@ -365,8 +367,10 @@ def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:
 def pose_rows(
     body_poses: Mapping[str, tuple[Any, Any]],
 ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """Body names, positions (B, 3) [m] and xyzw quaternions (B, 4) of wxyz ``body_poses``;
-    a malformed pose raises :class:`DataError` naming its body.
+    """Body names, positions (B, 3) [m] and xyzw quaternions (B, 4) of wxyz ``body_poses``.
+
+    Raises:
+        DataError: a malformed pose, naming its body.
     """
     bodies = tuple(str(body) for body in body_poses)
     try:

@@ -1,18 +1,22 @@
-"""Read episode recordings back offline: :func:`read_recording` (events, outcome, metadata),
-:func:`read_views` (the blueprint's views) and :func:`format_summary`.
+"""Read episode recordings back offline: summaries, views, text.
 
-``rerun`` is imported inside the functions, so importing this module is cheap.
+:func:`read_recording` (events, outcome, metadata), :func:`read_views` (the blueprint's
+views) and :func:`format_summary`.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import uuid
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple
+
+from rerun.chunk import RrdReader
+from rerun.error_utils import RerunWarning
 
 from cpmp.errors import CpmpFileError
 from cpmp.recordings.layout import (
@@ -25,14 +29,12 @@ from cpmp.recordings.layout import (
 )
 from cpmp.records import SequencerNote, TransitionEvent
 
-if TYPE_CHECKING:
-    import os
-
 
 class ViewInfo(NamedTuple):
-    """One view of a recording's blueprint: ``kind`` (rerun's view class, e.g. ``TimeSeries``,
-    ``TextLog``, ``StateTimeline``), display ``name``, ``origin`` entity path and the
-    ``contents`` query lines (``+ features/box_x``).
+    """One view of a recording's blueprint.
+
+    ``kind`` (rerun's view class, e.g. ``TimeSeries``, ``TextLog``, ``StateTimeline``), display
+    ``name``, ``origin`` entity path and the ``contents`` query lines (``+ features/box_x``).
     """
 
     kind: str
@@ -66,8 +68,9 @@ class RecordingSummary:
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict of the fields, each transition and note as a dict with named fields
-        (transitions without ``state``, which a recording does not hold).
+        """JSON-able dict of the fields, each transition and note as a dict with named fields.
+
+        Transitions have no ``state``: a recording does not hold it.
         """
         data = asdict(self)
         data["transitions"] = [
@@ -94,8 +97,6 @@ def _times_seconds(batch: Any) -> list[float] | None:
 
 def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
     """``(path, RrdReader)``; :class:`~cpmp.errors.CpmpFileError` for a missing path."""
-    from rerun.chunk import RrdReader
-
     file = Path(path)
     if not file.exists():
         raise CpmpFileError(f"recording {file} does not exist")
@@ -110,10 +111,9 @@ def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
 def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     """Read an ``.rrd`` file back offline and summarise it (see :class:`RecordingSummary`).
 
-    Raises :class:`~cpmp.errors.CpmpFileError` if ``path`` is missing or not a rerun recording.
+    Raises:
+        CpmpFileError: ``path`` is missing or not a rerun recording.
     """
-    from rerun.error_utils import RerunWarning
-
     try:
         with warnings.catch_warnings():
             # A truncated file warns about its missing footer before failing: the error says it.
@@ -237,13 +237,13 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
 
 
 def read_views(path: str | os.PathLike[str]) -> list[ViewInfo]:
-    """The views of the default blueprint stored in an ``.rrd`` file, in layout order (depth
-    first from the root container); ``[]`` if the file has no blueprint.
+    """The views of the default blueprint stored in an ``.rrd`` file, in layout order.
 
-    Raises :class:`~cpmp.errors.CpmpFileError` if ``path`` is missing or not a rerun recording.
+    Depth first from the root container; ``[]`` if the file has no blueprint.
+
+    Raises:
+        CpmpFileError: ``path`` is missing or not a rerun recording.
     """
-    from rerun.error_utils import RerunWarning
-
     views: dict[str, dict[str, Any]] = {}
     containers: dict[str, list[str]] = {}
     root = None

@@ -1,22 +1,22 @@
-"""Write an episode to a rerun ``.rrd`` file: :class:`EpisodeRecorder` (layout in
-:mod:`cpmp.recordings`; paths, texts, panels and blueprint in
-:mod:`~cpmp.recordings.layout`; buffered columns in
-:mod:`~cpmp.recordings.columns`).
+"""Write an episode to a rerun ``.rrd`` file: :class:`EpisodeRecorder`.
 
-``rerun`` is imported inside the functions and classes, so importing this module is cheap.
+The layout is in :mod:`cpmp.recordings`; paths, texts, panels and blueprint in
+:mod:`~cpmp.recordings.layout`; buffered columns in :mod:`~cpmp.recordings.columns`.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from cpmp.errors import ConfigError, CpmpError, DataError
 from cpmp.io import atomic_path
@@ -40,9 +40,6 @@ from cpmp.recordings.layout import (
     transition_text,
 )
 from cpmp.sequencer.inputs import checked_time
-
-if TYPE_CHECKING:
-    import os
 
 
 class EpisodeRecorder:
@@ -87,8 +84,6 @@ class EpisodeRecorder:
         flush_every: int = 5000,
         feature_groups: Mapping[str, Sequence[str]] | None = None,
     ) -> None:
-        import rerun as rr
-
         self.path = Path(path)
         self.feature_names = [str(name) for name in feature_names]
         if len(set(self.feature_names)) != len(self.feature_names):
@@ -262,8 +257,9 @@ class EpisodeRecorder:
         probability: float,
         kind: str = "switch",
     ) -> None:
-        """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s]
-        (``kind``: ``switch`` or ``recovery``).
+        """Record that ``variable`` switched from MP ``source`` to ``target`` at ``t`` [s].
+
+        ``kind``: ``switch`` or ``recovery``.
         """
         self._check_open()
         t = checked_time(t)
@@ -288,8 +284,10 @@ class EpisodeRecorder:
         self._log_status(t)
 
     def log_note(self, t: float, kind: str, variable: str, text: str) -> None:
-        """Record a sequencer note at ``t`` [s]: a held transition, a stall recovery or a
-        non-finite φ (``kind``), about ``variable`` (may be empty), as readable ``text``.
+        """Record a sequencer note at ``t`` [s] about ``variable`` (may be empty).
+
+        The note is a held transition, a stall recovery or a non-finite φ (``kind``), as
+        readable ``text``.
         """
         self._check_open()
         t = checked_time(t)

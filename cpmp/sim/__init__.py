@@ -9,8 +9,9 @@ Modules: ``scene`` (MJCF model, boxes, strategy regions), ``kinematics`` (arm FK
 ``mps`` (the MP library), ``control`` (MPs to joint targets), ``features`` (the 33 features),
 ``simulation`` (one episode's world), ``demonstrator`` (the scripted demonstrator),
 ``collect`` (recording demonstrations, one box or many together), ``policies`` (replay and
-batching of policies), ``runner`` (closed-loop episodes and their outcomes), ``bench`` (speed
-benchmark). The options are :class:`~cpmp.config.task.TaskConfig`.
+batching of policies), ``runner`` (closed-loop episodes and their :data:`Outcome`). The options
+are :class:`~cpmp.config.task.TaskConfig`; the simulator's speed benchmark is
+:mod:`cpmp.benchmarks.sim_speed`.
 """
 
 from cpmp.config.task import TaskConfig
@@ -20,7 +21,7 @@ from cpmp.sim.collect import record_demonstration, record_demonstrations
 from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.mps import VARIABLES, mp_names
 from cpmp.sim.policies import PolicyList
-from cpmp.sim.runner import OUTCOMES, EpisodeResult, run_episode, run_episodes
+from cpmp.sim.runner import OUTCOMES, EpisodeResult, Outcome, run_episode, run_episodes
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
 from cpmp.sim.simulation import Simulation
 
@@ -31,6 +32,7 @@ __all__ = [
     "BatchedPolicy",
     "Box",
     "EpisodeResult",
+    "Outcome",
     "PolicyList",
     "ScriptedDemonstrator",
     "Simulation",

@@ -1,6 +1,8 @@
-"""Running policies closed-loop on the simulator: one episode (:func:`run_episode`) or many
-boxes together (:func:`run_episodes`, one batched IK and one batched policy call per tick, the
-same results as one box at a time), and the checks that decide each episode's outcome.
+"""Running policies closed-loop on the simulator, and the checks that decide each outcome.
+
+One episode (:func:`run_episode`) or many boxes together (:func:`run_episodes`, one batched IK
+and one batched policy call per tick, the same results as one box at a time); each episode
+ends with an :data:`Outcome`.
 """
 
 from __future__ import annotations
@@ -8,7 +10,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -20,8 +22,18 @@ from cpmp.sim.collect import record_demonstrations
 from cpmp.sim.policies import PolicyList, as_batched, per_episode
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import Simulation, prepare_steps
+from cpmp.worlds.outcomes import Outcome as WorldOutcome
 
-OUTCOMES: tuple[str, ...] = ("complete", "wrong_start", "incomplete", "diverged")
+Outcome = Literal[WorldOutcome, "diverged"]
+"""How a closed-loop episode in the simulator ended: a world's outcome, or ``diverged``.
+
+``complete``: box in the container, hands home, MP sequences equal to the demonstrator's;
+``wrong_start``: the initial MPs differ from the correct strategy's; ``incomplete``: a wrong
+transition, a deadlock or a time-out; ``diverged``: NaN or unstable physics (counted as
+incomplete in Table I).
+"""
+OUTCOMES: tuple[Outcome, ...] = get_args(Outcome)
+"""Every :data:`Outcome`."""
 STILL_SPEED = 0.02
 """Joint speed [rad/s] below which the robot counts as standing still (deadlock detection)."""
 
@@ -30,15 +42,13 @@ STILL_SPEED = 0.02
 class EpisodeResult:
     """Outcome of :func:`run_episode`.
 
-    ``outcome``: "complete" (box in container, hands home, MP sequences equal the
-    demonstrator's), "wrong_start" (initial MPs differ from the correct strategy's),
-    "incomplete" (wrong transition, deadlock or time-out) or "diverged" (NaN/unstable physics).
+    ``outcome``: how it ended (:data:`Outcome`), ``reason`` says why in words.
     ``transitions``: every MP switch the policy made, in order; the runner sees only the active
     MPs, so each has ``probability`` nan and ``kind`` ``switch``, and ``state`` is the feature
     vector (d,) the policy switched on.
     """
 
-    outcome: str
+    outcome: Outcome
     reason: str
     sequences: dict[str, list[str]]
     transitions: list[TransitionEvent]
@@ -97,8 +107,10 @@ def run_episodes(
     on_tick: Sequence[Callable[[TickInfo], None] | None] | None = None,
     on_result: Callable[[int, EpisodeResult], None] | None = None,
 ) -> list[EpisodeResult]:
-    """Execute one closed-loop episode per box, all together; the results are those of
-    :func:`run_episode` on each box alone (same outcomes, transitions and times).
+    """Execute one closed-loop episode per box, all together.
+
+    The results are those of :func:`run_episode` on each box alone (same outcomes,
+    transitions and times).
 
     Every control tick: one batched pose/Jacobian and IK call over the running episodes'
     robots, MuJoCo stepping each episode's own model, and one batched policy call ``(N, d)``
@@ -168,8 +180,9 @@ def run_episodes(
 
 
 class _Rollout:
-    """One episode of :func:`run_episodes`: its simulation, the MP sequences so far and the
-    checks that end it (the closed loop of :func:`run_episode`, one tick at a time).
+    """One episode of :func:`run_episodes`: its simulation, MP sequences and ending checks.
+
+    The closed loop of :func:`run_episode`, one tick at a time.
     """
 
     def __init__(
@@ -197,7 +210,7 @@ class _Rollout:
         self.policy_time = 0.0
         self.result: EpisodeResult | None = None
 
-    def finish(self, outcome: str, reason: str) -> None:
+    def finish(self, outcome: Outcome, reason: str) -> None:
         """End the episode with ``outcome`` (the state of the simulation now)."""
         sim = self.sim
         ok = outcome != "diverged"
@@ -250,9 +263,7 @@ class _Rollout:
         return False
 
     def after_tick(self, t: float, active: Mapping[str, str]) -> None:
-        """Record the policy's MPs at time ``t`` [s]; end the episode on a wrong transition,
-        on completion or on a deadlock.
-        """
+        """Record the policy's MPs at time ``t`` [s]; end on a wrong transition, done, deadlock."""
         sim, want, old = self.sim, self.want, self.active
         new = _normalise(active, sim.variables)
         for variable in sim.variables:

@@ -6,6 +6,9 @@ from __future__ import annotations
 import pytest
 
 from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, benchmark, time_rollouts
+from cpmp.errors import ConfigError
+from cpmp.sim import Box
+from cpmp.sim.policies import ReplayPolicy
 
 
 def _check_episode(report, cfg):
@@ -44,8 +47,6 @@ def test_learned_policy_benchmark_reports_the_full_loop(cfg, boxes):
 def test_batched_rollouts_time_the_same_episodes(cfg, demos):
     """Replaying each box's demonstration, one at a time and batched: the same outcomes and
     simulated time, and each report's shares and real-time factor add up."""
-    from cpmp.sim import Box
-    from cpmp.sim.policies import ReplayPolicy
 
     order = ["right", "left"]
     expected = [demos[s] for s in order]
@@ -67,8 +68,6 @@ def test_batched_rollouts_time_the_same_episodes(cfg, demos):
 
 
 def test_rollouts_need_one_expected_demo_per_box(cfg, demos, boxes):
-    from cpmp.errors import ConfigError
-    from cpmp.sim.policies import ReplayPolicy
 
     with pytest.raises(ConfigError, match="one expected demonstration per box: 1 boxes, 0"):
         time_rollouts([boxes["right"]], [ReplayPolicy(demos["right"])], cfg, [])

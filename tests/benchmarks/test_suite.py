@@ -22,6 +22,9 @@ from cpmp.benchmarks.fit import (
 from cpmp.benchmarks.sequencer import bench_sequencer, bench_ticks
 from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.errors import ConfigError
+from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demonstrations
+from cpmp.worlds.two_point import evaluate, make_demonstrations
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -63,8 +66,6 @@ def test_bench_synthetic_counts_the_episodes_of_each_task(capsys):
     """Each (task, D, seed, config) row counts the outcomes of ``klr`` fitted on D demos of that
     task and run on held-out episodes seeded ``1000 + seed``: the same counts as the task's
     own ``evaluate`` on a fit made here."""
-    from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
-    from cpmp.worlds.two_point import evaluate, make_demonstrations
 
     args = ["--seeds", "1", "--sizes", "3", "--episodes", "4", "--configs", "defaults", "paper"]
     assert bench_synthetic_main(args) == 0
@@ -106,7 +107,6 @@ def test_sklearn_peer_reaches_klrs_loss(fitted_klr, train_demos):
 
 
 def test_node_kernels_needs_a_kernel_predictor(train_demos):
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     seq = ConcurrentSequencer.fit(train_demos, "mlp", seed=0, logger=None, epochs=2)
     with pytest.raises(ConfigError, match="has no kernel"):
@@ -114,16 +114,13 @@ def test_node_kernels_needs_a_kernel_predictor(train_demos):
 
 
 def test_padding_features_keeps_the_supports():
-    from cpmp.worlds.relay.demonstrator import make_demonstrations
-
-    demos = make_demonstrations(3, seed=0)
+    demos = relay_demonstrations(3, seed=0)
     padded = pad_features(demos, 10)
     assert padded[0].n_features == 10 and padded[0].feature_names[6:] == [
         f"pad_{j}" for j in range(4)
     ]
     np.testing.assert_array_equal(padded[0].features[:, :6], demos[0].features)
     assert not padded[0].features[:, 6:].any()
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     counts = [
         ConcurrentSequencer.fit(d, "klr", seed=0, logger=None).fit_summary["n_support_total"]

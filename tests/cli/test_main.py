@@ -16,15 +16,18 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
+from cpmp.cli import main as cli
 from cpmp.cli.main import COMMANDS, CONF_DIR, _Task, check_command
+from cpmp.compare import job as compare_job
 from cpmp.data.datafile import save_demonstrations
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.experiment import jobs as experiment_jobs
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-HEAVY = ("torch", "lightning", "mujoco", "pytorch_kinematics", "rerun", "matplotlib")
+HEAVY = ("torch", "lightning", "mujoco", "pytorch_kinematics", "rerun", "matplotlib", "sklearn")
 
 
 def console_script(name: str) -> str:
@@ -57,6 +60,7 @@ LIGHT_CASES = [
     ("collect", ["task=defalt"], ["task=defalt", "did you mean task=default"]),
     ("aggregate", ["hydra/launcher=nope"], ["hydra/launcher=nope", "joblib"]),
     ("progress_field", ["predictor=svm"], ["predictor=svm", "klr_sparse"]),
+    ("compare", ["experiment=compare_tny"], ["experiment=compare_tny", "compare_tiny"]),
     ("experiment", ["-m", "launcher=slrum"], ["launcher=slrum", "did you mean launcher=slurm"]),
     # an unknown key
     ("experiment", ["predictr=klr"], ["predictr=klr", "did you mean 'predictor'", "+predictr"]),
@@ -66,6 +70,8 @@ LIGHT_CASES = [
     ("collect", ["n_demo=3"], ["n_demo=3", "'n_demos'"]),
     ("aggregate", ["sweepdir=x"], ["sweepdir=x", "'sweep_dir'"]),
     ("progress_field", ["n_trajectory=3"], ["n_trajectory=3", "'n_trajectories'"]),
+    ("compare", ["compare.predictor=[klr]"], ["compare.predictor", "'compare.predictors'"]),
+    ("compare", ["compare.sweep.support=[1]"], ["compare.sweep.support", "support_scale"]),
     ("experiment", ["+predictor.gamma=2"], ["+predictor.gamma=2", "predictor.gamma=2"]),
     # a value of the wrong type, an override Hydra cannot parse, an unresolvable interpolation
     ("experiment", ["experiment.n_boxes=abc"], ["experiment.n_boxes='abc'", "integer"]),
@@ -84,6 +90,14 @@ LIGHT_CASES = [
     ("collect", ["n_demos=0"], ["n_demos=0", ">= 1"]),
     ("aggregate", ["hydra.job.chdir=abc"], ["hydra.job.chdir=abc", "bool"]),
     ("progress_field", ["seed=1.5"], ["seed=1.5", "integer"]),
+    ("compare", ["compare.sweep.support_scale=[1,x]"], ["support_scale", "'x'", "number"]),
+    ("compare", ["experiment.n_boxes=abc"], ["experiment.n_boxes='abc'", "integer"]),
+    # ... also through the alias (cpmp-experiment experiment=compare_tiny)
+    (
+        "experiment",
+        ["experiment=compare_tiny", "compare.baseline=[goal_nearest]"],
+        ["compare.baseline", "'compare.baselines'"],
+    ),
     # a missing file or directory, an unset required path
     ("experiment", ["--config-dir", "nope"], ["--config-dir nope"]),
     ("train", [], ["data.path is required"]),
@@ -93,6 +107,7 @@ LIGHT_CASES = [
     ("collect", ["--config-dir", "nope"], ["--config-dir nope"]),
     ("aggregate", ["sweep_dir=nope"], ["sweep_dir=nope", "no such directory"]),
     ("progress_field", ["--config-dir", "nope"], ["--config-dir nope"]),
+    ("compare", ["--config-dir", "nope"], ["--config-dir nope"]),
     # a sweep is checked job by job before the first one starts
     (
         "experiment",
@@ -139,6 +154,8 @@ def test_light_checks_import_no_heavy_module(tmp_path, some_file):
         ("train", [f"data.path={some_file}", "seed=3"]),
         ("evaluate", [f"checkpoint={some_file}", f"data.path={some_file}"]),
         ("aggregate", [f"sweep_dir={tmp_path}"]),
+        ("compare", ["experiment=compare_tiny", "compare.predictors=[klr,mlp]"]),
+        ("experiment", ["experiment=compare_tiny"]),
     ]
     code = f"""
 import json, sys
@@ -217,6 +234,13 @@ DEEP_CASES = [
         ["-m", "experiment.n_boxes=2,-1"],
         ["experiment.n_boxes must be >= 1, got -1", "job experiment.n_boxes=-1"],
     ),
+    ("compare", ["sequencer=goal_nearest"], ["job's sequencer", "learned one"]),
+    ("compare", ["compare.sweep.train_sizes=[4]"], ["compare.sweep.train_sizes", "[3, 6, 9]"]),
+    (
+        "experiment",
+        ["experiment=compare_tiny", "compare.sweep.support_scale=[0]"],
+        ["compare.sweep.support_scale", "numbers > 0"],
+    ),
 ]
 
 
@@ -279,8 +303,6 @@ def test_console_scripts_run_their_command(monkeypatch):
     """``cpmp-<name>`` of pyproject's [project.scripts] is ``cli.<name>_main``, which runs
     Hydra command ``name`` (and says so in its docstring)."""
     import tomllib
-
-    from cpmp.cli import main as cli
 
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     ran: list[str] = []
@@ -361,3 +383,28 @@ def test_evaluate_of_known_mps_reports_none(tmp_path, fitted_klr, test_demos, ca
     assert out["unknown_mps"] == []
     assert not [r for r in caplog.records if r.levelno == logging.WARNING]
     assert "does not know" not in (tmp_path / "evaluation.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("argv", "ran"),
+    [
+        (["experiment=compare_tiny"], "compare"),
+        (["experiment=tiny"], "experiment"),
+    ],
+)
+def test_experiment_compare_is_an_alias_of_the_compare_command(argv, ran, monkeypatch, tmp_path):
+    """``cpmp-experiment experiment=compare_tiny`` runs the comparison's job (the command line
+    dispatches it; the main job itself knows no comparison), any other experiment the main
+    job."""
+    calls: list[str] = []
+    monkeypatch.setattr(compare_job, "run_compare", lambda cfg, d: calls.append("compare"))
+    monkeypatch.setattr(
+        experiment_jobs, "run_experiment", lambda cfg, d: calls.append("experiment")
+    )
+    (job,) = check_command("experiment", argv)
+    COMMANDS["experiment"].check(job.cfg)
+    COMMANDS["experiment"].job(job.cfg, tmp_path)
+    assert calls == [ran]
+    (own,) = check_command("compare", argv)
+    if ran == "compare":  # the alias composes the same job as the command itself
+        assert own.cfg.compare == job.cfg.compare and own.cfg.experiment == job.cfg.experiment

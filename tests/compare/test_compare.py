@@ -1,6 +1,6 @@
-"""``experiment=compare``: its tiny form end to end through ``scripts/experiment.py`` (every
-field in every row, the figures, the table), the same numbers from a serial in-process run,
-the choice of rows, the option errors, and ``sequencer=goal_nearest`` in the training stage."""
+"""``cpmp-compare``: its tiny form end to end through ``scripts/compare.py`` (every field in every
+row, the figures, the table), the same numbers from a serial in-process run, the choice of rows,
+the option errors, and ``sequencer=goal_nearest`` in the training stage."""
 
 from __future__ import annotations
 
@@ -13,14 +13,17 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
-from cpmp.compare.job import NO_PREDICTOR, OUTPUT_FILES, group_options, row_specs
+from cpmp.compare.job import OUTPUT_FILES, run_compare
 from cpmp.compare.report import ROW_FIELDS
-from cpmp.compare.settings import CompareSettings
+from cpmp.compare.rows import NO_PREDICTOR, fit_jobs, group_options, row_specs
+from cpmp.compare.settings import CompareJob
+from cpmp.data.datafile import load_demonstrations
 from cpmp.errors import ConfigError
-from cpmp.experiment.config import to_dict, validate_common
+from cpmp.evaluation.offline import activation_progress, progress_errors
+from cpmp.experiment.config import validate_common
 from cpmp.experiment.fitting import fit_sequencer
-from cpmp.experiment.jobs import run_experiment
-from cpmp.experiment.settings import ExperimentSettings
+from cpmp.experiment.settings import to_dict
+from cpmp.experiment.strategies import balanced_subset
 from cpmp.predictors import PREDICTORS
 from cpmp.sim import OUTCOMES
 from cpmp.worlds.two_point import make_demonstrations
@@ -34,21 +37,21 @@ SAME_IN_EVERY_RUN = ("W", "I", "C", "diverged", "mae", "supports", "per_seed", "
 """Row fields that must not depend on the worker count (the others are timings)."""
 
 
-def compose_cfg(overrides: list[str]) -> Any:
+def compose_cfg(overrides: list[str], config: str = "compare") -> Any:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("experiment", overrides=overrides)
+        return compose(config, overrides=overrides)
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory, script_in_background):
-    """``experiment=compare_tiny`` as ``scripts/experiment.py`` (two worker processes) and, at
+    """``experiment=compare_tiny`` as ``scripts/compare.py`` (two worker processes) and, at
     the same time, a serial in-process run of three of its rows (two fits: klr's default is
     the sweep's 2.0). Yields both run dirs and the script's stdout."""
     base = tmp_path_factory.mktemp("compare")
     script, serial = base / "script", base / "serial"
     serial.mkdir()
     argv = ["experiment=compare_tiny", f"hydra.run.dir={script}"]
-    with script_in_background(base, "experiment.py", *argv, timeout=600) as run:
+    with script_in_background(base, "compare.py", *argv, timeout=600) as run:
         cfg = compose_cfg(
             [
                 "experiment=compare_tiny",
@@ -57,7 +60,7 @@ def tiny(tmp_path_factory, script_in_background):
                 "compare.sweep.support_scale=[2.0]",
             ]
         )
-        run_experiment(cfg, serial)
+        run_compare(cfg, serial)
     return script, serial, run.stdout.read_text()
 
 
@@ -128,17 +131,13 @@ def test_row_mae_is_the_fitted_models_error_on_the_held_out_demos(tiny):
     """The ``klr`` row's MAE is that of ``klr`` fitted here on the balanced D = 3 subset of the
     run's own training split and scored on its test split (both read back from
     ``seed_0/demos.h5``): the row fits on the right demos and scores on the held-out ones."""
-    from cpmp.data.datafile import load_demonstrations
-    from cpmp.evaluation.offline import activation_progress, progress_errors
-    from cpmp.experiment.strategies import balanced_subset
-
     script, _, _ = tiny
     rows = json.loads((script / "compare.json").read_text())
     (row,) = [r for r in rows if r["group"] == "predictors" and r["predictor"] == "klr"]
     path = script / "seed_0" / "demos.h5"
     train, test = (load_demonstrations(path, split=s) for s in ("train", "test"))
     cfg = compose_cfg(["experiment=compare_tiny"])
-    trainer = {**to_dict(cfg.trainer), "logger": None, "progress_bar": False}
+    trainer = {**to_dict(cfg.trainer), "progress_bar": False}
     klr = group_options("predictor")["klr"]
     seq = fit_sequencer(balanced_subset(train, 3), klr, cfg.sequencer, trainer, seed=0)
     expected = progress_errors(activation_progress(seq, test))["mae"]
@@ -150,10 +149,9 @@ def test_row_mae_is_the_fitted_models_error_on_the_held_out_demos(tiny):
 
 
 def test_all_compares_every_predictor_option_and_registered_kind():
-    cfg = compose_cfg(["experiment=compare"])
-    settings = ExperimentSettings.from_cfg(cfg.experiment)
-    compare = CompareSettings.from_cfg(cfg.compare, settings.train_sizes)
-    specs = row_specs(cfg, settings, compare)
+    cfg = compose_cfg([])  # conf/compare.yaml: experiment=compare
+    job = CompareJob.from_cfg(cfg)
+    specs = row_specs(cfg, job.settings, job.compare)
     options = group_options("predictor")
     rows = [s for s in specs if s.group == "predictors"]
     assert {s.predictor for s in rows} == set(options)
@@ -165,6 +163,13 @@ def test_all_compares_every_predictor_option_and_registered_kind():
     sweep = [s for s in specs if s.group == "support_sweep"]
     assert len(sweep) >= 5 and len({s.support_scale for s in sweep}) == len(sweep)
     assert all(s.train_sizes == (9,) and s.predictor_cfg["kind"] == "klr" for s in sweep)
+    # every fit once: the sweep's point at klr's own support_scale shares klr's fit
+    jobs = fit_jobs(specs, job.settings.seeds)
+    keys = [s.fit_key(seed, d) for s in specs for seed in job.settings.seeds for d in s.train_sizes]
+    assert list(jobs) == list(dict.fromkeys(keys)) and len(jobs) < len(keys)
+    for key, fit in jobs.items():
+        assert (fit.seed, fit.d) == (json.loads(key)["seed"], json.loads(key)["D"])
+        assert fit.spec.fit_key(fit.seed, fit.d) == key
 
 
 @pytest.mark.parametrize(
@@ -180,24 +185,24 @@ def test_all_compares_every_predictor_option_and_registered_kind():
     ],
 )
 def test_bad_compare_options_fail_before_any_work(overrides, message):
-    cfg = compose_cfg(["experiment=compare", *overrides])
-    settings = ExperimentSettings.from_cfg(cfg.experiment)
+    cfg = compose_cfg(overrides)
     with pytest.raises(ConfigError, match=message):
-        row_specs(cfg, settings, CompareSettings.from_cfg(cfg.compare, settings.train_sizes))
+        job = CompareJob.from_cfg(cfg)
+        row_specs(cfg, job.settings, job.compare)
 
 
 def test_sequencer_goal_nearest_is_fitted_by_the_training_stage():
-    cfg = compose_cfg(["sequencer=goal_nearest", "sequencer.hold_time=0.2"])
+    cfg = compose_cfg(["sequencer=goal_nearest", "sequencer.hold_time=0.2"], "experiment")
     validate_common(cfg)
     demos = make_demonstrations(3, seed=0)
     seq = fit_sequencer(demos, cfg.predictor, cfg.sequencer, cfg.trainer, seed=0)
     assert isinstance(seq, GoalNearestSequencer)
     assert seq.config.hold_time == 0.2
-    bad = compose_cfg(["sequencer=goal_nearest", "sequencer.kind=other"])
+    bad = compose_cfg(["sequencer=goal_nearest", "sequencer.kind=other"], "experiment")
     with pytest.raises(ConfigError, match=r"sequencer\.kind must be"):
         validate_common(bad)
     with pytest.raises(ConfigError, match=r"sequencer\.kind must be"):
         fit_sequencer(demos, bad.predictor, bad.sequencer, bad.trainer, seed=0)
-    typo = compose_cfg(["sequencer=goal_nearest", "+sequencer.hold=0.2"])
+    typo = compose_cfg(["sequencer=goal_nearest", "+sequencer.hold=0.2"], "experiment")
     with pytest.raises(ConfigError, match="valid options: speed_threshold"):
         validate_common(typo)

@@ -4,6 +4,7 @@ fail fast with a clear message, before any demonstration is collected."""
 from __future__ import annotations
 
 import dataclasses
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -12,8 +13,10 @@ import pytest
 import torch
 import yaml
 from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
+from cpmp.benchmarks.sim_speed import LEARNED_POLICY
 from cpmp.compare.settings import CompareSettings, SweepSettings
 from cpmp.config import (
     ACTIVATIONS,
@@ -25,6 +28,7 @@ from cpmp.config import (
     SequencerConfig,
     TaskConfig,
     TrainerConfig,
+    predictor_config,
 )
 from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
@@ -36,9 +40,13 @@ from cpmp.experiment.config import (
     to_dict,
     validate_common,
 )
+from cpmp.experiment.fitting import fit_sequencer
 from cpmp.experiment.jobs import run_experiment
 from cpmp.experiment.settings import ExperimentSettings
 from cpmp.predictors import PREDICTORS
+from cpmp.predictors.mlp import _ACTIVATIONS
+from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+from cpmp.worlds.two_point import make_demonstrations
 
 # One thread: with a second busy process on a 2-core machine, torch's default two threads
 # slow LBFGS fits down ~15x (spinning threads), see the fits below.
@@ -91,8 +99,6 @@ def test_experiment_options_compose_and_validate(name):
 
 @pytest.mark.parametrize("group", ["sequencer", "trainer", "task"])
 def test_other_groups_compose_and_validate(group):
-    from cpmp.sim import TaskConfig
-
     for name in options(group):
         cfg = compose_cfg("experiment", [f"{group}={name}"])
         kind, _ = validate_common(cfg)
@@ -113,8 +119,6 @@ def test_sequencer_configs_mean_what_they_say():
 def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
     """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
     ``fit(demos)`` with no options is the main job's default configuration."""
-    from cpmp.config import predictor_config
-    from cpmp.sequencer.sequencer import PAPER_OPTIONS
 
     seq_keys = set(SequencerConfig.__dataclass_fields__)
 
@@ -201,8 +205,6 @@ def test_other_entry_configs_compose(config_name, overrides):
 
 
 def test_task_config_round_trips_through_the_composed_task():
-    from cpmp.sim import TaskConfig
-
     composed = to_dict(compose_cfg("experiment").task)
     task = TaskConfig.from_dict(composed)
     assert task == TaskConfig()
@@ -303,7 +305,6 @@ def test_no_config_file_restates_a_default(group):
 
 
 def test_every_predictor_kind_has_its_options_class():
-    from cpmp.predictors.mlp import _ACTIVATIONS
 
     assert list(PREDICTOR_CONFIGS) == list(PREDICTORS)
     for kind, cls in PREDICTORS.items():
@@ -330,14 +331,12 @@ def test_the_schema_imports_neither_torch_nor_mujoco():
     ],
 )
 def test_the_schema_rejects_a_value_of_the_wrong_type(override, key):
-    from hydra.errors import ConfigCompositionException
 
     with pytest.raises(ConfigCompositionException, match=key.replace(".", r"\.")):
         compose_cfg("experiment", [override])
 
 
 def test_learned_policy_of_the_simulator_benchmark_is_the_main_jobs_default():
-    from cpmp.benchmarks.sim_speed import LEARNED_POLICY
 
     main = job_fit_settings(compose_cfg("experiment")).fit
     assert FitConfig.from_options(**LEARNED_POLICY) == main
@@ -366,7 +365,6 @@ def test_fit_settings_are_converted_once_into_typed_configs():
 
 
 def test_experiment_job_is_typed_and_picklable():
-    import pickle
 
     job = experiment_job(compose_cfg("experiment", ["experiment=tiny"]))
     assert job.settings.name == "tiny" and job.task == TaskConfig()
@@ -375,8 +373,6 @@ def test_experiment_job_is_typed_and_picklable():
 
 
 def test_keyword_fit_is_the_typed_fit(tmp_path):
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)
     by_keyword = ConcurrentSequencer.fit(
@@ -505,8 +501,6 @@ def test_evaluate_without_checkpoint_or_with_missing_one(tmp_path):
 
 
 def test_evaluate_with_missing_demo_file(tmp_path):
-    from cpmp.experiment.fitting import fit_sequencer
-    from cpmp.worlds.two_point import make_demonstrations
 
     cfg = compose_cfg("train", ["logger=none"])
     seq = fit_sequencer(make_demonstrations(2, seed=0), cfg.predictor, None, cfg.trainer)
@@ -541,8 +535,6 @@ def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path, run_script)
 def test_fit_sequencer_with_the_default_trainer_config(predictor):
     """The trainer's ``lr`` (null by default) and an Adam predictor's own ``lr`` must not clash;
     a trainer ``lr`` that is set overrides the predictor's."""
-    from cpmp.experiment.fitting import fit_sequencer
-    from cpmp.worlds.two_point import make_demonstrations
 
     demos = make_demonstrations(2, seed=0)
     overrides = [f"predictor={predictor}", "logger=none", "trainer.max_epochs=2"]

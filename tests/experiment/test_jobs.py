@@ -5,6 +5,8 @@ own HDF5 file (no simulator)."""
 from __future__ import annotations
 
 import json
+import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -13,11 +15,19 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from cpmp.cli.main import inspect_rrd_main
+from cpmp.cli.main import check_command, inspect_rrd_main
 from cpmp.data.datafile import load_demonstrations
+from cpmp.errors import ConfigError, DataError
+from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
 from cpmp.experiment.jobs import run_experiment
+from cpmp.experiment.settings import ExperimentSettings
+from cpmp.experiment.strategies import strategy_map, strategy_signatures
+from cpmp.experiment.workers import default_workers
 from cpmp.recordings import read_recording
+from cpmp.recordings.demos import label_switches, record_demo_rrd
+from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sim import Box, TaskConfig
 from cpmp.worlds.two_point import make_demonstrations
 
 # One thread: a second busy process on a 2-core machine slows torch's default two threads
@@ -106,10 +116,6 @@ def test_report_counts_and_distances_are_those_of_the_episodes(tiny):
 def test_report_progress_and_strategy_map_are_those_of_the_checkpoint(tiny):
     """The saved model, evaluated again on the saved test split and over the strategy grid,
     gives the report's progress errors and strategy-map accuracy."""
-    from cpmp.evaluation.offline import activation_progress, progress_errors
-    from cpmp.experiment.strategies import strategy_map, strategy_signatures
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
-    from cpmp.sim import TaskConfig
 
     report = json.loads(tiny["report_path"].read_text())
     run = tiny["direct"] / "seed_0"
@@ -123,7 +129,7 @@ def test_report_progress_and_strategy_map_are_those_of_the_checkpoint(tiny):
     task = TaskConfig.from_dict(tiny["cfg"].task)
     grid = report["strategy_map"]["grid"]
     again = strategy_map(seq, task, strategy_signatures(train), grid)
-    assert report["strategy_map"]["accuracy"] == again["accuracy"]
+    assert report["strategy_map"]["accuracy"] == again.accuracy
 
 
 def test_report_markdown_has_papers_column(tiny):
@@ -141,7 +147,6 @@ def test_files_written(tiny):
     # tiny: 2 demos per strategy, 1 of each for training
     assert len(load_demonstrations(demos_h5, split="train")) == 3
     assert len(load_demonstrations(demos_h5, split="test")) == 3
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     seq = ConcurrentSequencer.load(run / "seed_0" / "model_D3.pt")
     assert set(seq.graphs) == set(load_demonstrations(demos_h5)[0].variables)
@@ -214,8 +219,6 @@ def test_script_prints_report_path_last_and_same_numbers(tiny):
 @pytest.fixture(scope="module")
 def demo_rrd(tiny) -> Path:
     """The first collected demonstration of the tiny run, replayed into an ``.rrd``."""
-    from cpmp.recordings.demos import record_demo_rrd
-    from cpmp.sim import Box, TaskConfig
 
     demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
     meta = demo.metadata
@@ -226,7 +229,6 @@ def demo_rrd(tiny) -> Path:
 
 
 def test_demo_replayed_into_rrd(tiny, demo_rrd):
-    from cpmp.recordings.demos import label_switches
 
     demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
     meta = demo.metadata
@@ -252,9 +254,6 @@ def test_demo_replayed_into_rrd(tiny, demo_rrd):
 
 
 def test_demo_rrd_rejects_non_simulator_demos(tiny, tmp_path):
-    from cpmp.errors import DataError
-    from cpmp.recordings.demos import record_demo_rrd
-    from cpmp.sim import Box, TaskConfig
 
     synthetic = make_demonstrations(1, seed=0)[0]
     task = TaskConfig.from_dict(tiny["cfg"].task)
@@ -303,8 +302,6 @@ def test_evaluate_checkpoint_on_test_split(checkpoint, demo_file, tmp_path):
 
 
 def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
-    from cpmp.evaluation.offline import activation_progress
-    from cpmp.sequencer.sequencer import ConcurrentSequencer
 
     again = train(demo_file, tmp_path / "again")
     test = load_demonstrations(demo_file, split="test")
@@ -320,8 +317,6 @@ def test_same_seed_gives_identical_predictions(checkpoint, demo_file, tmp_path):
 @pytest.mark.parametrize("bad", [0, -2, 1.5, True])
 def test_bad_worker_count_is_a_config_error(bad):
     """The settings refuse what the Hydra schema would let through from Python."""
-    from cpmp.errors import ConfigError
-    from cpmp.experiment.settings import ExperimentSettings
 
     with pytest.raises(ConfigError, match=r"experiment\.workers must be an integer >= 1"):
         ExperimentSettings.from_cfg({"workers": bad})
@@ -330,17 +325,12 @@ def test_bad_worker_count_is_a_config_error(bad):
 @pytest.mark.parametrize("bad", ["1.5", "true"])
 def test_bad_worker_override_is_refused_at_composition(bad):
     """Not an integer: the schema refuses the override before any job is built."""
-    from cpmp.cli.main import check_command
-    from cpmp.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"experiment\.workers"):
         check_command("experiment", ["experiment=tiny", f"experiment.workers={bad}"])
 
 
 def test_default_workers_is_cores_or_seeds():
-    import os
-
-    from cpmp.experiment.workers import default_workers
 
     cores = len(os.sched_getaffinity(0))
     assert default_workers(1) == 1
@@ -354,7 +344,6 @@ def test_two_workers_give_the_serial_report(tmp_path, caplog):
     """Two seeds of ``experiment=tiny`` run serially and on two worker processes: every
     number of the report and of every episode is the same; the workers' log lines reach
     this process, prefixed with their job."""
-    import logging
 
     overrides = ["experiment=tiny", "experiment.seeds=[0,1]", "experiment.record=none"]
     runs = {}

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from fake_reports import table_one_entry
 
+from cpmp.errors import CpmpFileError
 from cpmp.experiment.report import (
     PAPER_TABLE_I,
     jsonable,
@@ -120,7 +121,6 @@ def test_write_report_writes_valid_json_with_nulls(tmp_path):
 
 
 def test_write_json_into_missing_directory_fails_cleanly(tmp_path):
-    from cpmp.errors import CpmpFileError
 
     with pytest.raises(CpmpFileError, match="does not exist"):
         write_json(tmp_path / "missing" / "x.json", {"a": 1})

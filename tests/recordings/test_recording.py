@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from rerun.chunk import RrdReader
 
+import cpmp.recordings as recording
+from cpmp.cli.main import inspect_rrd_main as main
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError, DataError, UnknownMPError
 from cpmp.recordings import (
     MAX_SERIES_PER_PANEL,
@@ -17,6 +21,10 @@ from cpmp.recordings import (
     read_recording,
     read_views,
 )
+from cpmp.recordings import layout as recording_layout
+from cpmp.recordings import reader as recording_reader
+from cpmp.recordings import writer as recording_writer
+from cpmp.records import SequencerNote, TransitionEvent
 
 MP_NAMES = {"left_pos": ["approach", "grasp", "lift"], "right_fingers": ["open", "close"]}
 FEATURES = ["box_x", "box_z"]
@@ -71,7 +79,6 @@ def episode_file(tmp_path: Path) -> Path:
 
 def _column(path: Path, entity: str, column: str) -> tuple[list[float], list]:
     """(times [s], values) of one component column of one entity, sorted by time (static: 0)."""
-    from rerun.chunk import RrdReader
 
     rows = []
     for chunk in RrdReader(path).stream():
@@ -187,7 +194,6 @@ def test_truncated_file_raises(episode_file: Path, tmp_path: Path) -> None:
 
 
 def test_episodes_get_distinct_recording_ids(tmp_path: Path) -> None:
-    from rerun.chunk import RrdReader
 
     first = _write_episode(tmp_path / "first.rrd")
     second = _write_episode(tmp_path / "second.rrd")
@@ -249,7 +255,6 @@ def test_invalid_arguments(tmp_path: Path) -> None:
 
 
 def test_inspect_rrd_cli(episode_file: Path, tmp_path: Path, capsys) -> None:
-    from cpmp.cli.main import inspect_rrd_main as main
 
     assert main([str(episode_file)]) == 0
     out = capsys.readouterr().out
@@ -449,7 +454,6 @@ def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> No
 
 
 def _blueprint_column(path: Path, column: str) -> list:
-    from rerun.chunk import RrdReader
 
     reader = RrdReader(path)
     values = []
@@ -471,10 +475,6 @@ def test_text_logs_show_the_text_first(robot_file: Path) -> None:
 
 
 def test_public_names_importable_from_recording() -> None:
-    import cpmp.recordings as recording
-    from cpmp.recordings import layout as recording_layout
-    from cpmp.recordings import reader as recording_reader
-    from cpmp.recordings import writer as recording_writer
 
     assert recording.EpisodeRecorder is recording_writer.EpisodeRecorder
     assert recording.read_recording is recording_reader.read_recording
@@ -496,9 +496,6 @@ def test_summary_holds_the_sequencers_own_records(tmp_path: Path) -> None:
     """A transition and a note the sequencer made read back as the same core records (equal but
     for the time's nanosecond resolution; a recording keeps no feature vector, so ``state`` is
     None and ``to_dict`` leaves it out)."""
-    from dataclasses import replace
-
-    from cpmp.records import SequencerNote, TransitionEvent
 
     event = TransitionEvent(0.2, "left_pos", "approach", "grasp", 0.4, np.ones(2), "recovery")
     note = SequencerNote(0.1, "hold", "left_pos", "approach -> grasp held")

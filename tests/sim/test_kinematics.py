@@ -11,6 +11,7 @@ import torch
 from cpmp.sim import (
     Box,
     Simulation,
+    kinematics,
 )
 from cpmp.sim.scene import ARM_JOINTS, HANDS, scene_xml_text
 from cpmp.sim.simulation import shared_kinematics
@@ -54,7 +55,6 @@ def test_compiled_jacobian_equals_eager_pytorch_kinematics(cfg):
 
 
 def test_failed_compilation_falls_back_to_eager_with_a_warning(monkeypatch):
-    from cpmp.sim import kinematics
 
     def no_compiler(*args, **kwargs):
         raise RuntimeError("no C++ compiler")
