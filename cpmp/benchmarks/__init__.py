@@ -1,5 +1,6 @@
-"""Benchmarks (``scripts/bench*.py``): speed and quality measurements written as JSON, never
-timed unit tests.
+"""Benchmarks (``scripts/bench*.py``): speed and quality measurements written as JSON.
+
+They are measurements, never timed unit tests.
 
 ``suite`` runs the sections of ``scripts/bench.py`` (``fit``, ``sequencer``, ``sim``, the main
 job's stages) picked in ``settings``; ``report`` renders them; ``start`` scores the start
