@@ -2,8 +2,8 @@
 
 Recordings: ROS 2 bags, LeRobot datasets, MimicGen-style HDF5; config ``conf/import.yaml``.
 
-The command is checked like the other Hydra commands (:mod:`cpmp.cli.checks`): the config is
-composed with light imports, ``mapping`` and ``input`` must be set, the mapping file must exist
+The command is checked and run like the other Hydra commands (:mod:`cpmp.cli.main`): the config
+is composed with light imports, ``mapping`` and ``input`` must be set, the mapping file must exist
 and parse (:func:`cpmp.importers.load_mapping`), the split must be valid; a failed check prints
 one ``error:`` line and exits with status 2. The job then calls
 :func:`cpmp.importers.import_recordings`, prints :func:`cpmp.importers.summary_text` (also
@@ -13,22 +13,17 @@ failed import leaves no output file.
 
 from __future__ import annotations
 
-import logging
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cpmp.cli.checks import Command, check_command_line, check_jobs
-from cpmp.cli.compose import CONF_DIR
-from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+from cpmp.cli.checks import Command
+from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.importers import SplitSpec, import_recordings, load_mapping, summary_text
 from cpmp.io import atomic_write_text
 
 NAME = "import"
 """The config (``conf/import.yaml``) and job name (runs go to ``logs/import/<timestamp>/``)."""
-
-log = logging.getLogger("cpmp")
 
 
 def _inputs(cfg: Any) -> list[str]:
@@ -90,51 +85,7 @@ IMPORT_COMMAND = Command(
     required=("mapping", "input"),
     files=("mapping",),
 )
-"""The ``cpmp-import`` command, as :data:`cpmp.cli.main.COMMANDS` describes the others (this
-module does not import :mod:`cpmp.cli.main`, so ``COMMANDS`` can list it)."""
+"""The ``cpmp-import`` command, listed in :data:`cpmp.cli.main.COMMANDS` with the others."""
 
 
-def _fail(err: CpmpError) -> None:
-    """Print ``err`` as one ``error:`` line and exit with status 2."""
-    print(f"error: {' '.join(str(err).split())}", file=sys.stderr)
-    sys.exit(2)
-
-
-class _ImportTask:
-    """Hydra's task function of ``cpmp-import`` (picklable; its module names the job).
-
-    Runs :func:`import_job` and prints the written file's path last; a :class:`CpmpError`
-    is logged and ends the command with one ``error:`` line and status 2.
-    """
-
-    def __init__(self) -> None:
-        self.__module__ = NAME
-
-    def __call__(self, cfg: Any) -> Path:
-        from hydra.core.hydra_config import HydraConfig
-
-        try:
-            out = import_job(cfg, Path(HydraConfig.get().runtime.output_dir))
-        except CpmpError as err:
-            log.error("%s: %s", type(err).__name__, err)
-            _fail(err)
-        print(out)
-        return out
-
-
-def import_main() -> None:
-    """``cpmp-import``: check the command line, then run the import under ``hydra.main``.
-
-    Exits with status 2 and one ``error:`` line on a bad configuration or a failed import.
-    """
-    import hydra
-
-    try:
-        jobs = check_command_line(IMPORT_COMMAND, sys.argv[1:])
-        check_jobs(IMPORT_COMMAND, jobs)
-    except CpmpError as err:
-        _fail(err)
-    hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name=NAME)(_ImportTask())()
-
-
-__all__ = ["IMPORT_COMMAND", "check_import", "import_job", "import_main", "split_from_cfg"]
+__all__ = ["IMPORT_COMMAND", "check_import", "import_job", "split_from_cfg"]

@@ -44,6 +44,7 @@ from hydra.core.hydra_config import HydraConfig
 
 from cpmp.cli.checks import CheckedJob, Command, check_command_line, check_jobs
 from cpmp.cli.compose import CONF_DIR
+from cpmp.cli.import_job import IMPORT_COMMAND
 from cpmp.compare.settings import CompareJob
 from cpmp.config import TaskConfig
 from cpmp.errors import CpmpError, CpmpFileError
@@ -209,6 +210,7 @@ COMMANDS: dict[str, Command] = {
             _check_progress_field,
             positive=("n_trajectories",),
         ),
+        IMPORT_COMMAND,
     )
 }
 """Every Hydra command by name: its console script is ``cpmp-<name>`` (``_`` as ``-``), run by
@@ -295,6 +297,7 @@ evaluate_main = _entry_point("evaluate")
 collect_main = _entry_point("collect")
 aggregate_main = _entry_point("aggregate")
 progress_field_main = _entry_point("progress_field")
+import_main = _entry_point("import")
 
 
 def inspect_rrd_main(argv: Sequence[str] | None = None) -> int:

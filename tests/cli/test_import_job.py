@@ -1,4 +1,4 @@
-"""``cpmp-import`` (scripts/import_demos.py): one command turns a recording into a
+"""``cpmp-import`` (scripts/import.py): one command turns a recording into a
 demonstration file and prints the summary and the file's path last; a bad configuration or a
 failed import ends with exit status 2, one ``error:`` line and no output file."""
 
@@ -20,7 +20,7 @@ from cpmp.data import list_splits, load_demonstrations, mp_sequences
 from cpmp.errors import ConfigError, CpmpFileError, DataError
 
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "scripts" / "import_demos.py"
+SCRIPT = ROOT / "scripts" / "import.py"
 
 MAPPING = {
     "source": "mimicgen",

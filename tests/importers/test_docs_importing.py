@@ -26,12 +26,12 @@ def blocks(language: str) -> list[str]:
 
 
 def commands() -> list[str]:
-    """The doc's ``scripts/import_demos.py`` commands on the example recordings (continued
+    """The doc's ``scripts/import.py`` commands on the example recordings (continued
     lines joined)."""
     lines = []
     for block in blocks("bash"):
         for command in block.replace("\\\n", " ").splitlines():
-            if "import_demos.py" in command and EXAMPLES in command:
+            if "import.py" in command and EXAMPLES in command:
                 lines.append(" ".join(command.split()))
     return lines
 

@@ -1,10 +1,10 @@
 """Import robot recordings (ROS 2 bags, LeRobot datasets, MimicGen HDF5) as demonstrations
 (``cpmp-import``).
 
-python scripts/import_demos.py mapping=conf/import/rosbag_example.yaml input=my_bags/
+python scripts/import.py mapping=conf/import/rosbag_example.yaml input=my_bags/
 """
 
-from cpmp.cli.import_job import import_main
+from cpmp.cli.main import import_main
 
 if __name__ == "__main__":
     import_main()
