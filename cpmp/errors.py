@@ -33,11 +33,14 @@ class CheckpointFormatError(CpmpFileError):
 
     Attributes:
         found: the file's ``"format"`` entry (``None`` where it has none).
+        damaged: the file's content does not match its stored checksum either, so ``found``
+            may itself be damaged.
     """
 
-    def __init__(self, message: str, found: object = None) -> None:
+    def __init__(self, message: str, found: object = None, damaged: bool = False) -> None:
         super().__init__(message)
         self.found = found
+        self.damaged = damaged
 
 
 class NotFittedError(CpmpError, RuntimeError):

@@ -1,16 +1,19 @@
 """Atomic file writing and the checkpoint files of the sequencers.
 
 A failed write never leaves a partial file behind. Checkpoints have one writer and one loader
-that checks format, version and trust.
+that checks integrity (a SHA-256 of the payload stored in the file), format, version and trust.
 """
 
 from __future__ import annotations
 
 import contextlib
 import glob
+import hashlib
+import logging
 import math
 import os
 import pickle
+import struct
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -21,6 +24,11 @@ import numpy as np
 from cpmp.errors import CheckpointFormatError, CpmpError, CpmpFileError
 
 T = TypeVar("T")
+
+log = logging.getLogger(__name__)
+
+CHECKSUM_KEY = "sha256"
+"""The checkpoint entry holding :func:`payload_digest` of the rest of the payload."""
 
 
 @contextlib.contextmanager
@@ -36,6 +44,11 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.exists():
         raise CpmpFileError(f"cannot write {target}: directory {directory} does not exist")
+    if target.is_dir():
+        raise CpmpFileError(
+            f"cannot write {target}: it is a directory; give a file path inside it, such as "
+            f"{target / 'model.pt'}"
+        )
     remove_stale_temporaries(target)
     try:
         fd, tmp_name = tempfile.mkstemp(
@@ -154,8 +167,68 @@ def to_builtin(obj: Any) -> Any:
     return obj
 
 
+def payload_digest(payload: Mapping[str, Any]) -> str:
+    """The SHA-256 (hex) of a checkpoint payload's content, independent of how it was pickled.
+
+    Keys, their order, strings, numbers (floats bit-exact), ``None``, lists, tuples and every
+    tensor's dtype, shape and bytes enter the digest, so any change of a value changes it; the
+    :data:`CHECKSUM_KEY` entry itself does not.
+
+    Args:
+        payload: tensors and plain Python (what :func:`save_checkpoint` takes).
+
+    Returns:
+        64 hexadecimal digits.
+
+    Raises:
+        TypeError: the payload holds another kind of object (a checkpoint never does).
+    """
+    import torch  # lazy: cpmp.data and the importers write through this module without torch
+
+    digest = hashlib.sha256()
+
+    def feed(tag: bytes, data: bytes) -> None:
+        digest.update(tag + struct.pack("<Q", len(data)) + data)
+
+    def walk(obj: Any, where: str) -> None:
+        if isinstance(obj, Mapping):
+            feed(b"d", str(len(obj)).encode())
+            for key, value in obj.items():
+                walk(key, where)
+                walk(value, f"{where}/{key}")
+        elif isinstance(obj, list | tuple):
+            feed(b"l" if isinstance(obj, list) else b"t", str(len(obj)).encode())
+            for i, value in enumerate(obj):
+                walk(value, f"{where}[{i}]")
+        elif isinstance(obj, str):
+            feed(b"s", obj.encode("utf-8", "surrogatepass"))
+        elif obj is None or isinstance(obj, bool):
+            feed(b"b", repr(obj).encode())
+        elif isinstance(obj, int):
+            feed(b"i", str(obj).encode())
+        elif isinstance(obj, float):
+            feed(b"f", struct.pack("<d", obj))
+        elif isinstance(obj, torch.Tensor):
+            flat = obj.detach().to("cpu").contiguous().reshape(-1)
+            feed(b"T", f"{flat.dtype} {tuple(obj.shape)}".encode())
+            feed(b"B", flat.view(torch.uint8).numpy().tobytes() if flat.numel() else b"")
+        elif isinstance(obj, torch.dtype):
+            feed(b"D", str(obj).encode())
+        else:
+            raise TypeError(
+                f"checkpoint payload holds a {type(obj).__name__} at {where or '/'}; checkpoints "
+                "hold tensors and plain Python only"
+            )
+
+    walk({k: v for k, v in payload.items() if k != CHECKSUM_KEY}, "")
+    return digest.hexdigest()
+
+
 def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) -> Path:
     """Write a checkpoint ``payload`` atomically to ``path`` with ``torch.save``.
+
+    The file also holds the payload's SHA-256 (:func:`payload_digest`, under
+    :data:`CHECKSUM_KEY`), which :func:`load_checkpoint` verifies.
 
     Args:
         path: the file.
@@ -164,12 +237,17 @@ def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) ->
 
     Returns:
         The path.
+
+    Raises:
+        CpmpFileError: ``path`` is a directory or its directory is missing or not writable.
     """
     import torch  # lazy: cpmp.data and the importers write through this module without torch
 
     path = Path(path)
+    content = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    content[CHECKSUM_KEY] = payload_digest(content)
     with atomic_path(path) as tmp:
-        torch.save(dict(payload), tmp)
+        torch.save(content, tmp)
     return path
 
 
@@ -201,11 +279,14 @@ def load_checkpoint(
     Every failure is a :class:`CpmpFileError`.
 
     The payload is loaded with ``torch.load(weights_only=True)``: a file holding Python objects
-    is refused as untrusted, never with torch's hint to switch the protection off. Then its
-    ``"format"`` entry must be ``spec.fmt`` (else :class:`CheckpointFormatError` carrying the
-    format found) and its ``"version"`` one of ``spec.versions``; ``rebuild(payload, version)``
-    builds the model, and what it raises (:data:`REBUILD_ERRORS`) is reported as a damaged
-    checkpoint.
+    is refused as untrusted, never with torch's hint to switch the protection off; an empty,
+    truncated or otherwise unreadable file is named so, with ``spec.remedy``. A payload with a
+    checksum (:data:`CHECKSUM_KEY`) must match it, else the file is damaged; a payload without
+    one (written before cpmp stored checksums) loads, with a logged warning that it was not
+    verified. Then its ``"format"`` entry must be ``spec.fmt`` (else
+    :class:`CheckpointFormatError` carrying the format found) and its ``"version"`` one of
+    ``spec.versions``; ``rebuild(payload, version)`` builds the model, and what it raises
+    (:data:`REBUILD_ERRORS`) is reported as a damaged checkpoint.
 
     Args:
         path: the checkpoint file.
@@ -220,6 +301,8 @@ def load_checkpoint(
         CheckpointFormatError: a readable checkpoint of another format.
     """
     payload = _load_payload(Path(path), spec)
+    if isinstance(payload, dict):
+        payload = _verified(payload, Path(path), spec)
     if not isinstance(payload, dict) or payload.get("format") != spec.fmt:
         found = payload.get("format") if isinstance(payload, dict) else None
         raise CheckpointFormatError(f"{path} is not a {spec.name} checkpoint", found)
@@ -239,6 +322,52 @@ def load_checkpoint(
         ) from err
 
 
+def _verified(payload: dict[str, Any], path: Path, spec: CheckpointSpec) -> dict[str, Any]:
+    """``payload`` without its checksum entry, once the checksum matched.
+
+    Args:
+        payload: what ``torch.load`` read from ``path``.
+        path: the file (for messages).
+        spec: the checkpoint kind expected (for messages).
+
+    Returns:
+        The payload less :data:`CHECKSUM_KEY`.
+
+    Raises:
+        CpmpFileError: the stored checksum does not match the content.
+        CheckpointFormatError: it does not match and the format entry is not ``spec.fmt``
+            (``damaged`` set: another loader may know the format and name the damage).
+    """
+    stored = payload.get(CHECKSUM_KEY)
+    if stored is None:
+        if payload.get("format") == spec.fmt:
+            log.warning(
+                "%s has no checksum (written before cpmp stored one): loaded without an "
+                "integrity check; save it again to add one",
+                path,
+            )
+        return payload
+    try:
+        actual = payload_digest(payload)
+    except TypeError as err:
+        actual = f"none ({err})"
+    if stored != actual and payload.get("format") != spec.fmt:
+        raise CheckpointFormatError(
+            f"{path} is not a {spec.name} checkpoint (its format entry is "
+            f"{payload.get('format')!r}) and its content does not match the SHA-256 stored in "
+            "it: a damaged file",
+            payload.get("format"),
+            damaged=True,
+        )
+    if stored != actual:
+        raise CpmpFileError(
+            f"{path} is a damaged {spec.name} checkpoint: its content does not match the "
+            f"SHA-256 stored in it (the file changed after it was written, e.g. a bad copy or "
+            f"disk); copy it again from its source, or {spec.remedy}"
+        )
+    return {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+
+
 def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
     """What ``torch.load(path, weights_only=True)`` returns.
 
@@ -247,19 +376,32 @@ def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
     """
     import torch  # lazy: cpmp.data and the importers write through this module without torch
 
+    if path.is_dir():
+        raise CpmpFileError(f"checkpoint {path} is a directory; give the checkpoint file in it")
     if not path.is_file():
         raise CpmpFileError(f"checkpoint {path} does not exist; {spec.remedy}")
+    size = path.stat().st_size
+    if size == 0:
+        raise CpmpFileError(
+            f"{path} is empty (0 bytes), not a {spec.name} checkpoint: a save or copy did not "
+            f"finish; {spec.remedy}"
+        )
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as err:
         if "global" not in str(err).lower():  # not a refused class: a damaged file
             raise CpmpFileError(
                 f"{path} is not a readable {spec.name} checkpoint (the file is damaged or of "
-                "another kind)"
+                f"another kind); {spec.remedy}"
             ) from err
         raise CpmpFileError(
             f"{path} is not a trusted {spec.name} checkpoint: it holds Python objects that a cpmp "
             f"checkpoint never contains, so it was not loaded; {spec.remedy}"
         ) from err
     except Exception as err:
-        raise CpmpFileError(f"{path} is not a readable {spec.name} checkpoint: {err}") from err
+        reason = str(err) or type(err).__name__
+        raise CpmpFileError(
+            f"{path} is not a readable {spec.name} checkpoint: the file is truncated or damaged "
+            f"({size} bytes; torch.load: {reason}); copy it again from its source, or "
+            f"{spec.remedy}"
+        ) from err

@@ -2,13 +2,16 @@ import os
 import stat
 
 import pytest
+import torch
 
 from cpmp.errors import CheckpointFormatError, CpmpFileError
 from cpmp.io import (
+    CHECKSUM_KEY,
     CheckpointSpec,
     atomic_path,
     atomic_write_text,
     load_checkpoint,
+    payload_digest,
     save_checkpoint,
 )
 
@@ -144,3 +147,69 @@ def test_checkpoint_version_and_damage_are_file_errors(tmp_path):
         _load(damaged)
     with pytest.raises(CpmpFileError, match="does not exist; R"):
         _load(tmp_path / "missing.pt")
+
+
+def test_saving_onto_a_directory_names_the_directory_not_a_temporary(tmp_path):
+    target = tmp_path / "runs"
+    target.mkdir()
+    with pytest.raises(CpmpFileError, match="it is a directory") as info:
+        save_checkpoint(target, {"format": "fmt-x", "version": 1, "value": 1})
+    assert str(target) in str(info.value) and ".tmp" not in str(info.value)
+    assert list(target.iterdir()) == []
+    with pytest.raises(CpmpFileError, match="is a directory"):
+        _load(target)
+
+
+def test_empty_and_truncated_checkpoints_say_so_and_what_to_do(tmp_path):
+    path = save_checkpoint(
+        tmp_path / "m.pt", {"format": "fmt-x", "version": 1, "value": torch.arange(500.0)}
+    )
+    data = path.read_bytes()
+    half = tmp_path / "half.pt"
+    half.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CpmpFileError, match=r"truncated or damaged \(\d+ bytes; .*\); .*R$"):
+        _load(half)
+    empty = tmp_path / "empty.pt"
+    empty.write_bytes(b"")
+    with pytest.raises(CpmpFileError, match=r"is empty \(0 bytes\).*; R$"):
+        _load(empty)
+
+
+def test_checkpoint_stores_the_payload_checksum_and_verifies_it(tmp_path):
+    payload = {"format": "fmt-x", "version": 1, "value": torch.tensor([1.0, 2.0])}
+    path = save_checkpoint(tmp_path / "m.pt", payload)
+    raw = torch.load(path, weights_only=True)
+    assert raw[CHECKSUM_KEY] == payload_digest(payload)
+    value, _ = _load(path)
+    assert torch.equal(value, payload["value"])
+    raw["value"] = torch.tensor([1.0, 2.5])  # content changed after writing
+    torch.save(raw, path)
+    with pytest.raises(CpmpFileError, match=r"does not match the SHA-256 stored in it.*R$"):
+        _load(path)
+
+
+def test_digest_sees_every_value_and_its_type():
+    base = {"a": [1, 2.0, "x", None, True], "t": torch.zeros(3)}
+    changed = [
+        {"a": [1, 2.0, "x", None, False], "t": torch.zeros(3)},
+        {"a": [1, 2, "x", None, True], "t": torch.zeros(3)},  # int, not float
+        {"a": (1, 2.0, "x", None, True), "t": torch.zeros(3)},
+        {"a": [1, 2.0, "x", None, True], "t": torch.zeros(3, dtype=torch.float64)},
+        {"a": [1, 2.0, "x", None, True], "t": torch.zeros(1, 3)},
+        {"a": [1, 2.0, "x", None, True], "t": torch.tensor([0.0, -0.0, 0.0])},
+        {"t": torch.zeros(3), "a": [1, 2.0, "x", None, True]},  # key order
+    ]
+    digests = {payload_digest(p) for p in [base, *changed]}
+    assert len(digests) == len(changed) + 1
+    assert payload_digest({**base, CHECKSUM_KEY: "anything"}) == payload_digest(base)
+    with pytest.raises(TypeError, match="holds a set at /a"):
+        payload_digest({"a": {1}})
+
+
+def test_checkpoint_without_checksum_loads_with_a_warning(tmp_path, caplog):
+    """Checkpoints written before cpmp stored checksums still load, unverified, and say so."""
+    path = tmp_path / "old.pt"
+    torch.save({"format": "fmt-x", "version": 1, "value": 3}, path)
+    with caplog.at_level("WARNING", logger="cpmp.io"):
+        assert _load(path) == (3, 1)
+    assert "has no checksum" in caplog.text and "save it again" in caplog.text

@@ -38,6 +38,11 @@ def load_sequencer(path: str | Path) -> ConcurrentSequencer | GoalNearestSequenc
     try:
         return ConcurrentSequencer.load(path)
     except CheckpointFormatError as err:
+        if err.found != CHECKPOINT_FORMAT and err.damaged:
+            raise CpmpFileError(
+                f"{path} is a damaged checkpoint: its content does not match the SHA-256 stored "
+                "in it; copy it again from its source, or retrain the model with scripts/train.py"
+            ) from err
         if err.found != CHECKPOINT_FORMAT:
             raise CpmpFileError(
                 f"{path} is neither a cpmp sequencer nor a {KIND} checkpoint; give a model.pt "
