@@ -116,6 +116,18 @@ def build_graph(demos: Sequence[Demonstration], variable: str) -> SequenceGraph:
     Every switch ``y[i-1] != y[i]`` adds the edge ``(y[i-1], y[i])`` if it is new, and starts a
     new activation of ``y[i]`` (so repeated MPs keep one activation per visit). Edges are added
     for every observed switch, also when the target node already exists.
+
+    Args:
+        demos: the labelled demonstrations.
+        variable: the control variable.
+
+    Returns:
+        The graph, its activations indexing ``demos``.
+
+    Raises:
+        DataError: no demonstrations, or two MP names of ``variable`` that differ only by
+            whitespace (naming both).
+        UnknownMPError: a demonstration without labels for ``variable``.
     """
     if len(demos) == 0:
         raise DataError("cannot build a sequence graph from zero demonstrations; give at least one")
@@ -135,7 +147,32 @@ def build_graph(demos: Sequence[Demonstration], variable: str) -> SequenceGraph:
                 graph.edges.add((previous, segment.mp))
             graph.activations[segment.mp].append(replace(segment, demo=m))
             previous = segment.mp
+    _check_distinct_names(demos, graph)
     return graph
+
+
+def _check_distinct_names(demos: Sequence[Demonstration], graph: SequenceGraph) -> None:
+    """Refuse MP names of one variable that differ only by whitespace (``"close"``, ``"close "``).
+
+    Args:
+        demos: the demonstrations ``graph`` was built from (to name where each name occurs).
+        graph: the built graph.
+
+    Raises:
+        DataError: naming both spellings and a demonstration of each.
+    """
+    seen: dict[str, str] = {}
+    for mp in sorted(graph.nodes):
+        other = seen.setdefault("".join(mp.split()), mp)
+        if other == mp:
+            continue
+        first = {name: graph.activations[name][0].demo for name in (other, mp)}
+        where = {name: demos[m].name or f"demonstration {m}" for name, m in first.items()}
+        raise DataError(
+            f"control variable {graph.variable!r} has MP names that differ only by whitespace: "
+            f"{other!r} (in {where[other]}) and {mp!r} (in {where[mp]}); label one MP with one "
+            "name"
+        )
 
 
 def build_graphs(

@@ -97,3 +97,13 @@ def test_unknown_variable_and_mp(demos):
     with pytest.raises(DataError, match="zero demonstrations"):
         build_graphs([])
     assert issubclass(UnknownMPError, CpmpError)
+
+
+def test_mp_names_differing_only_by_whitespace_are_refused_naming_both():
+    demos = [_demo(["A", "A", "close"], name="demo_0"), _demo(["A", "close ", "close "], name="d1")]
+    with pytest.raises(
+        DataError, match=r"differ only by whitespace: 'close' \(in demo_0\) and 'close ' \(in d1\)"
+    ):
+        build_graph(demos, "a")
+    with pytest.raises(DataError, match=r"'pick up' .* and 'pickup'"):
+        build_graph([_demo(["pick up", "pickup"])], "a")

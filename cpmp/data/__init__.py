@@ -16,6 +16,7 @@ from cpmp.data.datafile import (
     save_demonstrations,
 )
 from cpmp.data.demonstration import (
+    START_PREFIX,
     Activation,
     Demonstration,
     DemonstrationLog,
@@ -26,6 +27,7 @@ from cpmp.data.demonstration import (
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "START_PREFIX",
     "Activation",
     "Demonstration",
     "DemonstrationLog",
