@@ -235,8 +235,10 @@ def _fail(err: CpmpError) -> None:
 def run_job(job: Callable[[Any, Path], Path], cfg: Any, run_dir: str | Path) -> Path:
     """Run ``job(cfg, run_dir)``; print its output path last.
 
-    A user error (:class:`CpmpError`) is logged as one line and exits with status 2 instead of
-    a traceback.
+    A user error (:class:`CpmpError`) ends the job with one ``error:`` line on stderr and exit
+    status 2 instead of a traceback. The error also goes to the job's log file (not a second
+    time to the console); a run directory in which the job wrote nothing (Hydra's ``.hydra/``
+    and the job's log aside) is removed.
     """
     import torch  # lazy: the jobs' heavy dependency, after the command line was checked
 
@@ -244,10 +246,52 @@ def run_job(job: Callable[[Any, Path], Path], cfg: Any, run_dir: str | Path) -> 
     try:
         out = job(cfg, Path(run_dir))
     except CpmpError as err:
-        log.error("%s: %s", type(err).__name__, err)
+        _log_to_files(err)
+        _discard_empty_run_dir(Path(run_dir))
         _fail(err)
     print(out)
     return out
+
+
+def _log_to_files(err: CpmpError) -> None:
+    """Write ``err`` to the log files only (the console gets the one ``error:`` line)."""
+    record = log.makeRecord(
+        log.name, logging.ERROR, __file__, 0, "%s: %s", (type(err).__name__, err), None
+    )
+    for handler in logging.getLogger().handlers + log.handlers:
+        if isinstance(handler, logging.FileHandler):
+            handler.handle(record)
+
+
+def _discard_empty_run_dir(run_dir: Path) -> None:
+    """Remove ``run_dir`` if a failed job wrote nothing into it.
+
+    Only what Hydra writes before the job (``.hydra/`` with its config files, and the job's
+    ``<job name>.log``) is removed, and the directory itself only once empty: another file
+    keeps all of it. The working directory is never removed.
+
+    Args:
+        run_dir: the job's output directory.
+    """
+    if not run_dir.is_dir() or run_dir.resolve() == Path.cwd().resolve():
+        return
+    hydra_dir = run_dir / ".hydra"
+    logs = {f"{HydraConfig.get().job.name}.log"} if HydraConfig.initialized() else set()
+    ours = {".hydra", *logs}
+    if any(p.name not in ours for p in run_dir.iterdir()):
+        return
+    if hydra_dir.is_dir() and any(
+        p.name not in ("config.yaml", "hydra.yaml", "overrides.yaml") or not p.is_file()
+        for p in hydra_dir.iterdir()
+    ):
+        return
+    for name in logs:
+        (run_dir / name).unlink(missing_ok=True)
+    if hydra_dir.is_dir():
+        for p in hydra_dir.iterdir():
+            p.unlink()
+        hydra_dir.rmdir()
+    run_dir.rmdir()
 
 
 class _Task:

@@ -13,7 +13,7 @@ from typing import Any
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.config.goal_nearest import KIND
 from cpmp.data.datafile import list_splits, load_demonstrations
-from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.errors import ConfigError, CpmpFileError, DataError
 from cpmp.evaluation.checkpoints import load_sequencer
 from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.config import job_fit_settings
@@ -24,6 +24,15 @@ from cpmp.experiment.report import predictor_entry, write_json
 from cpmp.io import atomic_write_text
 
 log = logging.getLogger(__name__)
+
+ALL_DEMOS_WARNING = (
+    "every demonstration of the file was scored (no held-out split: the file has no "
+    "`mask/test`, or data.split=null), so these numbers may include the demonstrations the "
+    "model was trained on: they are not held-out numbers. Give the file a `mask/test` of "
+    "demonstrations the model never saw (cpmp-import and save_demonstrations write one), or "
+    "set data.split to such a split"
+)
+"""What the evaluation says when it scored every demonstration of a file."""
 
 
 def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
@@ -52,6 +61,31 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
     return path, split
 
 
+def _load_split(path: Path, split: str | None, use: str) -> list[Any]:
+    """The demonstrations of ``split`` (every one for ``None``), refusing an empty split.
+
+    Args:
+        path: the demonstration file.
+        split: the mask's name, or ``None``.
+        use: what the job does with them, for the message (``"train"``, ``"evaluate"``).
+
+    Returns:
+        The demonstrations.
+
+    Raises:
+        DataError: ``mask/<split>`` selects no demonstration (naming the split).
+    """
+    demos = load_demonstrations(path, split=split)
+    if not demos and split is not None:
+        total = len(load_demonstrations(path))  # the error path only: read them all to count
+        raise DataError(
+            f"{path}: split {split!r} (mask/{split}) is empty: it selects none of the file's "
+            f"{total} demonstrations; mark the demonstrations to {use} on in mask/{split}, or "
+            f"set data.split=null to {use} on all of them"
+        )
+    return demos
+
+
 def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file and save ``model.pt`` into ``run_dir``.
 
@@ -64,10 +98,12 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     """
     settings = job_fit_settings(cfg)
     path, split = _demo_file(cfg, "train")
-    demos = load_demonstrations(path, split=split)
+    demos = _load_split(path, split, "train")
     validation = None
     if split == "train" and "test" in list_splits(path):
-        validation = load_demonstrations(path, split="test")
+        validation = load_demonstrations(path, split="test") or None
+        if validation is None:
+            log.warning("%s: mask/test is empty: the fit is not validated", path)
     run_dir = Path(run_dir)
     held_out = f", validated on {len(validation)} from split test" if validation else ""
     with stage(f"train on {len(demos)} demos from {path} (split {split or 'all'}){held_out}"):
@@ -99,7 +135,9 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
         raise CpmpFileError(f"checkpoint {checkpoint} does not exist; train one with train.py")
     path, split = _demo_file(cfg, "test")
     seq = load_sequencer(checkpoint)  # any kind the main job or train.py writes
-    demos = load_demonstrations(path, split=split)
+    demos = _load_split(path, split, "evaluate")
+    if split is None:
+        log.warning("%s: %s", path, ALL_DEMOS_WARNING)
     run_dir = Path(run_dir)
     unknown = _unknown_mps(seq, demos)
     if unknown:
@@ -141,7 +179,39 @@ def _model_entry(seq: Any) -> dict[str, Any]:
     if isinstance(seq, GoalNearestSequencer):
         entry = predictor_entry("none", {}, {"kind": KIND})
         return {"sequencer": KIND, "predictor": entry.pop("kind"), **entry}
-    return {"sequencer": "learned", "predictor": seq.predictor.kind}
+    options = seq.predictor.spec()["config"]
+    return {
+        "sequencer": "learned",
+        "predictor": seq.predictor.kind,
+        "feature_weighting": options.get("feature_weighting"),
+        "feature_scaling": options.get("feature_scaling"),
+        "switch_rule": seq.config.switch_rule,
+        "coupling": seq.config.coupling,
+    }
+
+
+def predictor_description(model: dict[str, Any]) -> str:
+    """How the reports name a learned sequencer's predictor: its kind and feature weighting.
+
+    ``klr`` with ``path`` weighting is the ``predictor=klr_path`` preset (cpmp's default),
+    with ``none`` the paper's ``predictor=klr``; both are kind ``klr``, so the weighting is
+    always named.
+
+    Args:
+        model: :func:`_model_entry`'s entry of a learned sequencer.
+
+    Returns:
+        Markdown text such as ``predictor `klr` (feature weighting `path`, scaling `global`)``.
+    """
+    extra = [
+        f"{label} `{model[key]}`"
+        for key, label in (
+            ("feature_weighting", "feature weighting"),
+            ("feature_scaling", "scaling"),
+        )
+        if model.get(key) is not None
+    ]
+    return f"predictor `{model['predictor']}`" + (f" ({', '.join(extra)})" if extra else "")
 
 
 def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
@@ -189,9 +259,15 @@ def _evaluation_markdown(out: dict[str, Any]) -> str:
         f"{out['n_demos']} demos from `{out['data']}` (split {out['split'] or 'all'}).",
         "",
     ]
+    if out["split"] is None:
+        lines += [f"> **Warning:** {ALL_DEMOS_WARNING}.", ""]
     model = out["model"]
     if model["sequencer"] == "learned":
-        lines += [f"Learned sequencer, predictor `{model['predictor']}`.", ""]
+        lines += [
+            f"Learned sequencer, {predictor_description(model)}, switching rule "
+            f"`{model.get('switch_rule', '–')}`, coupling `{model.get('coupling', '–')}`.",
+            "",
+        ]
     else:
         lines += [f"Sequencer `{model['sequencer']}`: {model['note']}.", ""]
     if out.get("unknown_mps"):

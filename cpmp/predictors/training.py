@@ -28,7 +28,7 @@ from lightning.pytorch.utilities import _pytree as lightning_pytree
 
 from cpmp.config.trainer import TrainerConfig
 from cpmp.errors import ConfigError
-from cpmp.predictors.base import NodeData, ProgressPredictor
+from cpmp.predictors.base import START_PREFIX, NodeData, ProgressPredictor
 from cpmp.predictors.datamodule import ProgressDataModule
 from cpmp.predictors.lightning import HeldOutSums, ProgressModule, Solver
 from cpmp.predictors.newton import NewtonInfo
@@ -275,9 +275,9 @@ def fit_predictor(
     history = module.history
     stopped_early = solver == "adam" and len(history.train_loss) < epochs
     log.info(
-        "fitted %s on %d nodes in %.2f s on %s, %d epochs%s (loss %.5f%s)",
-        predictor.kind,
-        len(data),
+        "fitted %s on %s in %.2f s on %s, %d epochs%s (loss %.5f%s)",
+        _predictor_name(predictor),
+        _node_count(data),
         elapsed,
         device,
         len(history.train_loss),
@@ -312,6 +312,23 @@ def fit_predictor(
                 out["newton_iterations"],
             )
     return out
+
+
+def _predictor_name(predictor: ProgressPredictor) -> str:
+    """The predictor's kind and, where it has one, its feature weighting (``klr (path weighting)``).
+
+    ``predictor=klr_path`` and the paper's ``predictor=klr`` are both kind ``klr``; the
+    weighting tells them apart.
+    """
+    weighting = getattr(predictor.config, "feature_weighting", None)
+    return predictor.kind if weighting is None else f"{predictor.kind} ({weighting} weighting)"
+
+
+def _node_count(data: list[NodeData]) -> str:
+    """``"6 nodes"``, or ``"6 nodes + 2 start heads"`` when the bank has start heads."""
+    heads = sum(node.key[1].startswith(START_PREFIX) for node in data)
+    nodes = f"{len(data) - heads} node{'s' if len(data) - heads != 1 else ''}"
+    return nodes if not heads else f"{nodes} + {heads} start head{'s' if heads != 1 else ''}"
 
 
 def _held_out_mae(

@@ -346,7 +346,7 @@ def renamed(demo: Demonstration, old: str, new: str) -> Demonstration:
 def evaluate(tmp_path: Path, seq, demos: list[Demonstration]) -> dict:
     checkpoint = seq.save(tmp_path / "model.pt")
     data = tmp_path / "test.h5"
-    save_demonstrations(data, demos)
+    save_demonstrations(data, demos, splits={"test": list(range(len(demos)))})  # held out
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("evaluate", [f"checkpoint={checkpoint}", f"data.path={data}"])
     return json.loads(evaluate_checkpoint(cfg, tmp_path).read_text())
