@@ -1,6 +1,7 @@
 """What a fit learns from and what it checks afterwards.
 
-Per-node training data, the non-finite and degenerate-node checks, label-glitch warnings.
+Per-node training data, the non-finite and degenerate-node checks, label-glitch and label-typo
+warnings.
 
 :meth:`cpmp.sequencer.ConcurrentSequencer.fit_config` builds one :class:`~cpmp.predictors.NodeData`
 per node (its scaled samples and progress targets, eq. 1) with :func:`node_training_data`,
@@ -242,14 +243,88 @@ GLITCH_SAMPLES = 2
 label glitches."""
 
 
+TYPO_EDITS = 2
+"""A node with one activation whose name is at most this many edits (and at most a third of the
+longer name) from another MP of its variable is reported as a likely label typo."""
+
+
+def edit_distance(a: str, b: str) -> int:
+    """The optimal-string-alignment distance between two strings.
+
+    Insertions, deletions, substitutions and swaps of two neighbouring letters count one edit
+    each (``clsoe`` -> ``close`` is 1).
+
+    Args:
+        a: one string.
+        b: the other.
+
+    Returns:
+        The number of edits.
+    """
+    rows = [list(range(len(b) + 1))]
+    for i, ca in enumerate(a, 1):
+        row = [i] + [0] * len(b)
+        for j, cb in enumerate(b, 1):
+            row[j] = min(rows[-1][j] + 1, row[j - 1] + 1, rows[-1][j - 1] + (ca != cb))
+            if i > 1 and j > 1 and ca == b[j - 2] and a[i - 2] == cb:
+                row[j] = min(row[j], rows[-2][j - 2] + 1)
+        rows.append(row)
+    return rows[-1][-1]
+
+
+def typo_warnings(graphs: Mapping[str, SequenceGraph], demos: Sequence[Demonstration]) -> list[str]:
+    """One message per node that looks like a mistyped name of another MP of its variable.
+
+    A node with a single activation whose name is within :data:`TYPO_EDITS` edits of another
+    node's (``clsoe`` beside ``close``): a typo in one demonstration's labels makes a node with
+    one activation and new edges, which the sequencer then tries to reach.
+
+    Args:
+        graphs: the fitted graphs (their activations index ``demos``).
+        demos: the training demonstrations.
+
+    Returns:
+        The messages, naming both MPs and the demonstration of the single activation.
+    """
+    out = []
+    for v in sorted(graphs):
+        acts = graphs[v].activations
+        for mp in sorted(acts):
+            if len(acts[mp]) != 1:
+                continue
+            near = [
+                other
+                for other in sorted(acts)
+                if other != mp
+                and len(acts[other]) > 1
+                and edit_distance(mp, other) <= min(TYPO_EDITS, max(len(mp), len(other)) // 3)
+            ]
+            if near:
+                a = acts[mp][0]
+                name = demos[a.demo].name or f"demonstration {a.demo}"
+                out.append(
+                    f"node {v}/{mp}: its one activation (in {name}, from sample {a.start}) is "
+                    f"named like {v}/{near[0]} ({len(acts[near[0]])} activations); if it is a "
+                    f"typo, relabel it {near[0]!r}, or the sequencer learns an MP of one example"
+                )
+    return out
+
+
 def glitch_warnings(
     graphs: Mapping[str, SequenceGraph], demos: Sequence[Demonstration]
 ) -> list[str]:
-    """One message per node with a very short activation in the middle of a demonstration.
+    """One message per node with a very short activation or a name that looks mistyped.
 
     An activation of at most :data:`GLITCH_SAMPLES` samples between two other MPs (A...A, B,
     C...C): such a node can hardly ever be entered in closed loop, and the sequencer would
-    wait there.
+    wait there. A likely typo in an MP's name: :func:`typo_warnings`.
+
+    Args:
+        graphs: the fitted graphs (their activations index ``demos``).
+        demos: the training demonstrations.
+
+    Returns:
+        The messages, short activations first.
     """
     out = []
     for v in sorted(graphs):
@@ -269,7 +344,7 @@ def glitch_warnings(
                     f"sample(s) (from sample {a.start}); if that is a label glitch, relabel it, "
                     "or the sequencer may wait in this MP"
                 )
-    return out
+    return out + typo_warnings(graphs, demos)
 
 
 def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list[str]:
