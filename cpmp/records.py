@@ -26,7 +26,7 @@ SwitchKind = Literal["switch", "recovery"]
 """Why a transition fired: ``switch`` (the switching rule) or ``recovery`` (a stall resolved)."""
 SWITCH_KINDS: tuple[SwitchKind, ...] = get_args(SwitchKind)
 
-NoteKind = Literal["hold", "recovery", "nonfinite"]
+NoteKind = Literal["hold", "recovery", "give_up", "nonfinite", "clock_step"]
 """What a :class:`SequencerNote` is about (see there)."""
 NOTE_KINDS: tuple[NoteKind, ...] = get_args(NoteKind)
 
@@ -71,8 +71,11 @@ class SequencerNote:
     """Something the sequencer decided not to do, or did exceptionally, at time ``t`` [s].
 
     ``kind``: ``hold`` (a transition the rule would fire is held back by the coupling),
-    ``recovery`` (a stall resolved) or ``nonfinite`` (φ was NaN/inf; every MP kept);
-    ``variable``: the control variable concerned (empty if none); ``text``: readable.
+    ``recovery`` (a stall resolved), ``give_up`` (a stall no demonstrated transition resolves:
+    the sequencer switches no more), ``nonfinite`` (the features or φ were NaN/inf; every MP
+    kept; one note per run of such ticks) or ``clock_step`` (the caller's time jumped: not
+    counted as time that passed); ``variable``: the control variable concerned (empty if
+    none); ``text``: readable.
     """
 
     t: float

@@ -40,9 +40,11 @@ def test_fields_a_producer_does_not_know_keep_their_defaults() -> None:
 
 def test_a_kind_outside_its_closed_set_is_refused_where_the_record_is_made() -> None:
     assert SWITCH_KINDS == ("switch", "recovery")
-    assert NOTE_KINDS == ("hold", "recovery", "nonfinite")
+    assert NOTE_KINDS == ("hold", "recovery", "give_up", "nonfinite", "clock_step")
     with pytest.raises(DataError, match="one of switch, recovery, got 'jump'"):
         TransitionEvent(0.5, "v", "a", "b", kind="jump")
-    with pytest.raises(DataError, match="one of hold, recovery, nonfinite, got 'Hold'"):
+    with pytest.raises(
+        DataError, match="one of hold, recovery, give_up, nonfinite, clock_step, got 'Hold'"
+    ):
         SequencerNote(0.5, "Hold", "v", "held")
     assert SequencerNote(0.5, "recovery", "v", "resolved").kind == "recovery"

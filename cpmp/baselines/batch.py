@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from cpmp.errors import CpmpError
-from cpmp.sequencer import EpisodeBatch, EpisodeRecord, Features, LiveMask, Times
+from cpmp.sequencer import EpisodeBatch, EpisodeRecord, Features, LiveMask, Stamps, Times
 
 
 class SingleEpisodePolicy(EpisodeRecord, Protocol):
@@ -40,7 +40,8 @@ class GoalNearestBatch(EpisodeBatch):
 
     The interface of :class:`~cpmp.sequencer.BatchedSequencer`: ``reset``/``step`` take ``t``
     (scalar or ``(N,)``) [s], features ``x (N, d)`` and an optional ``live (N,)`` bool mask
-    (other episodes are left untouched) and return every episode's active MPs;
+    (other episodes are left untouched; ``step`` also an optional ``stamp``) and return every
+    episode's active MPs;
     ``episodes[i]`` holds episode ``i``'s ``events`` and ``last_tick``.
 
     Args:
@@ -67,13 +68,18 @@ class GoalNearestBatch(EpisodeBatch):
             self.episodes[i].reset(ts[i], xn[i])
         return self.active
 
-    def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+    def step(
+        self, t: Times, x: Features, live: LiveMask = None, stamp: Stamps = None
+    ) -> list[dict[str, str]]:
         """Advance the ``live`` episodes (default: all) one tick.
 
         Args:
             t: one time [s] or ``(N,)`` times.
             x: features ``(N, d)``.
             live: ``(N,)`` bool, the episodes to advance (``None``: all).
+            stamp: when the features were measured (one time or ``(N,)``), as the learned
+                sequencer's batch takes it; checked, not used: the baseline decides on the
+                features alone.
 
         Returns:
             Every episode's active MPs (variable -> MP).
@@ -82,6 +88,7 @@ class GoalNearestBatch(EpisodeBatch):
             CpmpError: what an episode raised, with the episode's index in the message.
         """
         ts, xn, rows = self._inputs(t, x, live, len(self.episodes[0].feature_names))
+        self._stamps(stamp)
         for i in rows:
             try:
                 self.episodes[i].step(ts[i], xn[i])

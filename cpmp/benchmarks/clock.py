@@ -418,6 +418,8 @@ class EpisodeRecord:
         calls, dropped: due ticks the inner policy was called on / dropped.
         recoveries, wrong_recoveries: recovery switches of the inner policy (if it reports
             ``events``), and those not the demonstrator's next MP.
+        give_ups: stalls the inner policy gave up on (``give_up`` notes, if it reports
+            ``notes``).
     """
 
     outcome: str
@@ -432,6 +434,7 @@ class EpisodeRecord:
     dropped: int = 0
     recoveries: int = 0
     wrong_recoveries: int = 0
+    give_ups: int = 0
 
 
 def _switch_times(demo: Demonstration) -> dict[str, list[float]]:
@@ -454,6 +457,8 @@ def _finish(
             for v in sorted(ref)
             for got, want in zip(record.switch_times.get(v, []), ref[v], strict=False)
         ]
+    notes = getattr(policy.inner, "notes", None) or []
+    record.give_ups = sum(note.kind == "give_up" for note in notes)
     seen: dict[str, int] = {}
     for event in getattr(policy.inner, "events", None) or []:
         k = seen.get(event.variable, 0) + 1
@@ -618,6 +623,7 @@ def summarise(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
         "dropped_ticks": sum(r.dropped for r in records),
         "recoveries": sum(r.recoveries for r in records),
         "wrong_recoveries": sum(r.wrong_recoveries for r in records),
+        "give_ups": sum(r.give_ups for r in records),
         "switch_error": {
             "n": int(errors.size),
             "mean": float(errors.mean()) if errors.size else None,
@@ -644,6 +650,7 @@ def _episode_row(r: EpisodeRecord) -> dict[str, Any]:
         "error": r.error,
         "recoveries": r.recoveries,
         "wrong_recoveries": r.wrong_recoveries,
+        "give_ups": r.give_ups,
     }
 
 

@@ -47,9 +47,11 @@ class SequencerConfig:
         progress_margin: with ``coupling=context``, another variable's MP counts as not far
             enough while its predicted φ is more than this below the least progress it had at
             a demonstrated switch (``None``: compare MPs only).
-        recovery: resolve stalls (no switch and no motion for ``stall_time``) by taking the
-            candidate transition most consistent with the coupling, then most probable, if its
-            ``p`` reaches ``recovery_threshold``.
+        recovery: resolve stalls (no switch and no motion for ``stall_time``) with a switch
+            the demonstrator made in that context and nearest state, the most consistent with
+            the coupling then the most probable, if its ``p`` reaches ``recovery_threshold``;
+            with none, give up (a ``give_up`` note) unless the task is at its demonstrated end
+            (see :mod:`cpmp.sequencer.switching`).
         stall_time: seconds without any switch and without motion that count as a stall.
         rest_speed: features count as at rest below this speed, in training ranges per second.
         recovery_threshold: the relaxed threshold of a recovery transition.
@@ -65,8 +67,13 @@ class SequencerConfig:
             seen together in a demonstration the one with the highest summed log entry
             probability, so graphs cannot start in a mixture of strategies that was never
             demonstrated (the coupling the paper's discussion proposes).
-        nonfinite: what a tick with a non-finite φ does: ``hold`` (keep every MP, note the
-            event) or ``raise`` (:class:`~cpmp.errors.DataError`). A non-finite φ never fires.
+        nonfinite: what a tick with non-finite features or φ does: ``hold`` (keep every MP,
+            note it once per run of such ticks) or ``raise`` (:class:`~cpmp.errors.DataError`).
+            A non-finite φ never fires.
+        stale_time: without a stamp, a feature vector equal to the last one is a repeat of
+            that measurement (a sensor slower than the loop) for up to this many seconds, and
+            adds no evidence to the switching rule; unchanged for longer, the state counts as
+            at rest (:mod:`cpmp.sequencer.timing`).
     """
 
     threshold: float = 0.65
@@ -83,6 +90,7 @@ class SequencerConfig:
     start_kernel: str = "isotropic"
     start_rule: str = "joint"
     nonfinite: str = "hold"
+    stale_time: float = 0.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -93,6 +101,7 @@ class SequencerConfig:
             "rest_speed",
             "recovery_threshold",
             "min_exit",
+            "stale_time",
         ):
             finite_number(getattr(self, name), f"sequencer option {name}")
         if not 0.0 <= self.threshold < 1.0:
@@ -117,6 +126,8 @@ class SequencerConfig:
                 f"stall_time and rest_speed must be > 0, got {self.stall_time} and "
                 f"{self.rest_speed}"
             )
+        if self.stale_time <= 0.0:
+            raise ConfigError(f"stale_time must be > 0 seconds, got {self.stale_time}")
         if not 0.0 <= self.min_exit < 1.0:
             raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
         if not isinstance(self.recovery, bool):

@@ -5,9 +5,10 @@ bank per control variable from demonstrations and steps them closed loop (``rese
 ``save`` / ``load``). Its parts, one module each, imported in this order (each only from the
 ones before it):
 
-* ``inputs``: the checks of what ``step`` is given (time, features, demonstrations);
-* ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule),
-  the learned cross-variable coupling and stall recovery;
+* ``inputs``: the checks of what ``step`` is given (time, stamps, features, demonstrations);
+* ``timing``: the measurement time of each tick's features (clock steps, stamps, repeats);
+* ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule)
+  on measurement time, the learned cross-variable coupling and stall recovery;
 * ``fit_data``: each node's training data and the checks after a fit;
 * ``model``: :class:`NodeIndex` and :class:`TransitionModel`, what an episode reads of a
   fitted sequencer;
@@ -24,6 +25,7 @@ from cpmp.sequencer.batch import (
     Features,
     FittedSequencer,
     LiveMask,
+    Stamps,
     Times,
 )
 from cpmp.sequencer.episode import SequencerEpisode
@@ -66,6 +68,7 @@ __all__ = [
     "PlateauRule",
     "SequencerEpisode",
     "StallDetector",
+    "Stamps",
     "SwitchRule",
     "Times",
     "TransitionModel",

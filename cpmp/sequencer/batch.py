@@ -20,6 +20,7 @@ from cpmp.errors import ConfigError, CpmpError, DataError
 from cpmp.predictors import ProgressPredictor
 from cpmp.records import SequencerNote, TransitionEvent
 from cpmp.sequencer.episode import SequencerEpisode
+from cpmp.sequencer.inputs import checked_features
 from cpmp.sequencer.model import TransitionModel
 
 Times = float | np.ndarray
@@ -28,6 +29,9 @@ Features = np.ndarray | torch.Tensor
 """Features ``(N, d)`` of ``N`` episodes."""
 LiveMask = np.ndarray | Sequence[bool] | None
 """``(N,)`` bool: the episodes a batch call advances (``None``: all)."""
+Stamps = float | np.ndarray | Sequence[float] | None
+"""When the features were measured [s]: one time for every episode, ``(N,)`` times, or
+``None`` (unknown; see :mod:`cpmp.sequencer.timing`)."""
 
 
 class BatchInputs(NamedTuple):
@@ -139,6 +143,23 @@ class EpisodeBatch:
             rows = np.flatnonzero(mask).tolist()
         return BatchInputs(times.tolist(), xn, rows)
 
+    def _stamps(self, stamp: Stamps) -> list[float | None]:
+        """Each episode's measurement stamp [s] (``None``: unknown).
+
+        Raises:
+            DataError: ``stamp`` is neither one time nor ``N`` times.
+        """
+        n = len(self.episodes)
+        if stamp is None:
+            return [None] * n
+        try:
+            stamps = np.broadcast_to(np.asarray(stamp, dtype=np.float64), (n,))
+        except ValueError as err:
+            raise DataError(
+                f"stamp must be one time or {n} times, got shape {np.shape(stamp)}"
+            ) from err
+        return stamps.tolist()
+
     @property
     def n_episodes(self) -> int:
         """N, the number of episodes."""
@@ -178,9 +199,12 @@ class BatchedSequencer(EpisodeBatch):
         batch.episodes[i].events, batch.episodes[i].notes, batch.episodes[i].last_tick
 
     ``live`` (optional, ``(N,)`` bool) leaves the other episodes untouched (finished
-    rollouts). A stateful predictor (``predictor.stateful``, e.g. ``dtw``) runs one stream
-    per episode: :meth:`reset` restarts all ``N`` streams and every call evaluates all
-    ``N`` rows (so every row must hold finite features), whatever ``live`` says.
+    rollouts); ``stamp`` (optional, one time or ``(N,)``) says when each row's features were
+    measured (:meth:`ConcurrentSequencer.step`). A row of non-finite features is not given to
+    the predictor: its episode follows the option ``nonfinite``. A stateful predictor
+    (``predictor.stateful``, e.g. ``dtw``) runs one stream per episode: :meth:`reset` restarts
+    all ``N`` streams and every call evaluates all ``N`` rows, whatever ``live`` says (a row
+    of non-finite features as the last finite features of its episode).
     """
 
     def __init__(self, seq: FittedSequencer, n: int) -> None:
@@ -190,6 +214,9 @@ class BatchedSequencer(EpisodeBatch):
         ]
         """One :class:`SequencerEpisode` per episode (``active``, ``events``, ``notes``,
         ``last_tick``)."""
+        self._held = np.zeros((len(self.episodes), len(seq.feature_names)))
+        """Each episode's last finite features (what a stateful predictor gets instead of
+        non-finite ones)."""
 
     def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Start the ``live`` episodes (default: all).
@@ -201,25 +228,36 @@ class BatchedSequencer(EpisodeBatch):
 
         Returns:
             Every episode's active MPs (variable -> MP).
+
+        Raises:
+            DataError: a started episode's features are not finite (there is no MP to keep).
         """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
+        checked_features(xn[rows], seq.feature_names)
         stateful = getattr(seq.predictor, "stateful", False)
         if stateful:
             seq.predictor.reset_state(len(self.episodes))
+        finite = np.isfinite(xn).all(axis=1)
+        self._held[finite] = xn[finite]
         if rows:
-            phi = seq.heads(xn if stateful else xn[rows])
+            phi = seq.heads(np.where(finite[:, None], xn, self._held) if stateful else xn[rows])
             for j, i in enumerate(rows):
                 self.episodes[i].start(ts[i], xn[i], phi[i if stateful else j])
         return self.active
 
-    def step(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
+    def step(
+        self, t: Times, x: Features, live: LiveMask = None, stamp: Stamps = None
+    ) -> list[dict[str, str]]:
         """Advance the ``live`` episodes (default: all) one tick.
 
         Args:
             t: one time [s] or ``(N,)`` times.
-            x: features ``(N, d)``.
+            x: features ``(N, d)``; a row with a NaN or inf holds every MP of its episode
+                (``nonfinite="hold"``, the default) or raises (``"raise"``).
             live: ``(N,)`` bool, the episodes to advance (``None``: all).
+            stamp: when the features were measured [s], one time or ``(N,)`` times on the
+                clock of ``t`` (``None``: unknown; see :meth:`ConcurrentSequencer.step`).
 
         Returns:
             Every episode's active MPs (variable -> MP).
@@ -229,21 +267,29 @@ class BatchedSequencer(EpisodeBatch):
         """
         seq = self.sequencer
         ts, xn, rows = self._inputs(t, x, live, len(seq.feature_names))
+        stamps = self._stamps(stamp)
         for i in rows:
             try:
-                self.episodes[i].check_time(ts[i])
+                self.episodes[i].check_time(ts[i], stamps[i])
             except CpmpError as err:
                 raise type(err)(f"episode {i}: {err}") from err
         if not rows:
             return self.active
+        finite = np.isfinite(xn).all(axis=1)
+        self._held[finite] = xn[finite]
         stateful = getattr(seq.predictor, "stateful", False)
-        phi = seq.progress(xn if stateful else xn[rows])
         if stateful:
-            phi = phi[rows]
-        finite = np.isfinite(phi).all(axis=1).tolist()
-        for i, row, ok in zip(rows, phi.tolist(), finite, strict=True):
+            phi = seq.progress(np.where(finite[:, None], xn, self._held))[rows]
+            usable = rows
+        else:
+            usable = [i for i in rows if finite[i]]
+            phi = seq.progress(xn[usable]) if usable else np.zeros((0, 0))
+        rows_phi: dict[int, list[float]] = dict(zip(usable, phi.tolist(), strict=True))
+        ok = dict(zip(usable, np.isfinite(phi).all(axis=1).tolist(), strict=True))
+        for i in rows:
+            row = rows_phi[i] if finite[i] else None
             try:
-                self.episodes[i].advance(ts[i], xn[i], row, ok)
+                self.episodes[i].advance(ts[i], xn[i], row, ok.get(i, False), stamps[i])
             except CpmpError as err:
                 raise type(err)(f"episode {i}: {err}") from err
         return self.active

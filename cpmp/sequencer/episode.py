@@ -3,7 +3,8 @@
 :class:`SequencerEpisode` holds one episode's state (active MPs, events, notes, the switching
 rules' histories, the stall detector) and applies the transition rule to the φ it is handed:
 the start rule at :meth:`~SequencerEpisode.start`, the transitions, holds and recoveries at
-every :meth:`~SequencerEpisode.advance`. It reads the fitted sequencer only through its
+every :meth:`~SequencerEpisode.advance`, on the measurement time of each tick's features
+(:mod:`cpmp.sequencer.timing`). It reads the fitted sequencer only through its
 :class:`~cpmp.sequencer.model.TransitionModel`; :class:`~cpmp.sequencer.ConcurrentSequencer`
 drives one episode, :class:`~cpmp.sequencer.batch.BatchedSequencer` many.
 """
@@ -18,9 +19,10 @@ import numpy as np
 
 from cpmp.errors import DataError, NotFittedError
 from cpmp.records import SequencerNote, SwitchKind, TickInfo, TransitionEvent
-from cpmp.sequencer.inputs import checked_time
+from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
+from cpmp.sequencer.timing import MeasurementClock
 
 
 class PhiCheck(NamedTuple):
@@ -127,8 +129,13 @@ class SequencerEpisode:
         }
         self._coupled = c.coupling == "context"
         self._stall = StallDetector(model.feature_range, c.stall_time, c.rest_speed)
+        self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
         self._last_t: float | None = None
+        self._nonfinite = False
+        self.gave_up: float | None = None
+        """The time [s] the episode gave up (a stall no demonstrated transition resolves;
+        it switches no more), or ``None``."""
         self._plan: TransitionPlan | None = None
         self._tick: TickInfo | None = None
         self._pending: _PendingTick | None = None
@@ -171,11 +178,15 @@ class SequencerEpisode:
         self.active = self._initial_mps(phi)
         self.events = []
         self.notes = []
-        for rule in self._rules.values():
+        for v, rule in self._rules.items():
             rule.reset()
+            self._observe_entry(v, t, phi)
         self._holding = {v: None for v in model.graphs}
-        self._stall.reset(t, np.asarray(x, dtype=np.float64).reshape(-1))
+        state = np.asarray(x, dtype=np.float64).reshape(-1)
+        self._stall.reset(self._clock.reset(t, state), state)
         self._last_t = t
+        self._nonfinite = False
+        self.gave_up = None
         self._plan = None
         self._pending = None
         self._tick = TickInfo(
@@ -183,66 +194,82 @@ class SequencerEpisode:
         )
         return dict(self.active)
 
-    def check_time(self, t: float) -> float:
-        """The time of the next tick, checked.
+    def check_time(self, t: float, stamp: float | None = None) -> float:
+        """The time of the next tick, checked (and its features' stamp, if given).
 
         Args:
             t: the time [s].
+            stamp: when the tick's features were measured [s] (``None``: unknown).
 
         Returns:
             ``t`` as a float.
 
         Raises:
             NotFittedError: the episode was not started.
-            DataError: ``t`` is not finite or goes back in time.
+            DataError: ``t`` is not finite or goes back in time; ``stamp`` is not finite or
+                later than ``t``.
         """
         if not self.active:
             raise NotFittedError("call reset(t, x) before step(t, x)")
         t = checked_time(t)
         if self._last_t is not None and t < self._last_t:
             raise DataError(f"time went backwards: step at t={t} after t={self._last_t}")
+        checked_stamp(stamp, t)
         return t
 
     def advance(
-        self, t: float, state: np.ndarray, phi: list[float], finite: bool
+        self,
+        t: float,
+        state: np.ndarray,
+        phi: list[float] | None,
+        finite: bool,
+        stamp: float | None = None,
     ) -> dict[str, str]:
         """One tick of the transition rule: switches, holds and stall recovery.
 
         Args:
             t: the time [s] (checked by :meth:`check_time`).
             state: the features ``(d,)``.
-            phi: the nodes' φ ``(K,)`` as a list.
+            phi: the nodes' φ ``(K,)`` as a list; ``None``: the features are not finite (the
+                predictor was not evaluated).
             finite: whether all of ``phi`` is finite.
+            stamp: when ``state`` was measured [s] (checked by :meth:`check_time`; ``None``:
+                unknown, see :mod:`cpmp.sequencer.timing`).
 
         Returns:
             Variable -> active MP after the tick.
 
         Raises:
-            DataError: a φ is not finite and the option ``nonfinite`` is ``raise``.
+            DataError: the features or a φ are not finite and the option ``nonfinite`` is
+                ``raise``.
         """
         model = self.model
         c = model.config
         self._last_t = t
-        if not finite:
-            bad = [
-                f"{v}/{mp}"
-                for (v, mp), f in zip(model.nodes.keys, phi, strict=True)
-                if not math.isfinite(f)
-            ]
-            text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
-            if c.nonfinite == "raise":
-                raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
-            if not self.notes or self.notes[-1].kind != "nonfinite":
-                self.notes.append(SequencerNote(t, "nonfinite", "", text))
-            self._tick = TickInfo(t, model.nodes.phi_dict(phi), {}, dict(self.active))
-            self._pending = None
-            return dict(self.active)
-        self._stall.observe(t, state)
+        reading = self._clock.tick(t, state if phi is not None else None, stamp)
+        if reading.clock_step > 0.0:
+            period = self._clock.period or 0.0
+            self.notes.append(
+                SequencerNote(
+                    t,
+                    "clock_step",
+                    "",
+                    f"the time jumped by {reading.clock_step + period:.3f} s (ticks every "
+                    f"{period:.3f} s): a clock step, counted as one tick",
+                )
+            )
+        if phi is None or not finite:
+            return self._hold_nonfinite(t, state, phi)
+        self._nonfinite = False
+        m = reading.m
+        if reading.fresh:
+            self._stall.observe(m, state)
         if self._plan is None:
             context = dict(self.active)
             self._plan = TransitionPlan(context, self._transition_plan(context))
         context, plan = self._plan
         coupled = self._coupled
+        stopped = self.gave_up is not None
         held: dict[str, str] = {}
         rows = []
         fired = False
@@ -256,9 +283,11 @@ class SequencerEpisode:
                     if phi[column] < bound:
                         bad[successor] += 1
             rows.append(TickRow(v, current, names, p, bad))
+            if stopped:
+                continue
             gate = exit_p > c.min_exit
             allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
-            k = self._rules[v].update(t, p, allowed)
+            k = self._rules[v].update(m, p, allowed)
             if coupled and gate and not all(allowed):
                 top = 0 if len(p) == 1 else max(range(len(p)), key=p.__getitem__)
                 if p[top] > c.threshold and not allowed[top] and k != top:
@@ -267,30 +296,101 @@ class SequencerEpisode:
                         self._note_hold(t, v, current, names[top], p[top], context, phi)
             self._holding[v] = held.get(v)
             if k is not None:
-                self._switch(t, v, names[k], p[k], state, "switch")
+                self._switch(t, m, v, names[k], p[k], state, phi, "switch")
                 fired = True
-        if not fired and c.recovery and self._stall.stalled(t):
-            candidates = [
-                Candidate(row.variable, row.current, s, q, b)
-                for row in rows
-                for s, q, b in zip(row.successors, row.p, row.inconsistent, strict=True)
-            ]
-            choice = recovery_choice(candidates, c.recovery_threshold)
-            if choice is not None:
-                v = choice.variable
-                self._switch(t, v, choice.target, choice.p, state, "recovery")
-                self.notes.append(
-                    SequencerNote(
-                        t,
-                        "recovery",
-                        v,
-                        f"stall of {c.stall_time:g} s resolved: {v}: {choice.source} -> "
-                        f"{choice.target} (p={choice.p:.2f})",
-                    )
-                )
+        if not (fired or stopped) and c.recovery and reading.fresh and self._stall.stalled(m):
+            self._resolve_stall(t, m, state, phi, rows, plan)
         active = dict(self.active)
         self._pending = _PendingTick(t, phi, rows, active, held)
         return dict(active)
+
+    def _hold_nonfinite(
+        self, t: float, state: np.ndarray, phi: list[float] | None
+    ) -> dict[str, str]:
+        """A tick with non-finite features (``phi`` ``None``) or φ: every MP kept, noted once.
+
+        Raises:
+            DataError: the option ``nonfinite`` is ``raise``.
+        """
+        model = self.model
+        if phi is None:
+            bad = [str(j) for j in np.flatnonzero(~np.isfinite(state))]
+            text = f"non-finite features (columns {', '.join(bad[:5])}); every MP kept"
+            phi = [math.nan] * len(model.nodes.keys)
+        else:
+            bad = [
+                f"{v}/{mp}"
+                for (v, mp), f in zip(model.nodes.keys, phi, strict=True)
+                if not math.isfinite(f)
+            ]
+            text = f"non-finite φ for {', '.join(bad[:5])}; every MP kept"
+        if model.config.nonfinite == "raise":
+            raise DataError(f"at t={t}: {text} (sequencer option nonfinite='raise')")
+        if not self._nonfinite:
+            self.notes.append(SequencerNote(t, "nonfinite", "", text))
+            self._nonfinite = True
+        self._tick = TickInfo(t, model.nodes.phi_dict(phi), {}, dict(self.active))
+        self._pending = None
+        return dict(self.active)
+
+    def _resolve_stall(
+        self,
+        t: float,
+        m: float,
+        state: np.ndarray,
+        phi: list[float],
+        rows: list[TickRow],
+        plan: list[PlanRow],
+    ) -> None:
+        """A stall: recover with a consistent transition, or give up, or (at the end) nothing.
+
+        See :mod:`cpmp.sequencer.switching` (Recovery).
+        """
+        model = self.model
+        c = model.config
+        candidates = []
+        for row, plan_row in zip(rows, plan, strict=True):
+            # the demonstrator, in the demonstrated state nearest this one, went to `nearest`
+            nearest = model.coupling.nearest_target(row.variable, row.current, state, self.active)
+            candidates += [
+                Candidate(row.variable, row.current, s, q, b, n == 0 and nearest in (None, s))
+                for s, q, b, n in zip(
+                    row.successors, row.p, row.inconsistent, plan_row.unseen, strict=True
+                )
+            ]
+        choice = recovery_choice(candidates, c.recovery_threshold)
+        if choice is not None:
+            v = choice.variable
+            self._switch(t, m, v, choice.target, choice.p, state, phi, "recovery")
+            self.notes.append(
+                SequencerNote(
+                    t,
+                    "recovery",
+                    v,
+                    f"stall of {c.stall_time:g} s resolved: {v}: {choice.source} -> "
+                    f"{choice.target} (p={choice.p:.2f})",
+                )
+            )
+            return
+        open_rows = [row for row in plan if 0 in row.unseen]
+        if not open_rows:
+            return  # every node is final here: the task's demonstrated end
+        self.gave_up = t
+        waiting = "; ".join(
+            f"{row.variable}: {row.current} -> "
+            + ", ".join(s for s, n in zip(row.successors, row.unseen, strict=True) if n == 0)
+            for row in open_rows
+        )
+        self.notes.append(
+            SequencerNote(
+                t,
+                "give_up",
+                "",
+                f"stall of {c.stall_time:g} s that no demonstrated switch resolves (made by the "
+                f"demonstrator here, p >= {c.recovery_threshold:g}); demonstrated in this "
+                f"context: {waiting}; every MP kept from now on",
+            )
+        )
 
     def _initial_mps(self, phi: np.ndarray) -> dict[str, str]:
         """The start rule on every head's φ ``(H,)``: variable -> MP.
@@ -374,13 +474,39 @@ class SequencerEpisode:
             )
         )
 
+    def _observe_entry(self, v: str, m: float, phi: list[float] | np.ndarray) -> None:
+        """Give ``v``'s rule the ``p`` of its new node's successors measured at ``m`` [s].
+
+        The measurement on which the node became active is the first of its history, so the
+        rule can fire ``patience`` after it, whatever the control rate.
+        """
+        nodes = self.model.nodes
+        current = self.active[v]
+        _, columns = nodes.successors[(v, current)]
+        if columns:
+            exit_p = float(phi[nodes.index[(v, current)]])
+            self._rules[v].observe(m, [exit_p * (1.0 - float(phi[i])) for i in columns])
+
     def _switch(
-        self, t: float, v: str, target: str, p: float, state: np.ndarray, kind: SwitchKind
+        self,
+        t: float,
+        m: float,
+        v: str,
+        target: str,
+        p: float,
+        state: np.ndarray,
+        phi: list[float],
+        kind: SwitchKind,
     ) -> None:
-        """Switch ``v`` to ``target`` at time ``t`` [s] with probability ``p``, and record it."""
+        """Switch ``v`` to ``target`` at time ``t`` [s] with probability ``p``, and record it.
+
+        ``m`` is the measurement time of the features ``state`` it was decided on; their φ
+        (``phi``) gives the new node's successors' first ``p``.
+        """
         self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
         self.active[v] = target
         self._rules[v].reset()
+        self._observe_entry(v, m, phi)
         self._holding[v] = None
-        self._stall.switched(t)
+        self._stall.switched(m)
         self._plan = None

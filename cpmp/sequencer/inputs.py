@@ -1,4 +1,4 @@
-"""Checks on what the sequencers are given: times, feature vectors, demonstrations.
+"""Checks on what the sequencers are given: times, stamps, feature vectors, demonstrations.
 
 Shared by :class:`~cpmp.sequencer.ConcurrentSequencer`, the batches of
 :mod:`cpmp.sequencer.episode` and :class:`~cpmp.baselines.GoalNearestSequencer`, so that the same
@@ -26,18 +26,48 @@ def checked_time(t: float) -> float:
     return t
 
 
-def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str]) -> np.ndarray:
+def checked_stamp(stamp: float | None, t: float) -> float | None:
+    """A measurement time ``stamp`` [s] of features given at time ``t`` [s], checked.
+
+    Args:
+        stamp: when the features were measured, on the caller's clock; ``None``: unknown.
+        t: the tick's time [s] (checked).
+
+    Returns:
+        ``stamp`` as a float, or ``None``.
+
+    Raises:
+        DataError: ``stamp`` is not finite or is later than ``t``.
+    """
+    if stamp is None:
+        return None
+    stamp = float(stamp)
+    if not math.isfinite(stamp):
+        raise DataError(f"a measurement stamp must be finite, got stamp={stamp}")
+    if stamp > t + 1e-9:
+        raise DataError(
+            f"features measured at stamp={stamp} are given at t={t}: a stamp is the time the "
+            "features were measured, on the same clock as t, at or before t"
+        )
+    return stamp
+
+
+def checked_features(
+    x: np.ndarray | torch.Tensor, feature_names: Sequence[str], finite: bool = True
+) -> np.ndarray:
     """Features ``x (..., d)`` as a float64 array, checked.
 
     Args:
         x: the features, NumPy or torch.
         feature_names: the ``d`` names the features must match in number.
+        finite: whether every feature must be finite.
 
     Returns:
         ``x`` as float64 ``(..., d)``.
 
     Raises:
-        DataError: the last axis is not ``d`` long, or a feature is not finite.
+        DataError: the last axis is not ``d`` long, or (with ``finite``) a feature is not
+            finite.
     """
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
@@ -47,7 +77,7 @@ def checked_features(x: np.ndarray | torch.Tensor, feature_names: Sequence[str])
             f"expected features with {len(feature_names)} entries "
             f"({', '.join(list(feature_names)[:4])}, ...), got shape {tuple(xn.shape)}"
         )
-    if not np.isfinite(xn).all():
+    if finite and not np.isfinite(xn).all():
         raise DataError("features contain NaN or inf; the sequencer needs finite features")
     return xn
 

@@ -135,6 +135,7 @@ class ConcurrentSequencer:
         )
         """What each episode reads (:class:`~cpmp.sequencer.model.TransitionModel`)."""
         self._episode = SequencerEpisode(self.transition_model)
+        self._held: np.ndarray | None = None
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -285,15 +286,38 @@ class ConcurrentSequencer:
         """
         t = checked_time(t)
         self.predictor.reset_state(1)
-        phi = self.heads(np.asarray(x, dtype=np.float64).reshape(-1))
-        return self._episode.start(t, x, phi)
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """Advance one tick at time ``t`` [s] with features ``x (d,)``; returns the active MPs."""
-        t = self._episode.check_time(t)
         state = np.asarray(x, dtype=np.float64).reshape(-1)
+        phi = self.heads(state)
+        self._held = state
+        return self._episode.start(t, state, phi)
+
+    def step(self, t: float, x: np.ndarray, *, stamp: float | None = None) -> dict[str, str]:
+        """Advance one tick at time ``t`` [s] with features ``x (d,)``.
+
+        The switching rule runs on the time the features were measured
+        (:mod:`cpmp.sequencer.switching`): features that are not a new measurement (``stamp``
+        not advanced; without ``stamp``, the same vector as the last tick's) add no evidence.
+
+        Args:
+            t: the time [s], not before the last tick's.
+            x: the features ``(d,)``. With a NaN or inf, every MP is kept and noted once per
+                run of such ticks (``nonfinite="hold"``, the default), or
+                :class:`~cpmp.errors.DataError` is raised (``nonfinite="raise"``).
+            stamp: when ``x`` was measured [s], on the clock of ``t``, at or before ``t``
+                (e.g. a camera frame's time); ``None``: unknown.
+
+        Returns:
+            Variable -> active MP after the tick.
+        """
+        t = self._episode.check_time(t, stamp)
+        state = checked_features(np.asarray(x).reshape(-1), self.feature_names, finite=False)
+        if not np.isfinite(state).all():
+            if getattr(self.predictor, "stateful", False) and self._held is not None:
+                self.progress(self._held)  # a stateful stream gets the last finite features
+            return self._episode.advance(t, state, None, False, stamp)
+        self._held = state
         phi = self.progress(state)
-        return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()))
+        return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()), stamp)
 
     def batched(self, n: int) -> BatchedSequencer:
         """``n`` independent episodes of this sequencer, stepped together.

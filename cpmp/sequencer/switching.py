@@ -3,17 +3,33 @@
 Pure Python on top of the per-tick transition probabilities; used by
 :class:`cpmp.sequencer.ConcurrentSequencer`.
 
-**Switching rules** decide, per variable and tick, whether the best successor ``s`` of the
-current node fires, given its transition probability ``p_s(t) = φ_current(x) · (1 - φ_s(x))``:
+**Switching rules** decide, per variable, whether the best successor ``s`` of the current node
+fires, given its transition probability ``p_s = φ_current(x) · (1 - φ_s(x))``:
 
 * ``paper`` — the paper's sentence read literally: "above a certain threshold and has not
-  improved over the last 50 ms": ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
-  min_improvement``, where ``p(t - patience)`` is the same successor's ``p`` at the last tick at
-  or before ``t - patience``. A ``p`` that peaks above the threshold and then falls back fires;
-  a ``p`` still rising waits.
+  improved over the last 50 ms": ``p(m) > threshold`` and ``p(m) <= p(m - patience) +
+  min_improvement``, where ``m`` is the time the features were measured and ``p(m - patience)``
+  the same successor's ``p`` interpolated linearly between the two measurements around
+  ``m - patience``. A ``p`` that peaks above the threshold and then falls back fires; a ``p``
+  still rising waits.
 * ``plateau`` — ``p`` must stay above the threshold for ``patience`` seconds without a new
   maximum (cpmp's earlier rule). It misses switches whose ``p`` crosses the threshold near its
   peak and then declines as the next MPs start to move.
+
+**Time and fresh input (the rules' contract).** Both rules compare ``p`` at *measurement
+times* (:class:`cpmp.sequencer.timing.MeasurementClock`), not at ticks, so they decide the same
+at any control rate: tested at 30 Hz to 1 kHz, with ±30 % jitter of the period and dropped
+ticks (a switch comes within one tick of the time an ideal loop would switch). A
+tick whose features are not a new measurement (the stamp passed to ``step`` has not advanced;
+without a stamp, the same feature vector as before) adds no evidence: ``p`` must fail to improve
+over at least ``patience`` of measurement time, spanned by at least two distinct measurements
+(the first one the measurement at which the node became active). A sensor slower than the loop
+is therefore supported at any rate with stamps, and without them up to ``stale_time`` between
+refreshes (default 0.25 s: 4 Hz); a switch then waits for the next refresh (up to one sensor
+period late), and with a sensor period longer than ``patience`` the improvement over
+``patience`` is read off the line between the last two measurements. A step of the caller's
+clock (a tick interval of more than 5 median intervals) is not time that passed. Features
+older than the last measurement (a stamp that goes back) are ignored.
 
 **Coupling** (the paper's discussion asks for more than the shared features): for every
 demonstrated switch ``source -> target`` of a variable, the MPs every *other* variable was
@@ -25,10 +41,18 @@ MP whose predicted progress φ is more than a margin below the least demonstrate
 back. It is learned from the labels alone (nothing task-specific), per other variable (a
 product of marginal sets, more lenient than requiring a demonstrated joint context).
 
-**Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds while
-the features are at rest (every feature moves slower than ``rest_speed`` times its training
-range per second). Then the single candidate transition most consistent with the coupling, and
-among those the most probable, fires if its ``p`` reaches ``recovery_threshold``.
+**Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds of
+measurement time while the features are at rest (every feature moves slower than
+``rest_speed`` times its training range per second). Only a switch the demonstrator made here
+may resolve it: every other variable runs an MP seen at that switch, and of the demonstrated
+switches out of the same MP in this context, the one in the state nearest the current one
+(:meth:`Coupling.nearest_target`) goes there. Among those whose ``p`` reaches
+``recovery_threshold``, the one with the fewest other variables less far than at any
+demonstrated switch (a stall is often an MP that cannot go further: fingers closed on an
+object), then the most probable, fires. When none may, the
+sequencer gives up (a ``give_up`` note; it switches no more) — unless every variable's node is
+*final* in the current context (no successor demonstrated with the other variables' current
+MPs): that is the task's demonstrated end, and nothing happens.
 """
 
 from __future__ import annotations
@@ -43,22 +67,27 @@ import numpy as np
 from cpmp.config import COUPLINGS, SWITCH_RULES
 from cpmp.data import Demonstration
 from cpmp.progress import LabelKind, demo_labels
-
-_EPS_T = 1e-9
-"""Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
+from cpmp.sequencer.timing import EPS_T
 
 
 class SwitchRule(Protocol):
-    """Per-variable switching state: fed every tick with the successors' ``p``."""
+    """Per-variable switching state, fed with the successors' ``p`` at measurement times."""
 
     def reset(self) -> None:
         """Forget the history (called when the variable's node changes)."""
 
+    def observe(self, t: float, p: Sequence[float]) -> None:
+        """Record the successors' ``p`` measured at ``t`` [s] without deciding.
+
+        Called with the measurement at which the node became active.
+        """
+
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record the successors' ``p`` at time ``t`` [s] and decide.
+        """Record the successors' ``p`` measured at ``t`` [s] and decide.
 
         Args:
-            t: the tick's time [s].
+            t: when the features were measured [s] (:class:`~cpmp.sequencer.timing.Reading`);
+                a ``t`` not later than the last one's is a repeat and adds no evidence.
             p: each successor's transition probability.
             allowed: per successor, whether it may fire (the coupling's and the exit gate).
 
@@ -79,7 +108,11 @@ def _best(p: Sequence[float], allowed: Sequence[bool]) -> int | None:
 
 
 class PaperRule:
-    """``p(t) > threshold`` and ``p(t) <= p(t - patience) + min_improvement`` (see module doc)."""
+    """``p(m) > threshold`` and ``p(m) <= p(m - patience) + min_improvement`` (see module doc).
+
+    ``p(m - patience)`` is interpolated linearly between the two measurements around it; the
+    rule waits until the measurements span ``patience``.
+    """
 
     def __init__(self, threshold: float, patience: float, min_improvement: float) -> None:
         self.threshold = threshold
@@ -91,21 +124,32 @@ class PaperRule:
         """Forget the history (called when the variable's node changes)."""
         self._history.clear()
 
-    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record the successors' ``p`` at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
+    def observe(self, t: float, p: Sequence[float]) -> None:
+        """Record ``p`` measured at ``t`` [s] (a repeat of the last time is not recorded)."""
         history = self._history
-        history.append((t, list(p)))
-        # Keep exactly one entry at or before t - patience: the reference tick.
-        reference = t - self.patience + _EPS_T
+        if not history or t > history[-1][0] + EPS_T:
+            history.append((t, list(p)))
+        # Keep exactly one entry at or before t - patience: the reference's left neighbour.
+        reference = t - self.patience + EPS_T
         while len(history) >= 2 and history[1][0] <= reference:
             history.popleft()
+
+    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        """Record ``p`` measured at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
+        self.observe(t, p)
         best = _best(p, allowed)
         if best is None or p[best] <= self.threshold:
             return None
-        t_ref, p_ref = history[0]
-        if t_ref > reference:
-            return None  # the node has not been active for `patience` yet
-        return best if p[best] <= p_ref[best] + self.min_improvement else None
+        history = self._history
+        reference = t - self.patience
+        t0, p0 = history[0]
+        if t0 > reference + EPS_T:
+            return None  # the measurements do not span `patience` yet
+        p_ref = p0[best]
+        if len(history) >= 2 and reference - t0 > EPS_T:
+            t1, p1 = history[1]
+            p_ref += (reference - t0) / (t1 - t0) * (p1[best] - p_ref)
+        return best if p[best] <= p_ref + self.min_improvement else None
 
 
 class PlateauRule:
@@ -123,8 +167,11 @@ class PlateauRule:
         """Forget the history (called when the variable's node changes)."""
         self._target = None
 
+    def observe(self, t: float, p: Sequence[float]) -> None:
+        """Nothing: the plateau starts at the first :meth:`update` above the threshold."""
+
     def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record the successors' ``p`` at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
+        """Record ``p`` measured at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
         best = _best(p, allowed)
         if best is None or p[best] <= self.threshold:
             self._target = None
@@ -133,7 +180,7 @@ class PlateauRule:
             self._target, self._best, self._since = best, p[best], t
         elif p[best] > self._best + self.min_improvement:
             self._best, self._since = p[best], t
-        if t - self._since >= self.patience - _EPS_T:
+        if t - self._since >= self.patience - EPS_T:
             self._target = None
             return best
         return None
@@ -176,6 +223,28 @@ class Gates(NamedTuple):
     bounds: list[ProgressBound]
 
 
+@dataclass(frozen=True, eq=False)
+class SwitchInstance:
+    """One demonstrated switch of a variable out of an MP (:attr:`Coupling.instances`).
+
+    Attributes:
+        target: the MP it switched to.
+        state: the features ``(d,)`` at the switch (the first sample under ``target``).
+        context: each other variable's MPs just before and at the switch.
+    """
+
+    target: str
+    state: np.ndarray
+    context: dict[str, frozenset[str]]
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, SwitchInstance)
+            and (self.target, self.context) == (other.target, other.context)
+            and np.array_equal(self.state, other.state)
+        )
+
+
 @dataclass
 class Coupling:
     """Contexts of the demonstrated switches (see module doc).
@@ -185,10 +254,14 @@ class Coupling:
         progress: ``(variable, source, target)`` -> other variable -> MP -> the lowest expected
             progress (eq. 1) that MP had reached at a demonstrated switch, for other variables
             that kept running the same MP through the switch.
+        instances: ``(variable, source)`` -> every demonstrated switch of ``variable`` out of
+            ``source``: its target, the features at it and the other variables' MPs around
+            it (what a recovery reads: :meth:`nearest_target`).
     """
 
     contexts: dict[Edge, dict[str, frozenset[str]]] = field(default_factory=dict)
     progress: dict[Edge, dict[str, dict[str, float]]] = field(default_factory=dict)
+    instances: dict[tuple[str, str], list[SwitchInstance]] = field(default_factory=dict)
 
     @classmethod
     def learn(
@@ -220,6 +293,7 @@ class Coupling:
         """
         contexts: dict[Edge, dict[str, set[str]]] = {}
         progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
+        instances: dict[tuple[str, str], list[SwitchInstance]] = {}
         variables = list(variables)
         if progress is None:
             progress = [demo_labels(demo, variables, transform, labels) for demo in demos]
@@ -231,17 +305,23 @@ class Coupling:
                     edge = (v, str(lab[i - 1]), str(lab[i]))
                     ctx = contexts.setdefault(edge, {})
                     prog = progress_seen.setdefault(edge, {})
+                    around = {}
                     for u in variables:
                         if u == v:
                             continue
                         before, after = str(mps[u][i - 1]), str(mps[u][i])
                         ctx.setdefault(u, set()).update((before, after))
+                        around[u] = frozenset((before, after))
                         if before == after:
                             seen = prog.setdefault(u, {})
                             seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
+                    instances.setdefault(edge[:2], []).append(
+                        SwitchInstance(edge[2], demo.features[i].copy(), around)
+                    )
         return cls(
             {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
             {e: c for e, c in progress_seen.items() if c},
+            instances,
         )
 
     def inconsistent(
@@ -304,6 +384,35 @@ class Coupling:
                     bounds.append(ProgressBound(u, seen[mp], seen[mp] - margin))
         return Gates(unseen, bounds)
 
+    def nearest_target(
+        self, variable: str, source: str, x: np.ndarray, active: Mapping[str, str]
+    ) -> str | None:
+        """What the demonstrator did leaving ``source`` in the demonstrated state nearest ``x``.
+
+        Among the demonstrated switches of ``variable`` out of ``source`` made while every
+        other variable ran its MP in ``active`` (just before or at the switch), the one whose
+        features are nearest ``x`` (Euclidean: the geometry of cpmp's global feature
+        scaling).
+
+        Args:
+            variable: the control variable.
+            source: its active MP.
+            x: the features now ``(d,)``.
+            active: variable -> active MP.
+
+        Returns:
+            That switch's target; ``None`` if no switch out of ``source`` was demonstrated in
+            this context (or the coupling keeps no switch states: a checkpoint of version 2).
+        """
+        best, target = np.inf, None
+        for inst in self.instances.get((variable, source), []):
+            if any(u in active and active[u] not in mps for u, mps in inst.context.items()):
+                continue
+            distance = float(np.sum((inst.state - x) ** 2))
+            if distance < best:
+                best, target = distance, inst.target
+        return target
+
     def describe(self, variable: str) -> list[str]:
         """One line per switch of ``variable``: the other variables' demonstrated MPs.
 
@@ -343,6 +452,17 @@ class Coupling:
                 }
                 for (v, s, t), c in sorted(self.contexts.items())
             ],
+            "instances": [
+                {
+                    "variable": v,
+                    "source": s,
+                    "target": inst.target,
+                    "state": inst.state.tolist(),
+                    "context": {u: sorted(m) for u, m in sorted(inst.context.items())},
+                }
+                for (v, s), insts in sorted(self.instances.items())
+                for inst in insts
+            ],
         }
 
     @classmethod
@@ -359,7 +479,16 @@ class Coupling:
             }
             if prog:
                 progress[edge] = prog
-        return cls(contexts, progress)
+        instances: dict[tuple[str, str], list[SwitchInstance]] = {}
+        for r in data.get("instances", []) if isinstance(data, Mapping) else []:
+            instances.setdefault((str(r["variable"]), str(r["source"])), []).append(
+                SwitchInstance(
+                    str(r["target"]),
+                    np.asarray(r["state"], dtype=np.float64),
+                    {str(u): frozenset(map(str, m)) for u, m in r["context"].items()},
+                )
+            )
+        return cls(contexts, progress, instances)
 
 
 def indicator_features(x: np.ndarray) -> np.ndarray:
@@ -375,6 +504,8 @@ def indicator_features(x: np.ndarray) -> np.ndarray:
 class StallDetector:
     """Tracks when any variable last switched and when the features last moved.
 
+    Times are measurement times (:mod:`cpmp.sequencer.timing`): feed it new measurements only,
+    so that time without them (a clock step, a sensor that stopped) is never a stall.
     ``feature_range (d,)``: each feature's range in the training data; motion is measured
     relative to it, so the detector does not depend on the features' units. Features with a
     range of 0 are ignored (:meth:`ConcurrentSequencer.fit` gives indicator features range 0:
@@ -417,7 +548,7 @@ class StallDetector:
 
     def stalled(self, t: float) -> bool:
         """No switch for ``stall_time`` and no motion for ``stall_time``."""
-        since = t - self.stall_time + _EPS_T
+        since = t - self.stall_time + EPS_T
         return self.last_switch <= since and self.last_motion <= since
 
 
@@ -430,7 +561,10 @@ class Candidate(NamedTuple):
         target: a successor of ``source``.
         p: the transition probability at this tick.
         n_inconsistent: the number of other variables inconsistent with the demonstrated
-            contexts of this switch.
+            contexts of this switch (an MP never seen there, or one less far than there).
+        demonstrated: whether the demonstrator made this switch here: every other variable
+            runs an MP seen at it, and of the demonstrated switches out of ``source`` in this
+            context, the one in the state nearest the current one goes to ``target``.
     """
 
     variable: str
@@ -438,6 +572,7 @@ class Candidate(NamedTuple):
     target: str
     p: float
     n_inconsistent: int
+    demonstrated: bool = True
 
 
 def _recovery_rank(c: Candidate) -> tuple[int, float, str, str]:
@@ -453,10 +588,12 @@ def recovery_choice(candidates: Sequence[Candidate], threshold: float) -> Candid
         threshold: the least ``p`` a recovery needs.
 
     Returns:
-        The candidate with the fewest inconsistent other variables and, among those, the
-        highest ``p``, if that ``p`` reaches ``threshold``; else ``None``.
+        Among the ``demonstrated`` candidates whose ``p`` reaches ``threshold``, the one with
+        the fewest inconsistent other variables and, among those, the most probable (ties: by
+        variable, then target); ``None`` if there is none: a switch the demonstrator did not
+        make here is never a recovery.
     """
-    ok = [c for c in candidates if c.p >= threshold]
+    ok = [c for c in candidates if c.demonstrated and c.p >= threshold]
     if not ok:
         return None
     return min(ok, key=_recovery_rank)
@@ -472,6 +609,7 @@ __all__ = [
     "PlateauRule",
     "ProgressBound",
     "StallDetector",
+    "SwitchInstance",
     "SwitchRule",
     "indicator_features",
     "make_rule",

@@ -111,13 +111,15 @@ def _assert_same_episode(single, batched):
 
 
 def _single_runs(seq, x, lengths):
-    """Each episode alone: reset on tick 0, then step while the tick is below its length."""
+    """Each episode alone: reset on tick 0, then step while the tick is below its length.
+
+    Every tick is a new measurement (its stamp), also on the streams' exact plateaus."""
     out = []
     for i, n_ticks in enumerate(lengths):
         actives = [seq.reset(0.0, x[0, i])]
         ticks = [seq.last_tick]
         for k in range(1, n_ticks):
-            actives.append(seq.step(k * DT, x[k, i]))
+            actives.append(seq.step(k * DT, x[k, i], stamp=k * DT))
             ticks.append(seq.last_tick)
         out.append((actives, list(seq.events), list(seq.notes), ticks))
     return out
@@ -131,7 +133,7 @@ def _batched_run(batch, x, lengths):
     ticks = [[ep.last_tick] for ep in batch.episodes]
     for k in range(1, int(lengths.max())):
         live = k < lengths
-        result = batch.step(k * DT, x[k], live=live)
+        result = batch.step(k * DT, x[k], live=live, stamp=k * DT)
         for i in np.flatnonzero(live):
             actives[i].append(result[i])
             ticks[i].append(batch.episodes[i].last_tick)
@@ -143,8 +145,9 @@ def _batched_run(batch, x, lengths):
 def test_batched_step_equals_single_steps_exactly():
     seq = _two_chains()
     n, ticks = 12, 160
-    x = _streams(n, ticks, seed=2)
+    x = _streams(n, ticks, seed=22)
     x[40, 5, 1] = 2.0  # one non-finite φ in one episode at one tick
+    x[30:33, 0] = np.nan  # three ticks of NaN features in another: the predictor never sees them
     lengths = np.random.default_rng(4).integers(60, ticks + 1, n)
     lengths[0] = ticks
     single = _single_runs(seq, x, lengths)
@@ -156,7 +159,9 @@ def test_batched_step_equals_single_steps_exactly():
     # the streams exercise every path, at different ticks in different episodes
     kinds = {e.kind for _, events, _, _ in single for e in events}
     notes = {note.kind for _, _, episode_notes, _ in single for note in episode_notes}
-    assert kinds == {"switch", "recovery"} and notes == {"hold", "recovery", "nonfinite"}
+    assert kinds == {"switch", "recovery"}
+    assert notes == {"hold", "recovery", "give_up", "nonfinite"}
+    assert [n.kind for n in single[0][2]].count("nonfinite") == 1  # one note for the burst
     first_switch = {events[0].t for _, events, _, _ in single if events}
     assert len(first_switch) >= 5
 
@@ -235,10 +240,21 @@ def test_torch_input_and_bad_inputs():
         batch.step(math.nan, x[1])
     with pytest.raises(DataError, match="one time or 2 times"):
         batch.step(np.array([DT, DT, DT]), x[1])
+    with pytest.raises(DataError, match="one time or 2 times"):
+        batch.step(DT, x[1], stamp=[0.0, 0.0, 0.0])
+    with pytest.raises(DataError, match="stamp"):
+        batch.step(DT, x[1], stamp=[0.0, 2 * DT])  # measured after it is given
     bad = x[1].copy()
     bad[0, 0] = np.inf
     with pytest.raises(DataError, match="NaN or inf"):
-        batch.step(DT, bad)
+        batch.reset(0.0, bad)  # no MP to keep at the start
+    strict = _two_chains(nonfinite="raise").batched(2)
+    strict.reset(0.0, x[0])
+    with pytest.raises(DataError, match=r"episode 0: .*non-finite features \(columns 0\)"):
+        strict.step(DT, bad)
+    batch.reset(0.0, x[0])
+    assert batch.step(DT, bad) == batch.active  # held (nonfinite="hold")
+    assert [n.kind for n in batch.notes[0]] == ["nonfinite"] and not batch.notes[1]
     for n in (0, -1, 2.5, True):
         with pytest.raises(ConfigError, match="n >= 1"):
             seq.batched(n)

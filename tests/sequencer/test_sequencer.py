@@ -50,11 +50,13 @@ def test_plateau_switch_after_patience_without_improvement():
         switch_rule="plateau", threshold=0.65, patience=0.05, min_improvement=1e-3
     )
     seq.reset(0.0, [0.0, 0.0, 0.0])
-    # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant
+    # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant, each tick a new
+    # measurement (its stamp; an unchanged vector without one adds no evidence)
     for k in range(1, 5):
-        assert seq.step(0.01 * k, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.01 .. 0.04 s: waiting
-    assert seq.step(0.05, [0.7, 0.0, 0.0]) == {"v": "A"}  # 0.04 s since first above threshold
-    assert seq.step(0.06, [0.7, 0.0, 0.0]) == {"v": "B"}  # 50 ms without improvement
+        t = 0.01 * k
+        assert seq.step(t, [0.7, 0.0, 0.0], stamp=t) == {"v": "A"}  # 0.01 .. 0.04 s: waiting
+    assert seq.step(0.05, [0.7, 0.0, 0.0], stamp=0.05) == {"v": "A"}  # 0.04 s above threshold
+    assert seq.step(0.06, [0.7, 0.0, 0.0], stamp=0.06) == {"v": "B"}  # 50 ms, no improvement
     (event,) = seq.events
     assert (event.t, event.source, event.target) == (0.06, "A", "B")
     assert event.probability == pytest.approx(0.7)
@@ -72,8 +74,9 @@ def test_plateau_improving_probability_delays_switch():
     flat = p - 0.01  # the last value stepped
     for _ in range(4):  # then flat: no switch before 50 ms passed since the last improvement
         t = round(t + 0.01, 10)
-        assert seq.step(t, [flat, 0.0, 0.0]) == {"v": "A"}
-    assert seq.step(round(t + 0.01, 10), [flat, 0.0, 0.0]) == {"v": "B"}
+        assert seq.step(t, [flat, 0.0, 0.0], stamp=t) == {"v": "A"}
+    t = round(t + 0.01, 10)
+    assert seq.step(t, [flat, 0.0, 0.0], stamp=t) == {"v": "B"}
 
 
 def test_plateau_creeping_improvement_below_tolerance_does_not_block():

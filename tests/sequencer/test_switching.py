@@ -1,5 +1,6 @@
 """Switching rules, learned coupling between graphs, stall recovery and non-finite progress."""
 
+import itertools
 import math
 from typing import ClassVar
 
@@ -249,15 +250,16 @@ def test_no_recovery_while_moving_or_below_the_relaxed_threshold():
     assert moving.active == {"v": "A"} and low.active == {"v": "A"}
 
 
-def test_recovery_prefers_consistent_then_probable():
+def test_recovery_takes_demonstrated_switches_consistent_then_probable():
     cands = [
         Candidate("u", "A", "B", 0.6, 1),
         Candidate("w", "C", "D", 0.4, 0),
         Candidate("w", "C", "E", 0.5, 0),
+        Candidate("x", "F", "G", 0.9, 0, demonstrated=False),
     ]
     assert recovery_choice(cands, 0.3) is cands[2]  # consistent first, then the most probable
-    assert recovery_choice(cands, 0.55) is cands[0]  # the only one at the threshold
-    assert recovery_choice(cands, 0.7) is None
+    assert recovery_choice(cands, 0.55) is cands[0]  # the only demonstrated one at the threshold
+    assert recovery_choice(cands, 0.7) is None  # never one the demonstrator did not make here
     # equal inconsistency and p: the variable, then the target decide
     tied = [Candidate("w", "C", "E", 0.5, 0), Candidate("u", "A", "B", 0.5, 0)]
     assert recovery_choice(tied, 0.3) is tied[1]
@@ -296,3 +298,134 @@ def test_indicator_features_and_jitter_are_not_motion():
     for k in range(1, 301):  # a slow drift of 0.02 range/s is motion
         drift.observe(k * DT, np.array([0.0002 * k, 0.0]))
     assert drift.last_motion > 2.4 and not drift.stalled(3.0)
+
+
+def _finished_relay(**config):
+    """u: U1 -> U2; w: W1 -> W2 -> W3, where W2 -> W3 was demonstrated only while u ran U1 and
+    one demonstration ends in (U2, W2): there W2 is final. Features (φ_U1, φ_U2, φ_W1, φ_W2,
+    φ_W3)."""
+    demos = [
+        _labels_demo({"u": ["U1"] * 6 + ["U2"] * 4, "w": ["W1"] * 2 + ["W2"] * 2 + ["W3"] * 6}),
+        _labels_demo({"u": ["U1"] * 3 + ["U2"] * 7, "w": ["W1"] * 2 + ["W2"] * 8}),
+    ]
+    graphs = {}
+    for v, chain in {"u": ["U1", "U2"], "w": ["W1", "W2", "W3"]}.items():
+        g = SequenceGraph(v)
+        for mp in chain:
+            g.add_node(mp)
+        g.initial_nodes = {chain[0]}
+        g.edges = set(itertools.pairwise(chain))
+        graphs[v] = g
+    keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2"), ("w", "W3")]
+    model = FeatureIsProgress(keys, 5, PredictorConfig())
+    coupling = Coupling.learn(demos, ["u", "w"])
+    options = {"stall_time": 0.5, "recovery_threshold": 0.3, **config}
+    return ConcurrentSequencer(
+        graphs, model, list("abcde"), SequencerConfig(**options), None, None, coupling
+    )
+
+
+def _run_to(seq, x, until, t=0.0):
+    """Step ``seq`` every DT with features ``x`` (each tick a new measurement) until ``until``."""
+    while t < until - 1e-9:
+        t = round(t + DT, 10)
+        seq.step(t, x, stamp=t)
+    return t
+
+
+def test_a_final_node_never_recovers():
+    """At (U2, W2) the task is done: W2 -> W3 (p = 0.5 >= the recovery threshold) was never
+    demonstrated while u ran U2, and U2 has no successor. A stall there is the demonstrated
+    end: no recovery, no give-up. (The earlier recovery took W2 -> W3, the only candidate.)"""
+    seq = _finished_relay()
+    seq.reset(0.0, [0.0] * 5)
+    t = _run_to(seq, [0.5, 0.0, 0.9, 0.0, 0.0], 0.2)  # w: W1 -> W2 (p = 0.9, U1 at 0.5)
+    t = _run_to(seq, [0.9, 0.0, 1.0, 0.1, 0.0], 0.4, t)  # u: U1 -> U2 (p = 0.9, w in W2)
+    assert [(e.variable, e.target) for e in seq.events] == [("w", "W2"), ("u", "U2")]
+    _run_to(seq, [1.0, 0.5, 1.0, 0.5, 0.0], 3.0, t)  # then at rest: a stall
+    assert seq.active == {"u": "U2", "w": "W2"}
+    assert [e.kind for e in seq.events] == ["switch", "switch"]
+    assert [n.kind for n in seq.notes if n.kind != "hold"] == []
+    # the same stall while u still runs U1 (where W2 -> W3 was demonstrated) recovers
+    seq.reset(0.0, [0.0] * 5)
+    t = _run_to(seq, [0.5, 0.0, 0.9, 0.0, 0.0], 0.2)
+    _run_to(seq, [0.62, 0.0, 1.0, 0.64, 0.0], 0.9, t)  # p_u = 0.62, p_w = 0.64 < 0.65
+    assert [(e.variable, e.target, e.kind) for e in seq.events] == [
+        ("w", "W2", "switch"),
+        ("w", "W3", "recovery"),  # the most probable of the two demonstrated here
+    ]
+
+
+def test_a_stall_no_demonstrated_transition_resolves_is_a_noted_give_up():
+    """A -> B is demonstrated, but its p = 0.1 stays below the recovery threshold: the
+    sequencer does not guess; it gives up once, with a note, and switches no more."""
+    seq = _stalled_chain(stall_time=0.5, recovery_threshold=0.3)
+    seq.reset(0.0, [0.1, 0.0])
+    t = _run_to(seq, [0.1, 0.0], 1.0)
+    assert seq._episode.gave_up == pytest.approx(0.5)
+    (note,) = seq.notes
+    assert note.kind == "give_up" and "v: A -> B" in note.text
+    _run_to(seq, [0.9, 0.0], 2.0, t)  # p = 0.9 now, flat: the rule would fire; it has stopped
+    assert seq.active == {"v": "A"} and not seq.events
+    assert [n.kind for n in seq.notes] == ["give_up"]
+
+
+def test_recovery_never_takes_a_transition_inconsistent_with_the_coupling():
+    """w's W1 -> W2 was demonstrated only while u ran U2: with u stalled in U1, the old
+    recovery took it (the most probable, 0.9); now nothing demonstrated fits: give up."""
+    seq = _two_chains(stall_time=0.5, recovery_threshold=0.3)
+    seq.reset(0.0, [0.0, 0.0, 0.0, 0.0])
+    _run_to(seq, [0.1, 0.0, 0.9, 0.0], 1.5)  # u: p = 0.1 < 0.3; w: p = 0.9, held
+    assert seq.active == {"u": "U1", "w": "W1"} and not seq.events
+    assert [n.kind for n in seq.notes] == ["hold", "give_up"]
+
+
+class FirstColumnsAreProgress(ProgressPredictor):
+    """Test double: node k's progress is feature k; the features after the nodes' are state."""
+
+    kind: ClassVar[str] = "first_columns_are_progress"
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        return torch.logit(z[:, : self.n_nodes].clamp(1e-9, 1 - 1e-9))
+
+
+def test_recovery_goes_where_the_demonstrator_went_from_the_nearest_state():
+    """A -> B was demonstrated with much left to do (amount 1), A -> C with nothing left (0):
+    at a stall with nothing left, C, although B is more probable (the repetition world's
+    'scoop again' after the last pour)."""
+    demos = []
+    for target, amount in (("B", 1.0), ("C", 0.0)):
+        features = np.zeros((10, 4))
+        features[:, 3] = amount
+        demos.append(
+            Demonstration(
+                time=np.arange(10) * DT,
+                features=features,
+                labels={"v": np.array(["A"] * 5 + [target] * 5)},
+                feature_names=["a", "b", "c", "amount"],
+            )
+        )
+    g = SequenceGraph("v")
+    for mp in "ABC":
+        g.add_node(mp)
+    g.initial_nodes = {"A"}
+    g.edges = {("A", "B"), ("A", "C")}
+    coupling = Coupling.learn(demos, ["v"])
+    assert coupling.nearest_target("v", "A", np.array([0.5, 0.2, 0.4, 0.05]), {"v": "A"}) == "C"
+    assert coupling.nearest_target("v", "A", np.array([0.5, 0.2, 0.4, 0.95]), {"v": "A"}) == "B"
+    assert coupling.nearest_target("v", "B", np.zeros(4), {"v": "B"}) is None  # none out of B
+    model = FirstColumnsAreProgress([("v", "A"), ("v", "B"), ("v", "C")], 4, PredictorConfig())
+    for amount, want in ((0.05, "C"), (0.95, "B")):
+        seq = ConcurrentSequencer(
+            {"v": g},
+            model,
+            ["a", "b", "c", "amount"],
+            SequencerConfig(stall_time=0.5, recovery_threshold=0.3),
+            None,
+            None,
+            coupling,
+        )
+        seq.reset(0.0, [0.0, 0.0, 0.0, amount])
+        _run_to(seq, [0.5, 0.2, 0.4, amount], 1.0)  # p_B = 0.4 > p_C = 0.3: both below 0.65
+        (event,) = seq.events
+        assert (event.target, event.kind) == (want, "recovery")
