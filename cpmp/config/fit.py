@@ -21,7 +21,7 @@ from cpmp.config.sequencer import SequencerConfig
 from cpmp.config.trainer import TrainerConfig
 from cpmp.errors import ConfigError
 
-FIT_OPTIONS = ("seed", "variables", "subsample")
+FIT_OPTIONS = ("seed", "variables", "subsample", "repair_glitches")
 """Keyword options of ``fit`` that belong to the fit itself (:class:`FitConfig`)."""
 
 
@@ -40,6 +40,10 @@ class FitConfig:
         variables: the control variables to model (``None``: every labelled one).
         subsample: train on every k-th sample of each activation (its last sample always
             kept; expected progress is computed on the full trajectory first), >= 1.
+        repair_glitches: relabel one or two samples of another MP between two samples of
+            the same MP with that MP before the graphs are built
+            (:func:`cpmp.sequencer.glitches.repair_glitches`; each repair is listed in
+            ``fit_summary["label_glitches"]``); ``False``: keep them as nodes.
     """
 
     predictor: str = "klr"
@@ -49,6 +53,7 @@ class FitConfig:
     seed: int = 0
     variables: Sequence[str] | None = None
     subsample: int = 1
+    repair_glitches: bool = True
 
     def __post_init__(self) -> None:
         cls = predictor_config_class(self.predictor)
@@ -65,6 +70,10 @@ class FitConfig:
             raise ConfigError(f"subsample must be an integer >= 1, got {subsample!r}")
         if self.variables is not None:
             object.__setattr__(self, "variables", tuple(self.variables))
+        if not isinstance(self.repair_glitches, bool):
+            raise ConfigError(
+                f"repair_glitches must be true or false, got {self.repair_glitches!r}"
+            )
 
     @classmethod
     def from_options(cls, predictor: str = "klr", **options: Any) -> FitConfig:

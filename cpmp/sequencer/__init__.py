@@ -10,6 +10,7 @@ ones before it):
 * ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule)
   on measurement time, the learned cross-variable coupling and stall recovery;
 * ``fit_data``: each node's training data and the checks after a fit;
+* ``glitches``: label glitches (``A A X A A``) repaired before the graphs are built;
 * ``model``: :class:`NodeIndex` and :class:`TransitionModel`, what an episode reads of a
   fitted sequencer;
 * ``episode``: :class:`SequencerEpisode`, the state machine of one episode;
@@ -29,6 +30,7 @@ from cpmp.sequencer.batch import (
     Times,
 )
 from cpmp.sequencer.episode import SequencerEpisode
+from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
 from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
 from cpmp.sequencer.model import NodeIndex, TransitionModel
 from cpmp.sequencer.sequencer import (
@@ -62,6 +64,7 @@ __all__ = [
     "EpisodeRecord",
     "Features",
     "FittedSequencer",
+    "LabelGlitch",
     "LiveMask",
     "NodeIndex",
     "PaperRule",
@@ -77,4 +80,5 @@ __all__ = [
     "checked_time",
     "indicator_features",
     "make_rule",
+    "repair_glitches",
 ]

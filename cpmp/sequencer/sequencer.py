@@ -49,6 +49,7 @@ from cpmp.sequencer.fit_data import (
     nonfinite_parameters,
     start_keys,
 )
+from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
 from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
 from cpmp.sequencer.model import NodeIndex, TransitionModel
 from cpmp.sequencer.switching import Coupling, indicator_features
@@ -195,6 +196,10 @@ class ConcurrentSequencer:
             logger: a Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` (both writing into
                 the trainer's ``log_dir``) or ``None`` (no logging).
 
+        Label glitches (``A A X A A``) are repaired first unless ``config.repair_glitches`` is
+        off; ``fit_summary["label_glitches"]`` lists each, with the node and edges it would
+        have added.
+
         Returns:
             The fitted sequencer.
 
@@ -206,6 +211,9 @@ class ConcurrentSequencer:
         predictor = config.predictor
         demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
         check_logger(logger, config.trainer.log_dir)
+        glitches: list[LabelGlitch] = []
+        if config.repair_glitches:
+            demos, glitches = repair_glitches(demos, config.variables)
         split = fit_demos(demos, validation, config.trainer.val_fraction, config.seed)
         demos = split.train
         graphs = build_graphs(demos, config.variables)
@@ -227,8 +235,9 @@ class ConcurrentSequencer:
                 "check the feature magnitudes and the options gamma / l2 / lr"
             )
         summary["n_demos"] = len(demos)
+        summary["label_glitches"] = [g.to_dict() for g in glitches]
         summary["warnings"] = glitch_warnings(graphs, demos) + fit_warnings(model, data)
-        for text in summary["warnings"]:
+        for text in [g.describe() for g in glitches] + summary["warnings"]:
             log.warning("%s", text)
         combos = initial_combinations(demos, sorted(graphs))
         progress = demo_progress(graphs, data, [d.n_samples for d in demos])
