@@ -1,7 +1,8 @@
 """The records every layer shares: transitions, notes, ticks, replays and policy protocols.
 
-A transition, a sequencer note, a control tick, an open-loop replay, and the policy protocols
-a closed loop drives; the closed sets of transition and note kinds (:data:`SwitchKind`,
+A transition, a sequencer note, a control tick, an open-loop replay, the policy protocols a
+closed loop drives, and an episode's recoveries judged against the demonstrator
+(:func:`count_recoveries`); the closed sets of transition and note kinds (:data:`SwitchKind`,
 :data:`NoteKind`) are checked where a record is made.
 
 The sequencer (:mod:`cpmp.sequencer.sequencer`), the simulator runner (:mod:`cpmp.sim.runner`), the
@@ -130,6 +131,48 @@ class ReplayResult(NamedTuple):
     events: list[TransitionEvent]
 
 
+class RecoveryCounts(NamedTuple):
+    """An episode's stall recoveries, judged against the demonstrator's run on its context.
+
+    Attributes:
+        right: recoveries to the MP the demonstrator ran next on that variable.
+        wrong: the others.
+    """
+
+    right: int
+    wrong: int
+
+
+def count_recoveries(
+    events: Sequence[TransitionEvent], expected: Mapping[str, Sequence[str]]
+) -> RecoveryCounts:
+    """Right and wrong recoveries among an episode's transitions.
+
+    The ``k``-th transition of a variable is right when the demonstrator's run on the same
+    context (``expected``: variable -> its MP sequence) made its ``k``-th switch to the same
+    MP.
+
+    Args:
+        events: the episode's transitions, in order.
+        expected: the demonstrator's MP sequence per variable.
+
+    Returns:
+        The counts of ``recovery`` transitions, right and wrong.
+    """
+    right = wrong = 0
+    seen: dict[str, int] = {}
+    for event in events:
+        k = seen[event.variable] = seen.get(event.variable, 0) + 1
+        if event.kind != "recovery":
+            continue
+        want = expected.get(event.variable, [])
+        if k < len(want) and want[k] == event.target:
+            right += 1
+        else:
+            wrong += 1
+    return RecoveryCounts(right, wrong)
+
+
 class Policy(Protocol):
     """What a closed loop drives, one episode: ``reset`` at the start, then ``step`` every tick.
 
@@ -174,9 +217,11 @@ __all__ = [
     "BatchedPolicy",
     "NoteKind",
     "Policy",
+    "RecoveryCounts",
     "ReplayResult",
     "SequencerNote",
     "SwitchKind",
     "TickInfo",
     "TransitionEvent",
+    "count_recoveries",
 ]

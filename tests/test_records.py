@@ -12,9 +12,11 @@ from cpmp.errors import DataError
 from cpmp.records import (
     NOTE_KINDS,
     SWITCH_KINDS,
+    RecoveryCounts,
     SequencerNote,
     TickInfo,
     TransitionEvent,
+    count_recoveries,
 )
 
 
@@ -48,3 +50,15 @@ def test_a_kind_outside_its_closed_set_is_refused_where_the_record_is_made() -> 
     ):
         SequencerNote(0.5, "Hold", "v", "held")
     assert SequencerNote(0.5, "recovery", "v", "resolved").kind == "recovery"
+
+
+def test_a_recovery_is_right_when_the_demonstrator_made_that_switch() -> None:
+    expected = {"u": ["A", "B", "C"], "w": ["X", "Y"]}
+    events = [
+        TransitionEvent(1.0, "u", "A", "B", kind="recovery"),  # u's 1st switch: to B, right
+        TransitionEvent(2.0, "w", "X", "Y"),  # switches by the rule are not counted
+        TransitionEvent(3.0, "w", "Y", "X", kind="recovery"),  # w's 2nd: the demonstrator ends
+        TransitionEvent(4.0, "u", "B", "A", kind="recovery"),  # u's 2nd: to C there, wrong
+    ]
+    assert count_recoveries(events, expected) == RecoveryCounts(right=1, wrong=2)
+    assert count_recoveries([], expected) == (0, 0)

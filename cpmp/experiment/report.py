@@ -95,7 +95,15 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
             mean = pooled_mean / n if n else None
             rep[f"{prefix}_mean"] = mean
             rep[f"{prefix}_std"] = float(np.sqrt(max(pooled_sq / n - mean**2, 0))) if n else None
-        for key in ("recoveries", "recovered_episodes", "recovered_complete", "holds"):
+        for key in (
+            "recoveries",
+            "recovered_episodes",
+            "recovered_complete",
+            "recoveries_right",
+            "recoveries_wrong",
+            "give_ups",
+            "holds",
+        ):
             rep[key], _ = mean_std([r["reproduction"].get(key) for r in rows])
         rep["n_boxes"] = settings.n_boxes
         rep["paper"] = PAPER_TABLE_I.get(d)

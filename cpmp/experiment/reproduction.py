@@ -24,7 +24,7 @@ from cpmp.experiment.console import progress_bar
 from cpmp.experiment.settings import RecordMode
 from cpmp.experiment.strategies import classify_start
 from cpmp.recordings import EpisodeRecorder
-from cpmp.records import TickInfo
+from cpmp.records import TickInfo, count_recoveries
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, Simulation, correct_strategy
 from cpmp.sim.runner import Outcome, run_episodes
@@ -46,6 +46,9 @@ class EpisodeRecord:
         distances: switch-state distances of a complete episode.
         distances_continuous: the same over the continuous features only.
         recoveries: stalls the sequencer resolved.
+        recoveries_right: recoveries to the MP the demonstrator ran next
+            (:func:`cpmp.records.count_recoveries`); ``recoveries_wrong``: the others.
+        give_ups: stalls the sequencer gave up on (0 or 1).
         holds: switches the sequencer held back.
         rrd: the episode's recording, if kept.
     """
@@ -59,6 +62,9 @@ class EpisodeRecord:
     distances: list[float]
     distances_continuous: list[float] = field(default_factory=list)
     recoveries: int = 0
+    recoveries_right: int = 0
+    recoveries_wrong: int = 0
+    give_ups: int = 0
     holds: int = 0
     rrd: str | None = None
 
@@ -178,6 +184,7 @@ def reproduce(
             recorder.close()
         distances: list[float] = []
         continuous: list[float] = []
+        judged = count_recoveries(episode.events, result.expected)
         if complete:
             columns = continuous_features([demo])
             for v in seq.graphs:
@@ -194,6 +201,9 @@ def reproduce(
                 distances=distances,
                 distances_continuous=continuous,
                 recoveries=sum(e.kind == "recovery" for e in episode.events),
+                recoveries_right=judged.right,
+                recoveries_wrong=judged.wrong,
+                give_ups=sum(n.kind == "give_up" for n in episode.notes),
                 holds=sum(n.kind == "hold" for n in episode.notes),
                 rrd=str(rrd) if rrd else None,
             )
@@ -242,5 +252,8 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
         "recoveries": sum(e.recoveries for e in episodes),
         "recovered_episodes": sum(e.recoveries > 0 for e in episodes),
         "recovered_complete": sum(e.recoveries > 0 for e in complete),
+        "recoveries_right": sum(e.recoveries_right for e in episodes),
+        "recoveries_wrong": sum(e.recoveries_wrong for e in episodes),
+        "give_ups": sum(e.give_ups for e in episodes),
         "holds": sum(e.holds for e in episodes),
     }
