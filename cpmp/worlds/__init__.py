@@ -3,7 +3,10 @@
 * ``two_point``: two points on a line, two strategies chosen by a context feature;
 * ``relay``: a carrier and a receiver hand an object over (three strategies, a
   cross-variable wait), with its scripted demonstrator and closed-loop evaluation;
-* ``outcomes``: how a closed-loop episode of a world ended (:data:`Outcome`), and the counts.
+* ``repetition``: a ladling cycle repeated as often as a quantity in the state says;
+* ``outcomes``: how a closed-loop episode of a world ended (:data:`Outcome`), and the counts;
+* ``common``: the checked counts, seeded episodes, scripted recordings and closed-loop runs the
+  worlds share.
 """
 
 from cpmp.worlds import relay, two_point

@@ -24,6 +24,7 @@ import numpy as np
 from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.worlds.common import note_switches, positive_count
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
 FEATURE_NAMES = ["p_a", "p_b", "context"]
@@ -174,9 +175,7 @@ class SyntheticTask:
             t = round(t + self.dt, 10)
             x = np.array([p[0], p[1], episode.context])
             active = policy.step(t, x)
-            for v in VARIABLES:
-                if active[v] != seqs[v][-1]:
-                    seqs[v].append(active[v])
+            note_switches(seqs, active)
             if active["a"] == "a_back" and active["b"] == "b_back" and np.all(np.abs(p) < 0.01):
                 return TwoPointRollout(seqs, True)
         return TwoPointRollout(seqs, False)
@@ -201,8 +200,7 @@ def evaluate(
     Raises:
         ConfigError: ``n_episodes`` is not a positive integer.
     """
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
-        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    positive_count(n_episodes, "n_episodes")
     task = task or SyntheticTask()
     rng = np.random.default_rng(seed)
     outcomes = []

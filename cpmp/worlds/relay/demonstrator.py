@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cpmp.data import Demonstration, DemonstrationLog
-from cpmp.errors import ConfigError
+from cpmp.data import Demonstration
+from cpmp.worlds.common import positive_count, record_script, seeded_episodes
 from cpmp.worlds.relay.world import (
     FEATURE_NAMES,
     STRATEGIES,
@@ -79,25 +79,20 @@ def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None)
 
     Recorded every ``dt`` from ``t = 0`` until the goal state is reached (or ``max_time``).
     """
-    state = task.initial_state(episode)
-    active = task.initial_mps(episode)
-    log = DemonstrationLog(VARIABLES)
-    t = 0.0
-    while True:
-        x = task.features(state, episode)
-        log.append(t, x, active)
-        if task.at_goal(state, episode) or t >= task.max_time:
-            break
-        active = script(task, x, episode, active)
-        task.advance(state, episode, active)
-        t = round(t + task.dt, 10)
+    run = record_script(
+        task,
+        episode,
+        lambda state: task.features(state, episode),
+        lambda x, active: script(task, x, episode, active),
+        VARIABLES,
+    )
     metadata = {
         "task": "relay",
         "context": episode.context,
         "strategy": episode.strategy,
-        "reached_goal": task.at_goal(state, episode),
+        "reached_goal": task.at_goal(run.state, episode),
     }
-    return log.to_demonstration(FEATURE_NAMES, name, metadata)
+    return run.log.to_demonstration(FEATURE_NAMES, name, metadata)
 
 
 class ScriptedPolicy:
@@ -138,11 +133,7 @@ def make_demonstrations(
     Raises:
         ConfigError: ``n`` is not a positive integer.
     """
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ConfigError(f"n must be a positive integer, got {n!r}")
+    positive_count(n, "n")
     task = task or RelayTask()
-    rng = np.random.default_rng(seed)
-    return [
-        demonstrate(task, task.sample_episode(rng, STRATEGIES[i % 2]), name=f"demo_{i}")
-        for i in range(n)
-    ]
+    episodes = seeded_episodes(task.sample_episode, STRATEGIES, n, seed)
+    return [demonstrate(task, episode, name=f"demo_{i}") for i, episode in enumerate(episodes)]

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.worlds.common import positive_count, run_policy, seeded_episodes
 from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 from cpmp.worlds.relay.world import STRATEGIES, VARIABLES, RelayEpisode, RelayTask, Strategy
 
@@ -55,24 +55,14 @@ def rollout(
     ``observe`` maps the true features ``(6,)`` to what the policy sees (e.g. observation
     noise with :func:`cpmp.data.augment.noisy_features`); default: the true features.
     """
-    see = observe or (lambda x: x)
-    state = task.initial_state(episode)
     expected = task.initial_mps(episode)
-    active = dict(policy.reset(0.0, see(task.features(state, episode))))
-    initial = dict(active)
-    seqs = {v: [active[v]] for v in VARIABLES}
-    t = 0.0
-    reached = task.at_goal(state, episode)
-    while not reached and t < task.max_time - 1e-9:
-        task.advance(state, episode, active)
-        t = round(t + task.dt, 10)
-        active = dict(policy.step(t, see(task.features(state, episode))))
-        for v in VARIABLES:
-            if active[v] != seqs[v][-1]:
-                seqs[v].append(active[v])
-        reached = task.at_goal(state, episode)
-    outcome = episode_outcome(initial == expected, reached)
-    return RolloutResult(outcome, seqs, t, initial, expected, reached, episode.strategy)
+    run = run_policy(
+        task, episode, policy, lambda state: task.features(state, episode), VARIABLES, observe
+    )
+    outcome = episode_outcome(run.initial == expected, run.reached_goal)
+    return RolloutResult(
+        outcome, run.sequences, run.time, run.initial, expected, run.reached_goal, episode.strategy
+    )
 
 
 def evaluate(
@@ -100,11 +90,9 @@ def evaluate(
     Raises:
         ConfigError: ``n_episodes`` is not a positive integer.
     """
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
-        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    positive_count(n_episodes, "n_episodes")
     task = task or RelayTask()
-    rng = np.random.default_rng(seed)
-    episodes = [task.sample_episode(rng, STRATEGIES[i % 2]) for i in range(n_episodes)]
+    episodes = seeded_episodes(task.sample_episode, STRATEGIES, n_episodes, seed)
     results = [rollout(task, episode, seq, observe) for episode in episodes]
     rows = [
         {

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.errors import ConfigError
 from cpmp.records import Policy
+from cpmp.worlds.common import positive_count, run_policy, seeded_episodes
 from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 from cpmp.worlds.repetition.world import (
     STRATEGIES,
@@ -73,26 +73,20 @@ def rollout(
     Returns:
         The result; the episode runs until the goal state or ``max_time``.
     """
-    see = observe or (lambda x: x)
-    state = task.initial_state(episode)
     expected = task.expected_sequences(episode)
-    active = dict(policy.reset(0.0, see(task.features(state))))
-    initial = dict(active)
-    seqs = {v: [active[v]] for v in VARIABLES}
-    t = 0.0
-    reached = task.at_goal(state, episode)
-    while not reached and t < task.max_time - 1e-9:
-        task.advance(state, episode, active)
-        t = round(t + task.dt, 10)
-        active = dict(policy.step(t, see(task.features(state))))
-        for v in VARIABLES:
-            if active[v] != seqs[v][-1]:
-                seqs[v].append(active[v])
-        reached = task.at_goal(state, episode)
-    started_right = initial == {v: s[0] for v, s in expected.items()}
-    outcome = episode_outcome(started_right, reached and seqs == expected)
+    run = run_policy(task, episode, policy, task.features, VARIABLES, observe)
+    started_right = run.initial == {v: s[0] for v, s in expected.items()}
+    outcome = episode_outcome(started_right, run.reached_goal and run.sequences == expected)
     return RolloutResult(
-        outcome, seqs, expected, t, initial, reached, episode.strategy, episode.need, state.spilled
+        outcome,
+        run.sequences,
+        expected,
+        run.time,
+        run.initial,
+        run.reached_goal,
+        episode.strategy,
+        episode.need,
+        run.state.spilled,
     )
 
 
@@ -121,13 +115,9 @@ def evaluate(
     Raises:
         ConfigError: ``n_episodes`` is not a positive integer.
     """
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
-        raise ConfigError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    positive_count(n_episodes, "n_episodes")
     task = task or RepetitionTask()
-    rng = np.random.default_rng(seed)
-    episodes = [
-        task.sample_episode(rng, STRATEGIES[i % len(STRATEGIES)]) for i in range(n_episodes)
-    ]
+    episodes = seeded_episodes(task.sample_episode, STRATEGIES, n_episodes, seed)
     results = [rollout(task, episode, seq, observe) for episode in episodes]
     rows = [
         {
