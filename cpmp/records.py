@@ -1,7 +1,7 @@
 """The records every layer shares: transitions, notes, ticks, replays and policy protocols.
 
-A transition, a sequencer note, a control tick, an open-loop replay, the policy protocols a
-closed loop drives, and an episode's recoveries judged against the demonstrator
+A transition, a sequencer note, a start decision, a control tick, an open-loop replay, the
+policy protocols a closed loop drives, and an episode's recoveries judged against the demonstrator
 (:func:`count_recoveries`); the closed sets of transition and note kinds (:data:`SwitchKind`,
 :data:`NoteKind`) are checked where a record is made.
 
@@ -89,6 +89,39 @@ class SequencerNote:
             raise DataError(
                 f"a sequencer note's kind is one of {', '.join(NOTE_KINDS)}, got {self.kind!r}"
             )
+
+
+class StartOption(NamedTuple):
+    """One start the start rule weighed.
+
+    Attributes:
+        combination: variable -> initial MP (every variable for the ``joint`` rule, one for
+            ``independent``).
+        score: ``Σ log(1 - φ)`` of its MPs' start heads: the log-likelihood that each MP is at
+            its beginning (higher is more likely; 0 is certain).
+    """
+
+    combination: dict[str, str]
+    score: float
+
+
+@dataclass(frozen=True)
+class StartDecision:
+    """How a sequencer chose the initial MPs at ``t`` [s].
+
+    Attributes:
+        t: the time [s] of the reset.
+        rule: ``joint`` (the best of the demonstrated initial combinations) or ``independent``
+            (each variable's best initial MP on its own).
+        options: the starts weighed, in the order weighed (``joint``: each demonstrated
+            combination; ``independent``: each variable's initial MPs, one variable each).
+        chosen: variable -> the initial MP taken.
+    """
+
+    t: float
+    rule: str
+    options: list[StartOption]
+    chosen: dict[str, str]
 
 
 @dataclass
@@ -220,6 +253,8 @@ __all__ = [
     "RecoveryCounts",
     "ReplayResult",
     "SequencerNote",
+    "StartDecision",
+    "StartOption",
     "SwitchKind",
     "TickInfo",
     "TransitionEvent",

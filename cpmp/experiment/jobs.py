@@ -157,6 +157,7 @@ def run_train_size(
             record=settings.record,
             max_time=settings.max_time,
             label=f"D{d}_",
+            train=subset,
         )
     row = {
         "progress": {k: offline["progress"][k] for k in ("mae", "mae_first", "mae_last")},

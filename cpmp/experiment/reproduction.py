@@ -23,7 +23,7 @@ from cpmp.experiment.collection import SeedData
 from cpmp.experiment.console import progress_bar
 from cpmp.experiment.settings import RecordMode
 from cpmp.experiment.strategies import classify_start
-from cpmp.recordings import EpisodeRecorder
+from cpmp.recordings import EpisodeRecorder, StartReference
 from cpmp.records import TickInfo, count_recoveries
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, Simulation, correct_strategy
@@ -73,17 +73,52 @@ class EpisodeRecord:
         return dict(self.__dict__)
 
 
+START_AXES = ("box_width", "box_depth")
+"""The features a recording compares an episode's start with the training starts in: the box
+size decides the strategy (:func:`cpmp.sim.correct_strategy`)."""
+
+
+def start_references(demos: Sequence[Demonstration]) -> list[StartReference]:
+    """The starts of ``demos``: each one's initial MPs and features at its first sample."""
+    return [
+        StartReference(
+            demo.name or f"demo {i}",
+            {v: str(labels[0]) for v, labels in sorted(demo.labels.items())},
+            dict(zip(demo.feature_names or [], demo.features[0].tolist(), strict=True)),
+        )
+        for i, demo in enumerate(demos)
+    ]
+
+
 class EpisodeLogger:
     """``on_tick`` callback that writes a rerun recording of a sequencer-driven episode.
 
+    At the first tick it also logs the sequencer's start decision against the training starts
+    ``references`` (compared in the features ``axes``). A hold the sequencer notes again
+    before its variable switches (its φ hovering at the threshold) is logged once: one note
+    per hold, not one per re-crossing.
+
     Args:
         recorder: the episode's :class:`~cpmp.recordings.EpisodeRecorder`.
-        seq: the sequencer driving the episode (its events and notes are logged).
+        seq: the sequencer episode driving the episode (its start decision, events and notes
+            are logged).
+        references: the training demonstrations' starts.
+        axes: the features to compare the starts in.
     """
 
-    def __init__(self, recorder: Any, seq: ConcurrentSequencer) -> None:
+    def __init__(
+        self,
+        recorder: Any,
+        seq: Any,
+        references: Sequence[StartReference] = (),
+        axes: Sequence[str] = (),
+    ) -> None:
         self.recorder = recorder
         self.seq = seq
+        self.references = list(references)
+        self.axes = list(axes)
+        self._started = False
+        self._holds: dict[str, str | None] = {}
         self._n_events = 0
         self._n_notes = 0
 
@@ -98,11 +133,21 @@ class EpisodeLogger:
             tick.transition_probs if tick else None,
             info.body_poses,
         )
+        decision = getattr(self.seq, "start_decision", None)
+        if not self._started and decision is not None:
+            self.recorder.log_start(decision, self.references, self.axes)
+        self._started = True
         for event in self.seq.events[self._n_events :]:
             self.recorder.log_transition(
                 event.t, event.variable, event.source, event.target, event.probability, event.kind
             )
+            self._holds.pop(event.variable, None)
         for note in self.seq.notes[self._n_notes :]:
+            if note.kind == "hold":
+                target = tick.held.get(note.variable) if tick else None
+                if target is not None and self._holds.get(note.variable) == target:
+                    continue  # the same hold again before the variable switched
+                self._holds[note.variable] = target
             self.recorder.log_note(note.t, note.kind, note.variable, note.text)
         self._n_events = len(self.seq.events)
         self._n_notes = len(self.seq.notes)
@@ -119,13 +164,16 @@ def reproduce(
     record_dir: Path | None = None,
     max_time: float | None = None,
     label: str = "",
+    train: Sequence[Demonstration] = (),
 ) -> list[EpisodeRecord]:
     """Run ``seq`` closed-loop on every box; classify outcomes and measure switch distances.
 
     ``expected[i]`` is the demonstrator's recording of ``boxes[i]``: its switch states are the
     "desired states" of Table Ib. All boxes run together (:func:`cpmp.sim.runner.run_episodes`
     with ``seq.batched``); every number equals a run of one box at a time. ``record``: which
-    episodes are written into ``record_dir`` as ``.rrd`` (nothing without ``record_dir``).
+    episodes are written into ``record_dir`` as ``.rrd`` (nothing without ``record_dir``);
+    a recording compares its start with the starts of ``train`` (the demonstrations ``seq``
+    was fitted on) in :data:`START_AXES`.
     """
     out: list[EpisodeRecord] = []
     if not boxes:
@@ -133,6 +181,8 @@ def reproduce(
     if record_dir is not None and record != "none":
         record_dir.mkdir(parents=True, exist_ok=True)
     batch = seq.batched(len(boxes))
+    references = start_references(train)
+    axes = [a for a in START_AXES if a in seq.feature_names]
     paths: list[Path | None] = []
     recorders: list[Any] = []
     callbacks: list[EpisodeLogger | None] = []
@@ -151,7 +201,7 @@ def reproduce(
                 geoms=sim.geoms(),
                 metadata={"box_width": box.width, "box_depth": box.depth},
             )
-            callback = EpisodeLogger(recorder, batch.episodes[i])
+            callback = EpisodeLogger(recorder, batch.episodes[i], references, axes)
         paths.append(rrd)
         recorders.append(recorder)
         callbacks.append(callback)

@@ -14,46 +14,66 @@ the :meth:`EpisodeRecorder.log_tick` call).
 entity path                            content
 =====================================  ===================================================
 ``world/<body>``                       ``Transform3D`` per tick: body pose in the world
+                                       (a wrong start too: it has one tick, at t = 0)
 ``world/<body>/<geom>``                static ``Transform3D`` (geom pose in the body frame)
                                        and one of ``Boxes3D``/``Capsules3D``/
                                        ``Cylinders3D``/``Ellipsoids3D`` (sphere); ``<geom>``
                                        is the geom's ``name``, default ``geom_<i>``
 ``features/<name>``                    ``Scalars``: one feature per entity (static
-                                       ``SeriesLines`` name: the feature name)
+                                       ``SeriesLines``: the feature name less its panel's,
+                                       a colour of its own in the panel)
 ``progress/<variable>/<mp>/phi``       ``Scalars``: predicted progress φ of the node
 ``progress/<variable>/<mp>/entry``     ``Scalars``: 1 - φ
 ``progress/<variable>/<mp>/exit``      ``Scalars``: φ
 ``transition/<variable>/<target>``     ``Scalars``: transition probability to ``target``
-``active/<variable>``                  ``TextLog`` ``"<variable>: <mp>"`` and
+                                       from the active MP; NaN while ``target`` is not a
+                                       successor of the active MP (the line breaks)
+``active/<variable>``                  ``TextLog`` ``"  0.44 s  <variable>: <mp>"`` and
                                        ``StateChange`` ``<mp>`` when the active MP changes
 ``active/<variable>/index``            ``Scalars`` per tick: index of the active MP in
                                        ``mp_names[variable]``
 ``status``                             ``TextDocument`` (markdown), logged when an active
-                                       MP changes, at each transition and at the outcome:
-                                       the active MP of every variable, the last
-                                       transition, the outcome
-``events/transitions``                 ``TextLog`` ``"left_pos: approach -> grasp (p=0.71)"``
-                                       plus the machine-readable ``cpmp.Transition`` record
+                                       MP changes, at each transition and note, at the
+                                       start decision and at the outcome: the active MP of
+                                       every variable, the last transition, the last note
+                                       in full, the start decision, the outcome
+``start``                              ``TextDocument`` (markdown) at the start decision:
+                                       the starts weighed with their scores, the episode's
+                                       start against the training starts, the features
+``start/boxes/training``, ``/episode`` ``Points2D``: the training starts (colour: their
+                                       initial MPs) and this episode's start in two
+                                       features (:meth:`EpisodeRecorder.log_start`)
+``events/start``                       ``TextLog`` ``"  0.00 s  start (joint rule, ...)"``
+                                       plus the machine-readable ``cpmp.Start`` record
+``events/transitions``                 ``TextLog`` ``"  0.44 s  left_pos: approach -> grasp
+                                       (p=0.71) [switch]"`` plus the machine-readable
+                                       ``cpmp.Transition`` record
 ``events/transitions/<variable>``      the same ``TextLog``, per control variable
-``events/notes``                       ``TextLog`` ``"<kind>: <text>"`` plus ``cpmp.Note``
-``events/outcome``                     ``TextLog`` ``"outcome: <outcome> (<reason>)"`` at
-                                       the episode end (level ``WARN`` for a failure) plus
-                                       the ``cpmp.Outcome`` record
+``events/notes``                       ``TextLog`` ``"  1.09 s  <kind>: <text>"`` plus
+                                       ``cpmp.Note``
+``events/outcome``                     ``TextLog`` ``" 10.75 s  outcome: <outcome>
+                                       (<reason>)"`` at the episode end (level ``WARN`` for
+                                       a failure) plus the ``cpmp.Outcome`` record
 =====================================  ===================================================
 
-Blueprint (the viewer's default layout): the 3D scene above the ``status`` document; one
-time-series panel per feature group (:func:`group_features`: box, each hand, goal distances,
-touch, ... from the feature names, at most 8 series each, legend in a corner); a tab per
-control variable with its φ (= exit), entry and transition probabilities; the active MPs as
-lanes of a state timeline; the events log (transitions, notes, outcome) with the text as its
-first column. The blueprint and selection panels start collapsed and the full time panel open
-(its rows mark every event). :func:`read_views` lists the views.
+Blueprint (the viewer's default layout, sent when the recording is closed, for what it holds):
+the 3D scene above the ``status`` document (the ``start`` document and the start map in tabs
+beside it); one time-series panel per feature group (:func:`group_features`: box, each hand,
+goal distances, touch, ... from the feature names, at most 8 series each); a tab per control
+variable with its φ (= exit), entry and transition probabilities, an MP in one colour in all
+three; every plot's legend in its top-left corner; the active MPs as lanes of a state
+timeline; the events log (start, transitions, notes, outcome), each line starting with its
+time. Every view lists the entity paths it shows (rerun 0.41 matches no wildcard in the
+middle of a path). An episode that ended at its first tick (a wrong start) puts the start
+decision and the start map in the middle instead of the plots. The blueprint and selection
+panels start collapsed, the time panel as one row. :func:`read_views` lists the views.
 
 Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
 ``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
 ``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
-probability), ``cpmp.Note:{kind,variable,text}`` and ``cpmp.Outcome:{outcome,reason}``
-(strings); their time is the ``time`` timeline of the row. The episode name is the recording
+probability), ``cpmp.Note:{kind,variable,text}``, ``cpmp.Outcome:{outcome,reason}`` and
+``cpmp.Start:{rule,chosen,options}`` (strings; ``chosen`` and ``options`` as JSON); their time
+is the ``time`` timeline of the row. The episode name is the recording
 name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,
 ``feature_names``, ``feature_groups``, ``mp_names`` and ``metadata`` (all but the first as JSON
 text; metadata values that JSON cannot encode are stored as ``str``).
@@ -72,6 +92,7 @@ from cpmp.recordings.layout import (
     GEOM_TYPES,
     MAX_SERIES_PER_PANEL,
     TOUCH_WORDS,
+    StartReference,
     group_features,
     outcome_text,
     transition_text,
@@ -94,6 +115,7 @@ __all__ = [
     "EpisodeRecorder",
     "RecordingSummary",
     "SequencerNote",
+    "StartReference",
     "TransitionEvent",
     "ViewInfo",
     "format_summary",

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from cpmp.recordings.layout import check_mp, entity
+from cpmp.recordings.layout import check_mp, entity, series_color
 
 _RowBuffer = tuple[list[int], list[float], list[np.ndarray]]
 """Ticks, times [s] and one row (K,) of scalar values per tick for a tuple of K entity paths."""
@@ -38,21 +38,32 @@ class ColumnBuffer:
         self._layouts: dict[tuple[Any, ...], tuple[str, ...]] = {}
         self._named_series: set[str] = set()
 
-    def name_series(self, path: str, name: str) -> None:
-        """Give the series at ``path`` its legend ``name`` (a static ``SeriesLines``), once."""
+    def name_series(self, path: str, name: str, color: tuple[int, int, int] | None = None) -> None:
+        """Give the series at ``path`` its legend ``name`` and ``color`` (static ``SeriesLines``).
+
+        Once per path; ``color`` ``None``: rerun's colour.
+        """
         if path not in self._named_series:
             self._named_series.add(path)
-            self._rec.log(path, rr.SeriesLines(names=[name]), static=True)
+            lines = rr.SeriesLines(names=[name], colors=None if color is None else [color])
+            self._rec.log(path, lines, static=True)
+
+    def mp_color(self, variable: str, mp: str) -> tuple[int, int, int]:
+        """The colour of ``mp``'s series in every panel of ``variable`` (by its place)."""
+        return series_color(list(self._mp_names[variable]).index(mp))
 
     def progress_paths(self, variable: str, mps: tuple[str, ...]) -> tuple[str, ...]:
-        """``phi``, ``entry``, ``exit`` paths of each MP in ``mps`` (MP-major), checked, named."""
+        """``phi``, ``entry``, ``exit`` paths of each MP in ``mps`` (MP-major), checked, named.
+
+        Every series of an MP is named by the MP (its panel says which quantity it is).
+        """
         key = ("progress", variable, mps)
         if key not in self._layouts:
             series = [(mp, part) for mp in mps for part in ("phi", "entry", "exit")]
             self._add_layout(
                 key,
                 [(variable, mp) for mp in mps],
-                [(("progress", variable, mp, part), f"{mp} {part}") for mp, part in series],
+                [(("progress", variable, mp, part), mp) for mp, part in series],
             )
         return self._layouts[key]
 
@@ -63,7 +74,7 @@ class ColumnBuffer:
             self._add_layout(
                 key,
                 [(variable, target) for target in targets],
-                [(("transition", variable, target), f"to {target}") for target in targets],
+                [(("transition", variable, target), target) for target in targets],
             )
         return self._layouts[key]
 
@@ -93,9 +104,9 @@ class ColumnBuffer:
         for variable, mp in checks:
             check_mp(self._mp_names, variable, mp)
         paths = tuple(entity(*parts) for parts, _ in series)
-        for path, (_, name) in zip(paths, series, strict=True):
+        for path, (parts, name) in zip(paths, series, strict=True):
             if name is not None:
-                self.name_series(path, name)
+                self.name_series(path, name, self.mp_color(parts[1], name))
         self._layouts[key] = paths
 
     def add_row(self, paths: tuple[str, ...], tick: int, t: float, row: np.ndarray) -> None:

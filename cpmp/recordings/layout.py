@@ -8,15 +8,17 @@ records, the text of the log lines and of the ``status`` document, the feature p
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from cpmp.errors import ConfigError, CpmpError, DataError, UnknownMPError
+from cpmp.records import StartDecision
 
 GEOM_TYPES = ("box", "capsule", "sphere", "cylinder")
 """Geom types :class:`~cpmp.recordings.EpisodeRecorder` can draw."""
@@ -31,6 +33,26 @@ MAX_SERIES_PER_PANEL = 8
 TOUCH_GROUP = "touch"
 OTHER_GROUP = "other"
 
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+)
+"""Series colours (matplotlib's ``tab10``): series ``i`` of a panel gets ``PALETTE[i % 10]``, so
+the series of one panel differ (rerun's own colours, from the entity path, repeat); an MP keeps
+its colour in its variable's φ, entry and transition panels."""
+
+LEGEND_CORNER = "LeftTop"
+"""Where the legend of a plot with one sits (rerun's default, bottom right, covers the ends of
+the φ curves)."""
+
 TRANSITION_ARCHETYPE = "cpmp.Transition"
 """Name of the machine-readable transition record (columns ``cpmp.Transition:<field>``)."""
 OUTCOME_ARCHETYPE = "cpmp.Outcome"
@@ -41,6 +63,14 @@ PROPERTY_NAME = "cpmp"
 """Name of the recording property holding the episode, features, MP names and metadata."""
 STATUS_ENTITY = "status"
 """Entity of the markdown ``status`` document."""
+EVENT_ORDER = ("events/start", "events/transitions", "events/notes", "events/outcome")
+"""The entities of the events log (text lines and machine-readable records)."""
+START_ARCHETYPE = "cpmp.Start"
+"""Name of the machine-readable start-decision record (at ``events/start``)."""
+START_ENTITY = "start"
+"""Entity of the markdown document of the start decision."""
+START_BOXES_ENTITY = "start/boxes"
+"""Origin of the 2D plot of the episode's start state against the training starts."""
 
 _GEOM_MIN_SIZE = {"box": 3, "capsule": 2, "sphere": 1, "cylinder": 2}
 _DEFAULT_RGBA = (0.6, 0.6, 0.6, 1.0)
@@ -67,10 +97,153 @@ def check_mp(mp_names: Mapping[str, Sequence[str]], variable: str, mp: str | Non
 
 
 # ------------------------------------------------------------------------- text of the logs
+def series_color(index: int) -> tuple[int, int, int]:
+    """The colour of series ``index`` of a panel (:data:`PALETTE`, cycled)."""
+    return PALETTE[index % len(PALETTE)]
+
+
 def transition_text(variable: str, source: str, target: str, probability: float, kind: str) -> str:
-    """``"left_pos: approach -> grasp (p=0.71)"``, with ``" [recovery]"`` for a recovery."""
-    text = f"{variable}: {source} -> {target} (p={probability:.2f})"
-    return text if kind == "switch" else f"{text} [{kind}]"
+    """``"left_pos: approach -> grasp (p=0.71) [switch]"``, tagged with the switch's kind."""
+    return f"{variable}: {source} -> {target} (p={probability:.2f}) [{kind}]"
+
+
+def event_text(t: float, text: str) -> str:
+    """A line of the events log: ``"  3.25 s  <text>"`` (the time in the text itself).
+
+    The log's own time column is hidden: the viewer cuts it to ``+3…`` at any width the
+    layout leaves it.
+    """
+    return f"{t:6.2f} s  {text}"
+
+
+def start_text(decision: StartDecision) -> str:
+    """One line for the events log: the rule, the MPs chosen, their score and the runner-up.
+
+    ``"start (joint rule, 3 demonstrated starts): left_pos=reach_edge, ... (log p -0.12; next
+    best -2.31: left_pos=idle, ...)"``.
+    """
+    ranked = sorted(decision.options, key=lambda o: -o.score)
+    chosen = _combination_text(decision.chosen)
+    if decision.rule == "joint":
+        differ = _differing([o.combination for o in decision.options]) or None
+        chosen = _combination_text(decision.chosen, differ)
+        head = f"start (joint rule, {len(decision.options)} demonstrated starts): {chosen}"
+        best = ranked[0].score if ranked else math.nan
+        others = [o for o in ranked if o.combination != decision.chosen]
+        tail = f"log p {best:.2f}"
+        if others:
+            runner_up = _combination_text(others[0].combination, differ)
+            tail += f"; next best {others[0].score:.2f}: {runner_up}"
+        return f"{head} ({tail})"
+    return f"start (independent rule, each variable's best initial MP): {chosen}"
+
+
+def _combination_text(combination: Mapping[str, str], only: set[str] | None = None) -> str:
+    """``"left_pos=reach_edge, right_pos=idle"`` (the variables in ``only``, if given)."""
+    return ", ".join(
+        f"{v}={mp}" for v, mp in sorted(combination.items()) if only is None or v in only
+    )
+
+
+def _differing(combinations: Sequence[Mapping[str, str]]) -> set[str]:
+    """The variables whose MP is not the same in all of ``combinations``."""
+    variables = {v for combo in combinations for v in combo}
+    return {v for v in variables if len({combo.get(v) for combo in combinations}) > 1}
+
+
+def series_label(group: str, name: str) -> str:
+    """A feature's legend text in its panel: ``name`` less the panel's name as its prefix.
+
+    ``dist.left_fingers.grasp`` in panel ``dist.left`` is ``fingers.grasp``, ``box_x`` in
+    ``box`` is ``x`` (the panel's title says the rest), so the legend stays narrow.
+    """
+    head, _, tail = group.rpartition(" ")
+    prefix = head if head and tail.isdigit() else group
+    rest = name[len(prefix) :] if name.startswith(prefix) else ""
+    return rest[1:] if len(rest) > 1 and rest[0] in "._-/ " else name
+
+
+def start_markdown(
+    decision: StartDecision,
+    features: Mapping[str, float],
+    references: Sequence[StartReference],
+    axes: Sequence[str],
+) -> str:
+    """The start-decision document: the starts weighed with their scores, the state decided on.
+
+    Args:
+        decision: the sequencer's start decision.
+        features: feature name -> value at the start (empty if unknown).
+        references: the training demonstrations' starts (may be empty).
+        axes: the features the training starts are compared on (columns of their table).
+
+    Returns:
+        Markdown: the rule and the options ranked by score (the chosen one marked), the
+        episode's values of ``axes`` against each training start (nearest first), and every
+        feature at the start, grouped as the feature panels are.
+    """
+    lines = [f"**start decision** at t = {decision.t:.2f} s, rule `{decision.rule}`", ""]
+    if decision.rule == "joint":
+        lines += [
+            "Demonstrated initial combinations, scored by Σ log(1 − φ) of their start heads "
+            "(0: every MP surely at its beginning):",
+            "",
+            "| | score | initial MPs |",
+            "|---|---|---|",
+        ]
+    else:
+        lines += [
+            "Each variable's initial MPs, scored by log(1 − φ) of their start heads:",
+            "",
+            "| | score | initial MP |",
+            "|---|---|---|",
+        ]
+    combos = [o.combination for o in decision.options] + [r.combination for r in references]
+    differ = _differing(combos) if decision.rule == "joint" else None
+    for option in sorted(decision.options, key=lambda o: -o.score):
+        chosen = all(decision.chosen.get(v) == mp for v, mp in option.combination.items())
+        mark = "**chosen**" if chosen else ""
+        text = _combination_text(option.combination, differ)
+        lines.append(f"| {mark} | {option.score:.2f} | {text} |")
+    same = {v: mp for v, mp in decision.chosen.items() if differ is not None and v not in differ}
+    if same:
+        lines += ["", f"The same in every start: {_combination_text(same)}."]
+    shown = [a for a in axes if a in features]
+    if references and shown:
+        here = np.array([features[a] for a in shown])
+        scale = np.ptp([[r.values[a] for a in shown] for r in references], axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+
+        def distance(ref: StartReference) -> float:
+            there = np.array([ref.values[a] for a in shown])
+            return float(np.linalg.norm((there - here) / scale))
+
+        lines += [
+            "",
+            "This episode's start against the training starts (distance in units of the "
+            "training range of each column; the start map plots the first two columns, "
+            f"x {shown[0]}, y {shown[-1]} downwards):",
+            "",
+            "| start | " + " | ".join(shown) + " | distance | initial MPs |",
+            "|---|" + "---|" * (len(shown) + 2),
+            "| **this episode** | "
+            + " | ".join(f"{features[a]:.3f}" for a in shown)
+            + f" | 0 | {_combination_text(decision.chosen, differ)} |",
+        ]
+        for ref in sorted(references, key=distance):
+            values = " | ".join(f"{ref.values[a]:.3f}" for a in shown)
+            lines.append(
+                f"| {ref.name} | {values} | {distance(ref):.2f} | "
+                f"{_combination_text(ref.combination, differ)} |"
+            )
+    if features:
+        lines += ["", "Features at the start:", ""]
+        groups = group_features(list(features))
+        lines += [
+            f"- **{group}**: " + ", ".join(f"{n} {features[n]:.3f}" for n in members)
+            for group, members in groups.items()
+        ]
+    return "\n".join(lines)
 
 
 def outcome_text(outcome: str, reason: str) -> str:
@@ -85,16 +258,23 @@ def status_markdown(
     variables: Sequence[str],
     last_transition: str = "",
     outcome: str = "",
+    last_note: str = "",
+    start: str = "",
 ) -> str:
     """The ``status`` document at ``t`` [s], as markdown.
 
     It shows the active MP of each of ``variables`` (``-`` when none yet), the last
-    transition and the outcome text.
+    transition, the last sequencer note (in full: the events log cuts long lines), the start
+    decision and the outcome text.
     """
     lines = [f"**{episode}** · t = {t:.2f} s", "", "| variable | active MP |", "|---|---|"]
     lines += [f"| {var} | {active.get(var, '-')} |" for var in variables]
     if last_transition:
         lines += ["", f"last transition: {last_transition}"]
+    if last_note:
+        lines += ["", f"last note: {last_note}"]
+    if start:
+        lines += ["", start]
     if outcome:
         lines += ["", f"**{outcome}**"]
     return "\n".join(lines)
@@ -208,88 +388,184 @@ def check_feature_groups(
 
 
 # -------------------------------------------------------------------------------- blueprint
-def blueprint(feature_groups: Mapping[str, Sequence[str]], variables: Sequence[str]) -> Any:
-    """The viewer's default layout (an ``rrb.Blueprint``).
+class VariableSeries(NamedTuple):
+    """What a recording logged of one control variable's probabilities.
 
-    Scene and status | feature panels (one per group of ``feature_groups``) and per-variable
-    probabilities (a tab per control variable of ``variables``) | active MPs and events. Every
-    plot has few series (rerun's legend sits in its bottom-right corner).
+    Attributes:
+        progress: the MPs whose φ (and entry 1 - φ) were logged, in ``mp_names`` order.
+        targets: the MPs a transition probability was logged to, in ``mp_names`` order.
     """
-    unit = rrb.ScalarAxis(range=(0.0, 1.0))
+
+    progress: list[str]
+    targets: list[str]
+
+
+def blueprint(
+    feature_groups: Mapping[str, Sequence[str]],
+    series: Mapping[str, VariableSeries],
+    *,
+    start: bool = False,
+    start_focus: bool = False,
+    events: Sequence[str] = EVENT_ORDER,
+) -> Any:
+    """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
+
+    Scene above the ``status`` document (and, with ``start``, the start decision and its 2D
+    plot in tabs beside it) | the feature panels (one per group of ``feature_groups``) above a
+    tab per control variable of ``series`` with its φ (= exit), entry (1 - φ) and transition
+    probabilities | the active MPs as state lanes above the events log. Every view's
+    contents are the logged entity paths themselves (rerun 0.41 matches no wildcard in the
+    middle of a path). ``start_focus`` (an episode that ended at its first tick, e.g. a wrong
+    start, where the plots would hold one point): the start decision and its plot take the
+    middle column instead. The time panel starts collapsed (one row), the blueprint and
+    selection panels too.
+
+    Args:
+        feature_groups: panel name -> feature names.
+        series: variable -> the MPs its φ and transition probabilities were logged for.
+        start: whether a start decision was logged (:data:`START_ENTITY`).
+        start_focus: lay out the start decision instead of the time series.
+        events: the event entities logged (of :data:`EVENT_ORDER`), listed by the events log.
+
+    Returns:
+        The blueprint.
+    """
     feature_views = [
         rrb.TimeSeriesView(
             origin="features",
             contents=[f"+ {entity('features', name)}" for name in members],
             name=group,
+            plot_legend=rrb.PlotLegend(LEGEND_CORNER),
         )
         for group, members in feature_groups.items()
     ] or [rrb.TimeSeriesView(origin="features", name="features")]
     variable_tabs = [
-        rrb.Grid(
-            rrb.TimeSeriesView(
-                origin=entity("progress", var),
-                contents="+ $origin/*/phi",
-                name=f"{var}: progress φ (= exit)",
-                axis_y=unit,
-            ),
-            rrb.TimeSeriesView(
-                origin=entity("progress", var),
-                contents="+ $origin/*/entry",
-                name=f"{var}: entry 1 - φ",
-                axis_y=unit,
-            ),
-            rrb.TimeSeriesView(
-                origin=entity("transition", var),
-                name=f"{var}: transition probabilities",
-                axis_y=unit,
-            ),
-            name=var,
-        )
-        for var in variables
+        _variable_views(var, logged)
+        for var, logged in series.items()
+        if logged.progress or logged.targets
     ]
-    body_first = rrb.TextLogColumns(
-        timeline_columns=[rrb.encodings.TimelineColumn("time")],
-        text_log_columns=[
-            rrb.encodings.TextLogColumn("body"),
-            rrb.encodings.TextLogColumn("loglevel"),
-            rrb.encodings.TextLogColumn("entitypath", visible=False),
-        ],
-    )
-    middle = [rrb.Grid(*feature_views, name="features")]
-    if variable_tabs:
-        middle.append(rrb.Tabs(*variable_tabs, name="probabilities"))
+    start_doc = rrb.TextDocumentView(origin=START_ENTITY, name="start")
+    start_plot = rrb.Spatial2DView(origin=START_BOXES_ENTITY, name="start map")
+    status = rrb.TextDocumentView(origin=STATUS_ENTITY, name="status")
+    if start_focus and start:
+        left = rrb.Vertical(
+            rrb.Spatial3DView(origin="world", name="scene"), status, row_shares=[3, 2]
+        )
+        middle = rrb.Vertical(start_doc, start_plot, row_shares=[3, 2])
+    else:
+        lower_left: Any = status
+        if start:
+            lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
+        left = rrb.Vertical(
+            rrb.Spatial3DView(origin="world", name="scene"), lower_left, row_shares=[3, 2]
+        )
+        parts: list[Any] = [rrb.Grid(*feature_views, name="features")]
+        if variable_tabs:
+            parts.append(rrb.Tabs(*variable_tabs, name="probabilities"))
+        middle = rrb.Vertical(*parts, row_shares=[1, 1][: len(parts)])
+    events_log = [f"+ {path}" for path in events]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(origin="world", name="scene"),
-                rrb.TextDocumentView(origin=STATUS_ENTITY, name="status"),
-                row_shares=[3, 2],
-            ),
-            rrb.Vertical(*middle, row_shares=[3, 2][: len(middle)]),
+            left,
+            middle,
             rrb.Vertical(
                 rrb.StateTimelineView(origin="active", name="active MPs"),
                 rrb.Tabs(
                     rrb.TextLogView(
                         origin="events",
-                        contents=[
-                            "+ events/transitions",
-                            "+ events/notes",
-                            "+ events/outcome",
-                        ],
+                        contents=events_log or ["+ events/outcome"],
                         name="events",
-                        columns=body_first,
+                        columns=_TEXT_FIRST,
                     ),
-                    rrb.TextLogView(origin="active", name="active MP log", columns=body_first),
+                    rrb.TextLogView(origin="active", name="active MP log", columns=_TEXT_FIRST),
                 ),
                 row_shares=[2, 3],
             ),
-            column_shares=[2, 3, 2],
+            column_shares=[2, 4, 3],
         ),
-        # Room for the views; the full time panel stays: its rows mark every event.
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="expanded"),
+        rrb.TimePanel(state="collapsed"),
     )
+
+
+_TEXT_FIRST = rrb.TextLogColumns(
+    timeline_columns=[rrb.encodings.TimelineColumn("time", visible=False)],
+    text_log_columns=[
+        rrb.encodings.TextLogColumn("body"),
+        rrb.encodings.TextLogColumn("loglevel"),
+        rrb.encodings.TextLogColumn("entitypath", visible=False),
+    ],
+)
+"""Text logs: the message first (it carries its time, :func:`event_text`), no path column."""
+
+
+def _variable_views(variable: str, logged: VariableSeries) -> Any:
+    """One variable's tab: φ (= exit), entry (1 - φ) and the transition probabilities."""
+    unit = rrb.ScalarAxis(range=(0.0, 1.0))
+    legend = rrb.PlotLegend(LEGEND_CORNER)
+    views = []
+    if logged.progress:
+        views += [
+            rrb.TimeSeriesView(
+                origin=entity("progress", variable),
+                contents=[f"+ {entity('progress', variable, mp, 'phi')}" for mp in logged.progress],
+                name="φ (exit)",
+                axis_y=unit,
+                plot_legend=legend,
+            ),
+            rrb.TimeSeriesView(
+                origin=entity("progress", variable),
+                contents=[
+                    f"+ {entity('progress', variable, mp, 'entry')}" for mp in logged.progress
+                ],
+                name="entry 1 − φ",
+                axis_y=unit,
+                plot_legend=rrb.PlotLegend(LEGEND_CORNER, visible=False),
+            ),
+        ]
+    if logged.targets:
+        views.append(
+            rrb.TimeSeriesView(
+                origin=entity("transition", variable),
+                contents=[f"+ {entity('transition', variable, mp)}" for mp in logged.targets],
+                name="p(switch to)",
+                axis_y=unit,
+                plot_legend=legend,
+            )
+        )
+    return rrb.Horizontal(*views, name=variable)
+
+
+def blueprint_paths(views: Sequence[Any]) -> list[str]:
+    """The entity paths the ``+ path`` lines of ``views``' contents name (no wildcards).
+
+    Args:
+        views: :class:`~cpmp.recordings.ViewInfo` of a recording (``read_views``).
+
+    Returns:
+        Each path once, in order.
+    """
+    out: dict[str, None] = {}
+    for view in views:
+        for line in view.contents:
+            if line.startswith("+ ") and "*" not in line and "$origin" not in line:
+                out[line[2:].strip()] = None
+    return list(out)
+
+
+class StartReference(NamedTuple):
+    """A training demonstration's start, to compare an episode's start against.
+
+    Attributes:
+        name: the demonstration's name.
+        combination: variable -> its initial MP.
+        values: feature name -> value at its first sample.
+    """
+
+    name: str
+    combination: dict[str, str]
+    values: dict[str, float]
 
 
 # ----------------------------------------------------------------------------- the 3D scene
@@ -390,6 +666,7 @@ __all__ = [
     "GEOM_TYPES",
     "MAX_SERIES_PER_PANEL",
     "TOUCH_WORDS",
+    "StartReference",
     "group_features",
     "outcome_text",
     "transition_text",

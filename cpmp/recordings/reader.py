@@ -23,11 +23,13 @@ from cpmp.recordings.layout import (
     NOTE_ARCHETYPE,
     OUTCOME_ARCHETYPE,
     PROPERTY_NAME,
+    START_ARCHETYPE,
     TRANSITION_ARCHETYPE,
     outcome_text,
+    start_text,
     transition_text,
 )
-from cpmp.records import SequencerNote, TransitionEvent
+from cpmp.records import SequencerNote, StartDecision, StartOption, TransitionEvent
 
 
 class ViewInfo(NamedTuple):
@@ -54,6 +56,7 @@ class RecordingSummary:
     ``n_ticks``: number of distinct ``tick`` values. ``entity_paths``: sorted, without the
     leading ``/`` and without recording properties. ``metadata``: the recorder's ``metadata``.
     ``feature_groups``: plot panel -> feature names (empty for files written before panels).
+    ``start``: the start decision logged (``None`` if none), with its options and scores.
     """
 
     episodes: list[str]
@@ -66,16 +69,20 @@ class RecordingSummary:
     metadata: dict[str, Any] = field(default_factory=dict)
     notes: list[SequencerNote] = field(default_factory=list)
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
+    start: StartDecision | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields.
 
-        Transitions have no ``state``: a recording does not hold it.
+        Transitions have no ``state``: a recording does not hold it. The start's options are
+        ``{"combination", "score"}`` dicts.
         """
         data = asdict(self)
         data["transitions"] = [
             {k: v for k, v in asdict(event).items() if k != "state"} for event in self.transitions
         ]
+        if self.start is not None:
+            data["start"]["options"] = [o._asdict() for o in self.start.options]
         return data
 
 
@@ -140,6 +147,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     transitions: list[TransitionEvent] = []
     notes: list[SequencerNote] = []
     outcomes: list[tuple[float, int, str, str]] = []
+    start: StartDecision | None = None
     duration = 0.0
     for index, _store, entity_path, batch in batches:
         columns = batch.schema.names
@@ -202,6 +210,20 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                             str(_first(cells["text"][row]) or ""),
                         )
                     )
+        if f"{START_ARCHETYPE}:rule" in columns:
+            cells = {
+                name: batch.column(f"{START_ARCHETYPE}:{name}").to_pylist()
+                for name in ("rule", "chosen", "options")
+            }
+            for row, t in enumerate(times):
+                if _first(cells["rule"][row]) is not None:
+                    options = json.loads(_first(cells["options"][row]) or "[]")
+                    start = StartDecision(
+                        t,
+                        str(_first(cells["rule"][row])),
+                        [StartOption(dict(o["combination"]), float(o["score"])) for o in options],
+                        json.loads(_first(cells["chosen"][row]) or "{}"),
+                    )
         if f"{OUTCOME_ARCHETYPE}:outcome" in columns:
             outcome_column = batch.column(f"{OUTCOME_ARCHETYPE}:outcome").to_pylist()
             reason_column = (
@@ -233,6 +255,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         metadata=metadata,
         notes=notes,
         feature_groups=feature_groups,
+        start=start,
     )
 
 
@@ -316,6 +339,8 @@ def format_summary(summary: RecordingSummary) -> str:
     if summary.feature_groups:
         panels = ", ".join(f"{g} ({len(m)})" for g, m in summary.feature_groups.items())
         lines.append(f"feature panels: {panels}")
+    if summary.start is not None:
+        lines.append(f"t={summary.start.t:8.3f} s  {start_text(summary.start)}")
     lines.append(f"transitions ({len(summary.transitions)}):")
     lines += [
         f"  t={e.t:8.3f} s  "

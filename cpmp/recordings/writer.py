@@ -22,23 +22,35 @@ from cpmp.errors import ConfigError, CpmpError, DataError
 from cpmp.io import atomic_path
 from cpmp.recordings.columns import ColumnBuffer
 from cpmp.recordings.layout import (
+    EVENT_ORDER,
     NOTE_ARCHETYPE,
     OUTCOME_ARCHETYPE,
     PROPERTY_NAME,
+    START_ARCHETYPE,
+    START_BOXES_ENTITY,
+    START_ENTITY,
     STATUS_ENTITY,
     TRANSITION_ARCHETYPE,
+    StartReference,
+    VariableSeries,
     blueprint,
     check_feature_groups,
     check_mp,
     entity,
+    event_text,
     geom_archetypes,
     group_features,
     outcome_text,
     parse_geom,
     pose_rows,
+    series_color,
+    series_label,
+    start_markdown,
+    start_text,
     status_markdown,
     transition_text,
 )
+from cpmp.records import StartDecision
 from cpmp.sequencer.inputs import checked_time
 
 
@@ -112,6 +124,12 @@ class EpisodeRecorder:
         }
         self._active: dict[str, str] = {}
         self._last_transition = ""
+        self._last_note = ""
+        self._start_line = ""
+        self._start_features: dict[str, float] = {}
+        self._events: set[str] = set()
+        self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
+        self._targets: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._n_ticks = 0
         self._buffered_ticks = 0
         self._last_t = -math.inf
@@ -124,9 +142,8 @@ class EpisodeRecorder:
             # a process would then merge into one recording when the files are opened together.
             self._rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()))
             self._columns = ColumnBuffer(self._rec, self.mp_names)
-            self._rec.save(
-                self._tmp, default_blueprint=blueprint(self.feature_groups, list(self.mp_names))
-            )
+            # The default blueprint is sent by close(), once the logged series are known.
+            self._rec.save(self._tmp)
             self._rec.send_recording_name(self.episode)
             self._rec.send_property(
                 PROPERTY_NAME,
@@ -138,8 +155,14 @@ class EpisodeRecorder:
                     metadata=json.dumps(dict(metadata or {}), default=str, sort_keys=True),
                 ),
             )
+            place = {
+                name: (group, m)
+                for group, members in self.feature_groups.items()
+                for m, name in enumerate(members)
+            }
             for path, name in zip(self._feature_paths, self.feature_names, strict=True):
-                self._columns.name_series(path, name)
+                group, m = place[name]
+                self._columns.name_series(path, series_label(group, name), series_color(m))
             for geom in parsed_geoms:
                 self._log_geom(geom)
         except BaseException:
@@ -163,7 +186,14 @@ class EpisodeRecorder:
     def _log_status(self, t: float, outcome: str = "") -> None:
         """The ``status`` document at ``t`` [s] (event time already set)."""
         text = status_markdown(
-            self.episode, t, self._active, list(self.mp_names), self._last_transition, outcome
+            self.episode,
+            t,
+            self._active,
+            list(self.mp_names),
+            self._last_transition,
+            outcome,
+            self._last_note,
+            self._start_line,
         )
         self._rec.log(STATUS_ENTITY, self._rr.TextDocument(text, media_type="text/markdown"))
 
@@ -201,10 +231,23 @@ class EpisodeRecorder:
                 row = np.empty(3 * phi.size)
                 row[0::3], row[1::3], row[2::3] = phi, 1.0 - phi, phi
                 rows.append((self._columns.progress_paths(variable, tuple(phis)), row))
-        for variable, targets in (transition_probs or {}).items():
-            if targets:
-                row = np.fromiter(targets.values(), dtype=float, count=len(targets))
-                rows.append((self._columns.transition_paths(variable, tuple(targets)), row))
+        transitions = {v: dict(p) for v, p in (transition_probs or {}).items()}
+        for variable, seen in self._targets.items():
+            # A target logged before but not a successor now gets NaN: its line breaks
+            # (rerun draws no line across a NaN) instead of sliding across the gap.
+            if seen and variable not in transitions:
+                transitions[variable] = {}
+        for variable, targets in transitions.items():
+            if not targets and not self._targets.get(variable):
+                continue
+            index = self._mp_index.get(variable, {})
+            for target in targets:
+                if target not in index:
+                    check_mp(self.mp_names, variable, target)
+            seen = self._targets[variable]
+            names = [mp for mp in self.mp_names[variable] if mp in targets or mp in seen]
+            row = np.array([targets.get(mp, math.nan) for mp in names], dtype=float)
+            rows.append((self._columns.transition_paths(variable, tuple(names)), row))
         if active:
             indices = np.empty(len(active))
             for i, (variable, mp) in enumerate(active.items()):
@@ -218,6 +261,12 @@ class EpisodeRecorder:
         tick = self._n_ticks
         for paths, row in rows:
             self._columns.add_row(paths, tick, t, row)
+        for variable, phis in progress.items():
+            self._progress_mps[variable].update(phis)
+        for variable, targets in transitions.items():
+            self._targets[variable].update(targets)
+        if tick == 0:
+            self._start_features = dict(zip(self.feature_names, values.tolist(), strict=True))
         changed = False
         for variable, mp in active.items():
             if self._active.get(variable) != mp:
@@ -229,7 +278,7 @@ class EpisodeRecorder:
                 self._active[variable] = mp
                 self._rec.log(
                     entity("active", variable),
-                    self._rr.TextLog(f"{variable}: {mp}"),
+                    self._rr.TextLog(event_text(t, f"{variable}: {mp}")),
                     self._rr.StateChange(state=[mp]),
                 )
         if changed:
@@ -278,8 +327,10 @@ class EpisodeRecorder:
             },
         )
         self._set_event_time(t)
-        self._rec.log("events/transitions", self._rr.TextLog(text, level="INFO"), record)
-        self._rec.log(entity("events", "transitions", variable), self._rr.TextLog(text))
+        line = event_text(t, text)
+        self._events.add("events/transitions")
+        self._rec.log("events/transitions", self._rr.TextLog(line, level="INFO"), record)
+        self._rec.log(entity("events", "transitions", variable), self._rr.TextLog(line))
         self._last_transition = f"{text} at {t:.2f} s"
         self._log_status(t)
 
@@ -295,9 +346,99 @@ class EpisodeRecorder:
             NOTE_ARCHETYPE,
             components={"kind": str(kind), "variable": str(variable), "text": str(text)},
         )
-        level = "WARN" if kind in ("recovery", "nonfinite") else "INFO"
+        level = "WARN" if kind in ("recovery", "nonfinite", "give_up") else "INFO"
         self._set_event_time(t)
-        self._rec.log("events/notes", self._rr.TextLog(f"{kind}: {text}", level=level), record)
+        line = event_text(t, f"{kind}: {text}")
+        self._events.add("events/notes")
+        self._rec.log("events/notes", self._rr.TextLog(line, level=level), record)
+        self._last_note = f"{kind} at {t:.2f} s: {text}"
+        self._log_status(t)
+
+    def log_start(
+        self,
+        decision: StartDecision,
+        references: Sequence[StartReference] = (),
+        axes: Sequence[str] = (),
+    ) -> None:
+        """Record how the initial MPs were chosen, at the decision's time.
+
+        The decision (``events/start``: a line of the events log and the machine-readable
+        ``cpmp.Start`` record) and the ``start`` document: the starts weighed with their
+        scores, this episode's features at its first tick against the training starts
+        ``references`` in the features ``axes``, and every feature at the start. With two
+        ``axes``, ``start/boxes`` plots the training starts (coloured by their initial
+        combination) and this episode's start (black) in those two features.
+
+        Args:
+            decision: the sequencer's start decision (``SequencerEpisode.start_decision``).
+            references: the training demonstrations' starts.
+            axes: feature names to compare the starts in.
+
+        Raises:
+            UnknownMPError: an MP of ``decision`` is not in ``mp_names``.
+            ConfigError: an axis is not a feature, or a reference lacks one.
+        """
+        self._check_open()
+        t = checked_time(decision.t)
+        for option in decision.options:
+            for variable, mp in option.combination.items():
+                check_mp(self.mp_names, variable, mp)
+        axes = [str(a) for a in axes]
+        unknown = [a for a in axes if a not in self.feature_names]
+        missing = [r.name for r in references if any(a not in r.values for a in axes)]
+        if unknown or missing:
+            raise ConfigError(
+                f"start axes must be features of every reference: unknown {unknown}, "
+                f"references without them {missing}"
+            )
+        record = self._rr.DynamicArchetype(
+            START_ARCHETYPE,
+            components={
+                "rule": decision.rule,
+                "chosen": json.dumps(decision.chosen, sort_keys=True),
+                "options": json.dumps(
+                    [{"combination": o.combination, "score": o.score} for o in decision.options]
+                ),
+            },
+        )
+        self._set_event_time(t)
+        self._start_line = start_text(decision)
+        self._events.add("events/start")
+        self._rec.log(
+            "events/start", self._rr.TextLog(event_text(t, self._start_line), level="INFO"), record
+        )
+        document = start_markdown(decision, self._start_features, references, axes)
+        self._rec.log(START_ENTITY, self._rr.TextDocument(document, media_type="text/markdown"))
+        if len(axes) >= 2 and references:
+            self._log_start_points(references, axes[:2])
+        self._log_status(t)
+
+    def _log_start_points(self, references: Sequence[StartReference], axes: Sequence[str]) -> None:
+        """The training starts and this episode's start as 2D points in two features."""
+        combos: list[dict[str, str]] = []
+        for ref in references:
+            if ref.combination not in combos:
+                combos.append(ref.combination)
+        train = np.array([[ref.values[a] for a in axes] for ref in references], dtype=float)
+        spread = float(np.max(np.ptp(train, axis=0))) if len(train) > 1 else 0.0
+        radius = 0.025 * (spread if spread > 0 else max(float(np.max(np.abs(train))), 1.0))
+        self._rec.log(
+            entity(*START_BOXES_ENTITY.split("/"), "training"),
+            self._rr.Points2D(
+                train,
+                radii=radius,
+                colors=[series_color(combos.index(ref.combination)) for ref in references],
+                labels=[ref.name for ref in references],
+            ),
+        )
+        if self._start_features:
+            here = [[self._start_features[a] for a in axes]]
+            self._rec.log(
+                entity(*START_BOXES_ENTITY.split("/"), "episode"),
+                self._rr.Points2D(
+                    here, radii=1.6 * radius, colors=[(0, 0, 0)], labels=["this episode"]
+                ),
+            )
 
     def log_outcome(
         self, t: float, outcome: str, reason: str = "", *, success: bool | None = None
@@ -317,7 +458,8 @@ class EpisodeRecorder:
         )
         level = "WARN" if success is False else "INFO"
         self._set_event_time(t)
-        self._rec.log("events/outcome", self._rr.TextLog(text, level=level), record)
+        self._events.add("events/outcome")
+        self._rec.log("events/outcome", self._rr.TextLog(event_text(t, text), level=level), record)
         self._log_status(t, outcome=text)
 
     def close(self) -> Path:
@@ -326,6 +468,7 @@ class EpisodeRecorder:
             return self.path
         try:
             self._flush_buffers()
+            self._rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
             self._rec.flush()
             self._rec.disconnect()
         except BaseException:
@@ -334,6 +477,28 @@ class EpisodeRecorder:
         self._closed = True
         self._atomic.__exit__(None, None, None)
         return self.path
+
+    def _blueprint(self) -> Any:
+        """The default layout for what was logged (:func:`~cpmp.recordings.layout.blueprint`).
+
+        An episode that ended at its first tick with a start decision logged (a wrong start)
+        gets the start decision in the middle.
+        """
+        series = {
+            v: VariableSeries(
+                [mp for mp in mps if mp in self._progress_mps[v]],
+                [mp for mp in mps if mp in self._targets[v]],
+            )
+            for v, mps in self.mp_names.items()
+        }
+        started = bool(self._start_line)
+        return blueprint(
+            self.feature_groups,
+            series,
+            start=started,
+            start_focus=started and self._n_ticks <= 1,
+            events=sorted(self._events, key=EVENT_ORDER.index),
+        )
 
     def abort(self) -> None:
         """Discard the recording: nothing is written at ``path``. Idempotent."""

@@ -18,7 +18,14 @@ from typing import NamedTuple
 import numpy as np
 
 from cpmp.errors import DataError, NotFittedError
-from cpmp.records import SequencerNote, SwitchKind, TickInfo, TransitionEvent
+from cpmp.records import (
+    SequencerNote,
+    StartDecision,
+    StartOption,
+    SwitchKind,
+    TickInfo,
+    TransitionEvent,
+)
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
@@ -122,6 +129,8 @@ class SequencerEpisode:
         """Variable -> active MP (empty before :meth:`start`)."""
         self.events: list[TransitionEvent] = []
         self.notes: list[SequencerNote] = []
+        self.start_decision: StartDecision | None = None
+        """How :meth:`start` chose the initial MPs (``None`` before it)."""
         c = model.config
         self._rules = {
             v: make_rule(c.switch_rule, c.threshold, c.patience, c.min_improvement)
@@ -175,7 +184,8 @@ class SequencerEpisode:
                 "(check its parameters) or the features are far outside the training data"
             )
         model = self.model
-        self.active = self._initial_mps(phi)
+        self.start_decision = self._initial_mps(t, phi)
+        self.active = dict(self.start_decision.chosen)
         self.events = []
         self.notes = []
         for v, rule in self._rules.items():
@@ -392,26 +402,34 @@ class SequencerEpisode:
             )
         )
 
-    def _initial_mps(self, phi: np.ndarray) -> dict[str, str]:
-        """The start rule on every head's φ ``(H,)``: variable -> MP.
+    def _initial_mps(self, t: float, phi: np.ndarray) -> StartDecision:
+        """The start rule on every head's φ ``(H,)`` at ``t`` [s]: the MPs and the scores.
 
         See :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`.
         """
         model = self.model
         start_index = model.nodes.start_index
+        entry = np.clip(1.0 - phi, 1e-12, 1.0)
         if model.config.start_rule == "joint" and model.initial_combinations:
-            entry = np.clip(1.0 - phi, 1e-12, 1.0)
             scores = [
                 sum(np.log(entry[start_index[(v, mp)]]) for v, mp in combo.items())
                 for combo in model.initial_combinations
             ]
-            return dict(model.initial_combinations[int(np.argmax(scores))])
-        active = {}
+            options = [
+                StartOption(dict(combo), float(score))
+                for combo, score in zip(model.initial_combinations, scores, strict=True)
+            ]
+            chosen = dict(model.initial_combinations[int(np.argmax(scores))])
+            return StartDecision(t, "joint", options, chosen)
+        active, options = {}, []
         for v in sorted(model.graphs):
             initial = sorted(model.graphs[v].initial_nodes)
             entry_v = [1.0 - phi[start_index[(v, mp)]] for mp in initial]
             active[v] = initial[int(np.argmax(entry_v))]
-        return active
+            options += [
+                StartOption({v: mp}, float(np.log(entry[start_index[(v, mp)]]))) for mp in initial
+            ]
+        return StartDecision(t, "independent", options, active)
 
     def _transition_plan(self, context: Mapping[str, str]) -> list[PlanRow]:
         """What every tick needs while the active MPs are ``context``.
@@ -468,9 +486,7 @@ class SequencerEpisode:
                 t,
                 "hold",
                 v,
-                f"{v}: {current} -> {target} held (p={p:.2f}): "
-                + "; ".join(why)
-                + ", never seen at this switch",
+                "; ".join(why) + f", never seen at {v}: {current} -> {target} (held, p={p:.2f})",
             )
         )
 

@@ -35,7 +35,7 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
 from cpmp.predictors.training import check_logger, fit_predictor
-from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
+from cpmp.records import ReplayResult, SequencerNote, StartDecision, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
 from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.fit_data import (
@@ -354,6 +354,11 @@ class ConcurrentSequencer:
     def last_tick(self) -> TickInfo | None:
         """What the last :meth:`reset` or :meth:`step` computed (``None`` before a reset)."""
         return self._episode.last_tick
+
+    @property
+    def start_decision(self) -> StartDecision | None:
+        """How the last :meth:`reset` chose the initial MPs, with every start's score."""
+        return self._episode.start_decision
 
     def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
         """Run the sequencer open-loop over a recorded feature stream.

@@ -230,7 +230,11 @@ class _Rollout:
             self.on_result(self.index, self.result)
 
     def start(self, active: Mapping[str, str]) -> None:
-        """Take the policy's initial MPs; a wrong start ends the episode."""
+        """Take the policy's initial MPs; a wrong start ends the episode.
+
+        A wrong start still reaches the ``on_tick`` callback once (the state at ``t = 0`` and
+        the MPs chosen), so that a recording of it shows the scene it was decided in.
+        """
         sim, want = self.sim, self.want
         self.active = _normalise(active, sim.variables)
         sim.set_active(self.active)
@@ -242,17 +246,22 @@ class _Rollout:
             exp = {v: want[v][0] for v in wrong}
             strategy = correct_strategy(self.box, self.cfg)
             reason = f"initial MPs {got} differ from strategy {strategy!r}: {exp}"
+            self._report_tick()
             self.finish("wrong_start", reason)
 
-    def before_tick(self) -> None:
-        """The ``on_tick`` callback, then the active MPs to the simulation."""
+    def _report_tick(self) -> None:
+        """The ``on_tick`` callback with the state now (before the tick's physics)."""
         sim = self.sim
         if self.on_tick is not None:
             tick = TickInfo(
                 sim.t, active=dict(self.active), features=self.x, body_poses=sim.body_poses()
             )
             self.on_tick(tick)
-        sim.set_active(self.active)
+
+    def before_tick(self) -> None:
+        """The ``on_tick`` callback, then the active MPs to the simulation."""
+        self._report_tick()
+        self.sim.set_active(self.active)
 
     def physics_step(self) -> bool:
         """One control tick of physics; False (and the episode ended) if it diverged."""

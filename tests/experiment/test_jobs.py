@@ -24,10 +24,11 @@ from cpmp.experiment.jobs import run_experiment
 from cpmp.experiment.settings import ExperimentSettings
 from cpmp.experiment.strategies import strategy_map, strategy_signatures
 from cpmp.experiment.workers import default_workers
-from cpmp.recordings import read_recording
+from cpmp.recordings import read_recording, read_views
 from cpmp.recordings.demos import label_switches, record_demo_rrd
+from cpmp.recordings.layout import blueprint_paths
 from cpmp.sequencer.sequencer import ConcurrentSequencer
-from cpmp.sim import Box, TaskConfig
+from cpmp.sim import Box, Simulation, TaskConfig
 from cpmp.worlds.two_point import make_demonstrations
 
 # One thread: a second busy process on a 2-core machine slows torch's default two threads
@@ -366,3 +367,28 @@ def test_two_workers_give_the_serial_report(tmp_path, caplog):
     messages = [record.getMessage() for record in caplog.records]
     assert any(m.startswith("[seed 1 D=3] ") and "reproduce" in m for m in messages)
     assert any(m.startswith("[seed 0] ") and "collect" in m for m in messages)
+
+
+def test_a_wrong_start_recording_shows_its_scene_and_its_start_decision(tiny):
+    """A wrong start ends at t = 0, before any control tick: its recording still has every
+    body's pose, every feature, the active MPs and the status at t = 0, and the start decision
+    with every demonstrated start's score (the chosen one the best), laid out in the middle;
+    every recording's views name only logged entities."""
+    episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
+    task = TaskConfig.from_dict(tiny["cfg"].task)
+    for episode in episodes:
+        summary = read_recording(episode["rrd"])
+        paths = set(summary.entity_paths)
+        assert set(blueprint_paths(read_views(episode["rrd"]))) <= paths
+        assert summary.start is not None and summary.start.options
+        best = max(summary.start.options, key=lambda o: o.score)
+        assert best.combination == summary.start.chosen
+        if episode["outcome"] != "wrong_start":
+            continue
+        sim = Simulation(task, Box(0.2, 0.15, 0.1))  # its bodies and features: any box's
+        assert {f"world/{body}" for body in sim.body_poses()} <= paths
+        assert {f"features/{name}" for name in sim.feature_names} <= paths
+        assert {f"active/{v}" for v in sim.variables} | {"status", "start"} <= paths
+        assert summary.n_ticks == 1
+        names = [v.name for v in read_views(episode["rrd"])]
+        assert "start" in names and "start map" in names

@@ -149,7 +149,10 @@ def test_scalar_values_round_trip(episode_file: Path) -> None:
     _, index = _column(episode_file, "active/left_pos/index", "Scalars:scalars")
     assert [v[0] for v in index] == [0, 0, 0, 0, 1, 1, 1]
     _, active_text = _column(episode_file, "active/left_pos", "TextLog:text")
-    assert [v[0] for v in active_text] == ["left_pos: approach", "left_pos: grasp"]
+    assert [v[0] for v in active_text] == [
+        "  0.00 s  left_pos: approach",
+        "  0.40 s  left_pos: grasp",
+    ]
 
 
 def test_poses_and_geoms(episode_file: Path) -> None:
@@ -170,7 +173,7 @@ def test_format_summary_lists_transitions(episode_file: Path) -> None:
     text = format_summary(read_recording(episode_file))
     assert "demo_07" in text
     assert "ticks: 7" in text
-    assert "left_pos: approach -> grasp (p=0.71)" in text
+    assert "left_pos: approach -> grasp (p=0.71) [switch]" in text
     assert "outcome: success (box in container)" in text
 
 
@@ -409,9 +412,12 @@ def test_feature_panels_in_blueprint(robot_file: Path) -> None:
     for group, members in groups.items():
         assert panels[group].kind == "TimeSeries"
         assert panels[group].contents == [f"+ features/{name}" for name in members]
-    # Each feature's series is named by the feature (legend text), not by its entity path.
+    # Each feature's series is named by the feature less its panel's name (a narrow legend),
+    # not by its entity path; a name without the panel's prefix stays whole.
     _, names = _column(robot_file, "features/dist.left_fingers.grasp", "SeriesLines:names")
-    assert names == [["dist.left_fingers.grasp"]]
+    assert names == [["fingers.grasp"]]
+    _, names = _column(robot_file, "features/box_supported", "SeriesLines:names")
+    assert names == [["box_supported"]]
 
 
 def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> None:
@@ -419,11 +425,11 @@ def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> No
     first column, the active MPs (status document, state lanes) and the outcome at the end."""
     _, texts = _column(robot_file, "events/transitions", "TextLog:text")
     assert [t[0] for t in texts] == [
-        "right_fingers: relax -> grasp (p=0.90)",
-        "right_fingers: grasp -> release (p=0.68)",
+        "  0.20 s  right_fingers: relax -> grasp (p=0.90) [switch]",
+        "  0.40 s  right_fingers: grasp -> release (p=0.68) [switch]",
     ]
     outcome_times, outcome = _column(robot_file, "events/outcome", "TextLog:text")
-    assert outcome == [["outcome: incomplete (deadlock)"]]
+    assert outcome == [["  0.60 s  outcome: incomplete (deadlock)"]]
     assert outcome_times == pytest.approx([0.6], abs=TIME_TOL)
     _, level = _column(robot_file, "events/outcome", "TextLog:level")
     assert level == [["WARN"]]
@@ -437,10 +443,11 @@ def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> No
     # transition that made it so.
     at_03 = [d for t, d in zip(times, documents, strict=True) if t <= 0.3 + TIME_TOL][-1]
     assert "| right_fingers | grasp |" in at_03 and "| left_pos | reach |" in at_03
-    assert "right_fingers: relax -> grasp (p=0.90)" in at_03
+    assert "right_fingers: relax -> grasp (p=0.90) [switch]" in at_03
     final = documents[-1]
     assert "| right_fingers | release |" in final
-    assert "right_fingers: grasp -> release (p=0.68)" in final
+    assert "right_fingers: grasp -> release (p=0.68) [switch]" in final
+    assert "last note: hold at 0.40 s: reach -> lift held" in final
     assert "outcome: incomplete (deadlock)" in final
 
     views = {v.name: v for v in read_views(robot_file)}
@@ -448,9 +455,9 @@ def test_transition_text_active_mps_and_outcome_readable(robot_file: Path) -> No
     assert views["active MPs"].kind == "StateTimeline" and views["active MPs"].origin == "active"
     assert "+ events/outcome" in views["events"].contents
     assert "+ events/notes" in views["events"].contents
-    # The full time panel is open (3 = expanded): its rows mark each event, the outcome at
-    # the episode end included.
-    assert _blueprint_column(robot_file, "TimePanelBlueprint:state") == [[3]]
+    # The time panel is one row (2 = collapsed): the views get the height, the events log
+    # lists every event with its time.
+    assert _blueprint_column(robot_file, "TimePanelBlueprint:state") == [[2]]
 
 
 def _blueprint_column(path: Path, column: str) -> list:
@@ -465,13 +472,16 @@ def _blueprint_column(path: Path, column: str) -> list:
 
 
 def test_text_logs_show_the_text_first(robot_file: Path) -> None:
-    """The events and active-MP logs show the message body as their first column and hide the
-    entity path (so that it does not fill the visible width)."""
+    """The events and active-MP logs show the message body (which starts with its time) as
+    their first column and hide the entity path and the time column (which the viewer cuts to
+    ``+3…``)."""
     columns = _blueprint_column(robot_file, "TextLogColumns:text_log_columns")
     assert len(columns) == 2  # events and the active-MP log
     for cells in columns:
         assert cells[0] == {"kind": 3, "visible": True}  # 3 = Body
         assert {"kind": 1, "visible": False} in cells  # 1 = EntityPath
+    timelines = _blueprint_column(robot_file, "TextLogColumns:timeline_columns")
+    assert timelines == [[{"timeline": "time", "visible": False}]] * 2
 
 
 def test_public_names_importable_from_recording() -> None:
