@@ -113,10 +113,15 @@ def _composition_error(
         name = key.group(1)
         line = next((o.input_line for o in overrides if o.key_or_group == name), name)
         others = [o.input_line for o in overrides if "." not in o.key_or_group]
-        hint = _key_hint(name, config_name, others, config_dir)
+        close = _close_key(name, config_name, others, config_dir)
+        if close is not None:  # a misspelt key: adding it with + would only fail later
+            value = line.partition("=")[2]
+            return ConfigError(
+                f"{line}: the {config_name} config has no key {name!r} (did you mean "
+                f"{close!r}?); write {close}={value}"
+            )
         return ConfigError(
-            f"{line}: the {config_name} config has no key {name!r}{hint}; "
-            f"to add a new key write +{line}"
+            f"{line}: the {config_name} config has no key {name!r}; to add a new key write +{line}"
         )
     exists = re.match(r"Could not append to config. An item is already at '([^']+)'", text)
     if exists:
@@ -145,21 +150,27 @@ def _composition_error(
     return ConfigError(f"{one_line(text)}{detail}")
 
 
-def _key_hint(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str:
-    """`` (did you mean 'x'?)`` for a misspelt ``key``, from the keys beside it.
+def _close_key(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str | None:
+    """The existing key a misspelt ``key`` most likely means, from the keys beside it.
 
-    The keys are those of the config composed with ``groups`` (the overrides of groups and
-    top-level keys).
+    Args:
+        key: the dotted key that does not exist.
+        config_name: the command's config.
+        groups: the overrides of groups and top-level keys (the config is composed with them).
+        config_dir: an extra config directory, or ``None``.
+
+    Returns:
+        The dotted key (``sequencer.threshold`` for ``sequencer.treshold``), or ``None``.
     """
     parent, _, leaf = key.rpartition(".")
     try:
         cfg = compose_config(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
     except CpmpError:
-        return ""
+        return None
     node = OmegaConf.select(cfg, parent) if parent else cfg
     names = [str(k) for k in node if k != "hydra"] if isinstance(node, DictConfig) else []
     close = difflib.get_close_matches(leaf, names, n=1)
-    return f" (did you mean {'.'.join([*filter(None, [parent]), close[0]])!r}?)" if close else ""
+    return ".".join([*filter(None, [parent]), close[0]]) if close else None
 
 
 def compose_config(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:

@@ -63,7 +63,22 @@ LIGHT_CASES = [
     ("compare", ["experiment=compare_tny"], ["experiment=compare_tny", "compare_tiny"]),
     ("experiment", ["-m", "launcher=slrum"], ["launcher=slrum", "did you mean launcher=slurm"]),
     # an unknown key
-    ("experiment", ["predictr=klr"], ["predictr=klr", "did you mean 'predictor'", "+predictr"]),
+    (
+        "experiment",
+        ["predictr=klr"],
+        ["predictr=klr", "did you mean 'predictor'", "write predictor=klr"],
+    ),
+    # a misspelt key gets the corrected override, not '+' (which would fail at the job's checks)
+    (
+        "experiment",
+        ["sequencer.treshold=0.7"],
+        ["did you mean 'sequencer.threshold'", "write sequencer.threshold=0.7"],
+    ),
+    (
+        "experiment",
+        ["nokey_at_all=1"],
+        ["nokey_at_all=1", "to add a new key write +nokey_at_all=1"],
+    ),
     ("experiment", ["experiment.n_boxs=3"], ["experiment.n_boxs", "'experiment.n_boxes'"]),
     ("train", ["data.pth=x.h5"], ["data.pth=x.h5", "'data.path'"]),
     ("evaluate", ["checkpont=m.pt"], ["checkpont=m.pt", "'checkpoint'"]),
