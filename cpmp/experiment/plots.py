@@ -155,8 +155,9 @@ def plot_progress_curves(
 ) -> Path:
     """Fig. 6: mean predicted progress over normalised time, one panel per label.
 
-    Each panel (e.g. "3 demos") has a ±2 std band, the mean expected progress (dashed) and the
-    ideal diagonal.
+    Each panel (e.g. "3 demos") has the mean predicted progress with the spread of the
+    predictions over the activations (±2 std, clipped to φ's range [0, 1]: a spread, not an
+    uncertainty of the predictor), the mean expected progress (dashed) and the ideal diagonal.
 
     Each value is a dict from :func:`cpmp.evaluation.offline.progress_curves` (needs
     :data:`CURVE_KEYS`).
@@ -178,7 +179,8 @@ def plot_progress_curves(
         time = np.asarray(curves["time"], dtype=float)
         mean = np.asarray(curves["predicted_mean"], dtype=float)
         std = np.asarray(curves["predicted_std"], dtype=float)
-        ax.fill_between(time, mean - 2 * std, mean + 2 * std, alpha=0.3, label="±2 std")
+        low, high = np.clip(mean - 2 * std, 0.0, 1.0), np.clip(mean + 2 * std, 0.0, 1.0)
+        ax.fill_between(time, low, high, alpha=0.3, label="spread over activations (±2 std)")
         ax.plot(time, mean, linewidth=2, label="predicted (mean)")
         ax.plot(time, curves["expected_mean"], "--", color="C1", label="expected (mean)")
         ax.plot([0, 1], [0, 1], color="k", linewidth=1, label="ideal")

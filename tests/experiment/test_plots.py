@@ -13,6 +13,7 @@ from matplotlib.image import imread
 
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation.offline import progress_curves
+from cpmp.experiment import plots
 from cpmp.experiment.plots import (
     plot_progress_curves,
     plot_progress_field,
@@ -130,3 +131,18 @@ def test_plot_sweep(tmp_path: Path) -> None:
     with pytest.raises(DataError, match="repeats"):
         plot_sweep(table, "n_demos", "success", None, tmp_path / "bad.png")
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_fig6_band_is_named_a_spread_and_stays_in_phis_range(monkeypatch, tmp_path):
+    """The band is the predictions' spread over activations (not an uncertainty), and φ lies
+    in [0, 1]: the band is clipped there instead of running past the axes."""
+    figures = []
+    monkeypatch.setattr(plots, "save_figure", lambda figure, path: figures.append(figure))
+    t = np.linspace(0.0, 1.0, 50)
+    curves = dict(time=t, predicted_mean=t, predicted_std=np.full(50, 0.2), expected_mean=t)
+    plots.plot_progress_curves({"3 demos": curves}, tmp_path / "fig6.png")
+    (ax,) = figures[0].axes
+    (band,) = ax.collections
+    y = np.concatenate([path.vertices[:, 1] for path in band.get_paths()])
+    assert y.min() >= 0.0 and y.max() <= 1.0
+    assert band.get_label() == "spread over activations (±2 std)"
