@@ -53,6 +53,41 @@ class SteppedTask(Protocol[State, Episode]):
         ...
 
 
+Script = Callable[[object, np.ndarray, object, dict[str, str]], dict[str, str]]
+"""A world's demonstrator: ``script(task, x, episode, active)`` -> the active MPs after its
+switches at features ``x (d,)``."""
+
+
+class ScriptPolicy(Generic[Episode]):
+    """A world's demonstrator (its :data:`Script`) as a :class:`~cpmp.records.Policy`.
+
+    A world subclasses it and sets ``script``.
+
+    It knows the episode, as the demonstrator does.
+
+    Args:
+        task: the world's task options.
+        episode: the episode it runs.
+    """
+
+    script: Script
+
+    def __init__(self, task: SteppedTask[object, Episode], episode: Episode) -> None:
+        self.task = task
+        self.episode = episode
+        self.active: dict[str, str] = {}
+
+    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The demonstrator's initial MPs for the episode (``t`` [s] and ``x`` unused)."""
+        self.active = self.task.initial_mps(self.episode)
+        return dict(self.active)
+
+    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
+        """The demonstrator's switches at features ``x (d,)``; the active MPs after them."""
+        self.active = type(self).script(self.task, np.asarray(x, float), self.episode, self.active)
+        return dict(self.active)
+
+
 def positive_count(n: object, name: str) -> int:
     """``n`` checked to be a positive integer (``bool`` is not one).
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.data import Demonstration
-from cpmp.worlds.common import positive_count, record_script, seeded_episodes
+from cpmp.worlds.common import ScriptPolicy, positive_count, record_script, seeded_episodes
 from cpmp.worlds.relay.world import (
     FEATURE_NAMES,
     STRATEGIES,
@@ -95,26 +95,13 @@ def demonstrate(task: RelayTask, episode: RelayEpisode, name: str | None = None)
     return run.log.to_demonstration(FEATURE_NAMES, name, metadata)
 
 
-class ScriptedPolicy:
+class ScriptedPolicy(ScriptPolicy):
     """The demonstrator's finite state machine behind the :class:`~cpmp.records.Policy` interface.
 
     It knows the episode's goals, as the demonstrator does.
     """
 
-    def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
-        self.task = task
-        self.episode = episode
-        self.active: dict[str, str] = {}
-
-    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """The demonstrator's initial MPs for the episode."""
-        self.active = self.task.initial_mps(self.episode)
-        return dict(self.active)
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """The demonstrator's switches at features ``x (6,)``; the active MPs after them."""
-        self.active = script(self.task, np.asarray(x, float), self.episode, self.active)
-        return dict(self.active)
+    script = staticmethod(script)
 
 
 def make_demonstrations(

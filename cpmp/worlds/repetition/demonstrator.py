@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.data.demonstration import Demonstration
-from cpmp.worlds.common import positive_count, record_script, seeded_episodes
+from cpmp.worlds.common import ScriptPolicy, positive_count, record_script, seeded_episodes
 from cpmp.worlds.repetition.world import (
     AMOUNT_EPS,
     FEATURE_NAMES,
@@ -95,30 +95,13 @@ def demonstrate(
     return run.log.to_demonstration(FEATURE_NAMES, name, metadata)
 
 
-class ScriptedPolicy:
+class ScriptedPolicy(ScriptPolicy):
     """The demonstrator's finite state machine as a :class:`~cpmp.records.Policy`.
 
     It knows the episode's spot, as the demonstrator does.
-
-    Args:
-        task: the task's options.
-        episode: the episode it runs.
     """
 
-    def __init__(self, task: RepetitionTask, episode: RepetitionEpisode) -> None:
-        self.task = task
-        self.episode = episode
-        self.active: dict[str, str] = {}
-
-    def reset(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """The demonstrator's initial MPs (``t`` [s] and ``x`` (7,) unused)."""
-        self.active = self.task.initial_mps(self.episode)
-        return dict(self.active)
-
-    def step(self, t: float, x: np.ndarray) -> dict[str, str]:
-        """The demonstrator's switches on features ``x`` (7,) at time ``t`` [s]."""
-        self.active = script(self.task, np.asarray(x, float), self.episode, self.active)
-        return dict(self.active)
+    script = staticmethod(script)
 
 
 def make_demonstrations(
