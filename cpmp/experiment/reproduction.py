@@ -94,9 +94,9 @@ class EpisodeLogger:
     """``on_tick`` callback that writes a rerun recording of a sequencer-driven episode.
 
     At the first tick it also logs the sequencer's start decision against the training starts
-    ``references`` (compared in the features ``axes``). A hold the sequencer notes again
-    before its variable switches (its φ hovering at the threshold) is logged once: one note
-    per hold, not one per re-crossing.
+    ``references`` (compared in the features ``axes``). A hold note is passed with the MP it
+    holds back, so that the recording logs each hold once, with its duration and how many
+    times the sequencer noted it (its p hovering at the threshold).
 
     Args:
         recorder: the episode's :class:`~cpmp.recordings.EpisodeRecorder`.
@@ -118,7 +118,6 @@ class EpisodeLogger:
         self.references = list(references)
         self.axes = list(axes)
         self._started = False
-        self._holds: dict[str, str | None] = {}
         self._n_events = 0
         self._n_notes = 0
 
@@ -137,18 +136,15 @@ class EpisodeLogger:
         if not self._started and decision is not None:
             self.recorder.log_start(decision, self.references, self.axes)
         self._started = True
+        # Notes first: a hold noted at the tick its variable switched (to another successor)
+        # ended with that switch.
+        for note in self.seq.notes[self._n_notes :]:
+            held = tick.held.get(note.variable) if tick and note.kind == "hold" else None
+            self.recorder.log_note(note.t, note.kind, note.variable, note.text, held=held)
         for event in self.seq.events[self._n_events :]:
             self.recorder.log_transition(
                 event.t, event.variable, event.source, event.target, event.probability, event.kind
             )
-            self._holds.pop(event.variable, None)
-        for note in self.seq.notes[self._n_notes :]:
-            if note.kind == "hold":
-                target = tick.held.get(note.variable) if tick else None
-                if target is not None and self._holds.get(note.variable) == target:
-                    continue  # the same hold again before the variable switched
-                self._holds[note.variable] = target
-            self.recorder.log_note(note.t, note.kind, note.variable, note.text)
         self._n_events = len(self.seq.events)
         self._n_notes = len(self.seq.notes)
 

@@ -50,28 +50,38 @@ entity path                            content
                                        ``cpmp.Transition`` record
 ``events/transitions/<variable>``      the same ``TextLog``, per control variable
 ``events/notes``                       ``TextLog`` ``"  1.09 s  <kind>: <text>"`` plus
-                                       ``cpmp.Note``
+                                       ``cpmp.Note``; a hold once, at its first note, with
+                                       how long it lasted and how often it was noted
+                                       (``"...; held 0.63 s, until left_fingers switched
+                                       to relax at 9.91 s (noted 3 times)"``)
 ``events/outcome``                     ``TextLog`` ``" 10.75 s  outcome: <outcome>
                                        (<reason>)"`` at the episode end (level ``WARN`` for
                                        a failure) plus the ``cpmp.Outcome`` record
 =====================================  ===================================================
 
+An event's text longer than :data:`EVENT_WIDTH` characters continues on indented rows of
+the same entity and time (:func:`event_lines`; rerun 0.41's text log shows one line per row);
+the record is in the first row. Warnings (level ``WARN``: recoveries, give-ups, non-finite
+features, a failed outcome) are drawn in an orange of their own.
+
 Blueprint (the viewer's default layout, sent when the recording is closed, for what it holds):
 the 3D scene above the ``status`` document (the ``start`` document and the start map in tabs
-beside it); one time-series panel per feature group (:func:`group_features`: box, each hand,
-goal distances, touch, ... from the feature names, at most 8 series each); a tab per control
-variable with its φ (= exit), entry and transition probabilities, an MP in one colour in all
-three; every plot's legend in its top-left corner; the active MPs as lanes of a state
-timeline; the events log (start, transitions, notes, outcome), each line starting with its
-time. Every view lists the entity paths it shows (rerun 0.41 matches no wildcard in the
-middle of a path). An episode that ended at its first tick (a wrong start) puts the start
-decision and the start map in the middle instead of the plots. The blueprint and selection
-panels start collapsed, the time panel as one row. :func:`read_views` lists the views.
+beside it); a tab per feature group (:func:`group_features`: box, each hand, goal distances,
+touch, ... from the feature names, at most 8 series each), a plot as wide as the column; a tab
+per control variable with its φ (= exit), entry and transition probabilities, an MP in one
+colour in all three and named by φ's legend only; the legends in the plots' top-left corner;
+the active MPs as lanes of a state timeline; the events log (start, transitions, notes,
+outcome) in a monospace font, each event starting with its time. Every view lists the entity
+paths it shows (rerun 0.41 matches no wildcard in the middle of a path). An episode that ended
+at its first tick (a wrong start) puts the start decision and the start map in the middle
+instead of the plots. The blueprint and selection panels start collapsed, the time panel as one
+row. :func:`read_views` lists the views.
 
 Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
 ``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
 ``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
-probability), ``cpmp.Note:{kind,variable,text}``, ``cpmp.Outcome:{outcome,reason}`` and
+probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s] and
+``count``), ``cpmp.Outcome:{outcome,reason}`` and
 ``cpmp.Start:{rule,chosen,options}`` (strings; ``chosen`` and ``options`` as JSON); their time
 is the ``time`` timeline of the row. The episode name is the recording
 name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,
@@ -89,10 +99,12 @@ beside the target under a temporary name and renamed onto it only by a successfu
 from __future__ import annotations
 
 from cpmp.recordings.layout import (
+    EVENT_WIDTH,
     GEOM_TYPES,
     MAX_SERIES_PER_PANEL,
     TOUCH_WORDS,
     StartReference,
+    event_lines,
     group_features,
     outcome_text,
     transition_text,
@@ -109,6 +121,7 @@ from cpmp.recordings.reader import (
 from cpmp.recordings.writer import EpisodeRecorder
 
 __all__ = [
+    "EVENT_WIDTH",
     "GEOM_TYPES",
     "MAX_SERIES_PER_PANEL",
     "TOUCH_WORDS",
@@ -118,6 +131,7 @@ __all__ = [
     "StartReference",
     "TransitionEvent",
     "ViewInfo",
+    "event_lines",
     "format_summary",
     "group_features",
     "outcome_text",

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import rerun as rr
@@ -52,6 +53,19 @@ its colour in its variable's φ, entry and transition panels."""
 LEGEND_CORNER = "LeftTop"
 """Where the legend of a plot with one sits (rerun's default, bottom right, covers the ends of
 the φ curves)."""
+
+EVENT_WIDTH = 78
+"""Characters per line of the events log, its time included (:func:`event_lines`). rerun 0.41
+shows the first line of a multi-line text log entry only, so a long event is logged as
+several rows; the log's monospace body column shows about 82 characters in the default layout
+of a 1920 px wide viewer."""
+
+EVENT_INDENT = 10
+"""Continuation lines of an event start below its text, after the time (``"  3.25 s  "``)."""
+
+WARN_COLOR = (204, 85, 0)
+"""Text colour of the events log's warnings (recoveries, give-ups, a failed outcome): the
+level column is hidden to leave the text the width."""
 
 TRANSITION_ARCHETYPE = "cpmp.Transition"
 """Name of the machine-readable transition record (columns ``cpmp.Transition:<field>``)."""
@@ -107,13 +121,36 @@ def transition_text(variable: str, source: str, target: str, probability: float,
     return f"{variable}: {source} -> {target} (p={probability:.2f}) [{kind}]"
 
 
-def event_text(t: float, text: str) -> str:
-    """A line of the events log: ``"  3.25 s  <text>"`` (the time in the text itself).
+def event_lines(t: float, text: str, width: int = EVENT_WIDTH) -> list[str]:
+    """The rows of one event in the events log: ``"  3.25 s  <text>"``, wrapped at ``width``.
 
-    The log's own time column is hidden: the viewer cuts it to ``+3…`` at any width the
-    layout leaves it.
+    The time is in the text itself (the log's own time column is hidden: the viewer cuts it to
+    ``+3…``); continuation rows are indented by :data:`EVENT_INDENT` so that the text reads
+    as one block below its time. No row is longer than ``width`` characters (a word longer than
+    a line is broken).
+
+    Args:
+        t: the event's time [s].
+        text: the event, any length.
+        width: characters per row (at least :data:`EVENT_INDENT` + 10).
+
+    Returns:
+        The rows, the first starting with the time.
+
+    Raises:
+        ConfigError: ``width`` leaves too little room for the text.
     """
-    return f"{t:6.2f} s  {text}"
+    if width < EVENT_INDENT + 10:
+        raise ConfigError(f"event width must be >= {EVENT_INDENT + 10} characters, got {width}")
+    head = f"{t:6.2f} s  "
+    indent = " " * max(EVENT_INDENT, len(head))
+    return textwrap.wrap(
+        " ".join(text.split()),
+        width,
+        initial_indent=head,
+        subsequent_indent=indent,
+        break_on_hyphens=False,
+    ) or [head.rstrip()]
 
 
 def start_text(decision: StartDecision) -> str:
@@ -251,6 +288,46 @@ def outcome_text(outcome: str, reason: str) -> str:
     return f"outcome: {outcome}" + (f" ({reason})" if reason else "")
 
 
+HoldEnd = Literal["switch", "hold", "end"]
+"""What ended a hold: its variable switched, the coupling held it to another MP, the episode
+ended."""
+
+
+def hold_text(
+    text: str,
+    start: float,
+    end: float,
+    ended_by: HoldEnd,
+    count: int,
+    variable: str,
+    then: str = "",
+) -> str:
+    """A hold note with how long it lasted: ``text`` and ``"; held 0.63 s, until ..."``.
+
+    Args:
+        text: the sequencer's note (its reason first).
+        start: when the hold was first noted [s].
+        end: when it ended [s].
+        ended_by: what ended it.
+        count: how many times the sequencer noted it (its p dips below the threshold and
+            crosses it again while the switch is held).
+        variable: the held control variable.
+        then: the MP ``variable`` switched to (``switch``) or was held to instead (``hold``).
+
+    Returns:
+        ``"<text>; held 0.63 s, until left_fingers switched to relax at 9.91 s (noted 3
+        times)"``.
+    """
+    if ended_by == "switch":
+        until = f"until {variable} switched to {then} at {end:.2f} s"
+    elif ended_by == "hold":
+        until = f"until {end:.2f} s, then held to {then}"
+    else:
+        until = f"until the episode ended at {end:.2f} s"
+    noted = f" (noted {count} times)" if count > 1 else ""
+    return f"{text}; held {max(end - start, 0.0):.2f} s, {until}{noted}"
+
+
 def status_markdown(
     episode: str,
     t: float,
@@ -263,20 +340,20 @@ def status_markdown(
 ) -> str:
     """The ``status`` document at ``t`` [s], as markdown.
 
-    It shows the active MP of each of ``variables`` (``-`` when none yet), the last
-    transition, the last sequencer note (in full: the events log cuts long lines), the start
-    decision and the outcome text.
+    It shows the active MP of each of ``variables`` (``-`` when none yet), the outcome, the
+    start decision, the last transition and the last sequencer note, the longest, last (the
+    events log has every note in full).
     """
     lines = [f"**{episode}** · t = {t:.2f} s", "", "| variable | active MP |", "|---|---|"]
     lines += [f"| {var} | {active.get(var, '-')} |" for var in variables]
+    if outcome:
+        lines += ["", f"**{outcome}**"]
+    if start:
+        lines += ["", start]
     if last_transition:
         lines += ["", f"last transition: {last_transition}"]
     if last_note:
         lines += ["", f"last note: {last_note}"]
-    if start:
-        lines += ["", start]
-    if outcome:
-        lines += ["", f"**{outcome}**"]
     return "\n".join(lines)
 
 
@@ -411,14 +488,17 @@ def blueprint(
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
     Scene above the ``status`` document (and, with ``start``, the start decision and its 2D
-    plot in tabs beside it) | the feature panels (one per group of ``feature_groups``) above a
+    plot in tabs beside it) | the active MPs as state lanes above a tab per feature panel (one
+    per group of ``feature_groups``: a plot the column's width, whose legend covers little of
+    it; six small plots side by side had their legends over a third of their curves) above a
     tab per control variable of ``series`` with its φ (= exit), entry (1 - φ) and transition
-    probabilities | the active MPs as state lanes above the events log. Every view's
+    probabilities (one legend, φ's: an MP has its colour in all three) | the events log the
+    column's height (monospace, its rows :data:`EVENT_WIDTH` characters at most). Every view's
     contents are the logged entity paths themselves (rerun 0.41 matches no wildcard in the
     middle of a path). ``start_focus`` (an episode that ended at its first tick, e.g. a wrong
     start, where the plots would hold one point): the start decision and its plot take the
-    middle column instead. The time panel starts collapsed (one row), the blueprint and
-    selection panels too.
+    middle column instead, the lanes go above the events log. The time panel starts collapsed
+    (one row), the blueprint and selection panels too.
 
     Args:
         feature_groups: panel name -> feature names.
@@ -447,42 +527,36 @@ def blueprint(
     start_doc = rrb.TextDocumentView(origin=START_ENTITY, name="start")
     start_plot = rrb.Spatial2DView(origin=START_BOXES_ENTITY, name="start map")
     status = rrb.TextDocumentView(origin=STATUS_ENTITY, name="status")
+    lanes = rrb.StateTimelineView(origin="active", name="active MPs")
+    logs = rrb.Tabs(
+        rrb.TextLogView(
+            origin="events",
+            contents=[f"+ {path}" for path in events] or ["+ events/outcome"],
+            name="events",
+            columns=_TEXT_FIRST,
+            format_options=_MONOSPACE,
+        ),
+        rrb.TextLogView(
+            origin="active", name="active MP log", columns=_TEXT_FIRST, format_options=_MONOSPACE
+        ),
+    )
+    scene = rrb.Spatial3DView(origin="world", name="scene")
     if start_focus and start:
-        left = rrb.Vertical(
-            rrb.Spatial3DView(origin="world", name="scene"), status, row_shares=[3, 2]
-        )
+        left = rrb.Vertical(scene, status, row_shares=[1, 1])
         middle = rrb.Vertical(start_doc, start_plot, row_shares=[3, 2])
+        right = rrb.Vertical(lanes, logs, row_shares=[2, 3])
     else:
         lower_left: Any = status
         if start:
             lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
-        left = rrb.Vertical(
-            rrb.Spatial3DView(origin="world", name="scene"), lower_left, row_shares=[3, 2]
-        )
-        parts: list[Any] = [rrb.Grid(*feature_views, name="features")]
+        left = rrb.Vertical(scene, lower_left, row_shares=[1, 1])
+        parts: list[Any] = [lanes, rrb.Tabs(*feature_views, name="features", active_tab=0)]
         if variable_tabs:
             parts.append(rrb.Tabs(*variable_tabs, name="probabilities"))
-        middle = rrb.Vertical(*parts, row_shares=[1, 1][: len(parts)])
-    events_log = [f"+ {path}" for path in events]
+        middle = rrb.Vertical(*parts, row_shares=[3, 3, 4][: len(parts)])
+        right = logs
     return rrb.Blueprint(
-        rrb.Horizontal(
-            left,
-            middle,
-            rrb.Vertical(
-                rrb.StateTimelineView(origin="active", name="active MPs"),
-                rrb.Tabs(
-                    rrb.TextLogView(
-                        origin="events",
-                        contents=events_log or ["+ events/outcome"],
-                        name="events",
-                        columns=_TEXT_FIRST,
-                    ),
-                    rrb.TextLogView(origin="active", name="active MP log", columns=_TEXT_FIRST),
-                ),
-                row_shares=[2, 3],
-            ),
-            column_shares=[2, 4, 3],
-        ),
+        rrb.Horizontal(left, middle, right, column_shares=[2, 4, 3]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="collapsed"),
@@ -493,15 +567,24 @@ _TEXT_FIRST = rrb.TextLogColumns(
     timeline_columns=[rrb.encodings.TimelineColumn("time", visible=False)],
     text_log_columns=[
         rrb.encodings.TextLogColumn("body"),
-        rrb.encodings.TextLogColumn("loglevel"),
+        rrb.encodings.TextLogColumn("loglevel", visible=False),
         rrb.encodings.TextLogColumn("entitypath", visible=False),
     ],
 )
-"""Text logs: the message first (it carries its time, :func:`event_text`), no path column."""
+"""Text logs: the message alone (it carries its time, :func:`event_lines`; warnings in
+:data:`WARN_COLOR`), no level or path column: the text gets the width."""
+
+_MONOSPACE = rrb.TextLogFormat(monospace_body=True)
+"""Text logs in a monospace font: :data:`EVENT_WIDTH` characters take a known width and an
+event's continuation rows line up below its text."""
 
 
 def _variable_views(variable: str, logged: VariableSeries) -> Any:
-    """One variable's tab: φ (= exit), entry (1 - φ) and the transition probabilities."""
+    """One variable's tab: φ (= exit), entry (1 - φ) and the transition probabilities.
+
+    Only φ shows a legend (entry and the transitions use its colours); without φ logged, the
+    transitions show theirs.
+    """
     unit = rrb.ScalarAxis(range=(0.0, 1.0))
     legend = rrb.PlotLegend(LEGEND_CORNER)
     views = []
@@ -531,7 +614,8 @@ def _variable_views(variable: str, logged: VariableSeries) -> Any:
                 contents=[f"+ {entity('transition', variable, mp)}" for mp in logged.targets],
                 name="p(switch to)",
                 axis_y=unit,
-                plot_legend=legend,
+                # φ's legend names the colours (an MP keeps its colour in the three panels)
+                plot_legend=rrb.PlotLegend(LEGEND_CORNER, visible=not logged.progress),
             )
         )
     return rrb.Horizontal(*views, name=variable)
@@ -663,10 +747,12 @@ def pose_rows(
 
 
 __all__ = [
+    "EVENT_WIDTH",
     "GEOM_TYPES",
     "MAX_SERIES_PER_PANEL",
     "TOUCH_WORDS",
     "StartReference",
+    "event_lines",
     "group_features",
     "outcome_text",
     "transition_text",

@@ -11,6 +11,7 @@ import math
 import os
 import uuid
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -31,15 +32,18 @@ from cpmp.recordings.layout import (
     START_ENTITY,
     STATUS_ENTITY,
     TRANSITION_ARCHETYPE,
+    WARN_COLOR,
+    HoldEnd,
     StartReference,
     VariableSeries,
     blueprint,
     check_feature_groups,
     check_mp,
     entity,
-    event_text,
+    event_lines,
     geom_archetypes,
     group_features,
+    hold_text,
     outcome_text,
     parse_geom,
     pose_rows,
@@ -52,6 +56,25 @@ from cpmp.recordings.layout import (
 )
 from cpmp.records import StartDecision
 from cpmp.sequencer.inputs import checked_time
+
+
+@dataclass
+class _Hold:
+    """A hold the recorder has seen noted and not yet logged (it is logged when it ends).
+
+    Attributes:
+        t: when it was first noted [s].
+        tick: the tick it was first noted at (-1: before the first tick).
+        held: the MP the switch to which is held back.
+        text: the sequencer's first note of it.
+        count: how many times it was noted.
+    """
+
+    t: float
+    tick: int
+    held: str
+    text: str
+    count: int = 1
 
 
 class EpisodeRecorder:
@@ -127,6 +150,7 @@ class EpisodeRecorder:
         self._last_note = ""
         self._start_line = ""
         self._start_features: dict[str, float] = {}
+        self._holds: dict[str, _Hold] = {}
         self._events: set[str] = set()
         self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._targets: dict[str, set[str]] = {v: set() for v in self.mp_names}
@@ -177,11 +201,39 @@ class EpisodeRecorder:
         if self._closed:
             raise CpmpError(f"recorder for {self.path} is closed")
 
-    def _set_event_time(self, t: float) -> None:
+    def _set_event_time(self, t: float, tick: int | None = None) -> None:
         self._rec.reset_time()
         self._rec.set_time("time", duration=t)
-        if self._n_ticks:
-            self._rec.set_time("tick", sequence=self._n_ticks - 1)
+        tick = self._n_ticks - 1 if tick is None else tick
+        if tick >= 0:
+            self._rec.set_time("tick", sequence=tick)
+
+    def _log_event(
+        self,
+        path: str,
+        t: float,
+        text: str,
+        level: str = "INFO",
+        record: Any = None,
+        tick: int | None = None,
+    ) -> None:
+        """Log one event at ``t`` [s] to ``path``: its rows of the events log and its record.
+
+        The first row (``"  3.25 s  <text>"``) carries the machine-readable ``record``; a long
+        ``text`` continues on indented rows at the same time (:func:`event_lines`). Warnings
+        are drawn in :data:`WARN_COLOR`.
+        """
+        self._set_event_time(t, tick)
+        color = WARN_COLOR if level == "WARN" else None
+        rows = [
+            # clear_unset: a row without a colour is drawn uncoloured (the viewer would carry
+            # the entity's last colour over to it)
+            self._rr.TextLog.from_fields(clear_unset=True, text=line, level=level, color=color)
+            for line in event_lines(t, text)
+        ]
+        self._rec.log(path, rows[0], *([record] if record is not None else []))
+        for row in rows[1:]:
+            self._rec.log(path, row)
 
     def _log_status(self, t: float, outcome: str = "") -> None:
         """The ``status`` document at ``t`` [s] (event time already set)."""
@@ -276,11 +328,11 @@ class EpisodeRecorder:
                     self._rec.set_time("tick", sequence=tick)
                 changed = True
                 self._active[variable] = mp
-                self._rec.log(
-                    entity("active", variable),
-                    self._rr.TextLog(event_text(t, f"{variable}: {mp}")),
-                    self._rr.StateChange(state=[mp]),
-                )
+                first, *more = event_lines(t, f"{variable}: {mp}")
+                path = entity("active", variable)
+                self._rec.log(path, self._rr.TextLog(first), self._rr.StateChange(state=[mp]))
+                for line in more:
+                    self._rec.log(path, self._rr.TextLog(line))
         if changed:
             self._log_status(t)
         if poses is not None:
@@ -326,33 +378,81 @@ class EpisodeRecorder:
                 "kind": str(kind),
             },
         )
-        self._set_event_time(t)
-        line = event_text(t, text)
+        if variable in self._holds:
+            self._end_hold(variable, t, "switch", target)
+        level = "WARN" if kind == "recovery" else "INFO"
         self._events.add("events/transitions")
-        self._rec.log("events/transitions", self._rr.TextLog(line, level="INFO"), record)
-        self._rec.log(entity("events", "transitions", variable), self._rr.TextLog(line))
+        self._log_event("events/transitions", t, text, level, record)
+        self._log_event(entity("events", "transitions", variable), t, text, level)
         self._last_transition = f"{text} at {t:.2f} s"
+        self._set_event_time(t)
         self._log_status(t)
 
-    def log_note(self, t: float, kind: str, variable: str, text: str) -> None:
+    def log_note(
+        self, t: float, kind: str, variable: str, text: str, *, held: str | None = None
+    ) -> None:
         """Record a sequencer note at ``t`` [s] about ``variable`` (may be empty).
 
         The note is a held transition, a stall recovery or a non-finite φ (``kind``), as
-        readable ``text``.
+        readable ``text``. A ``hold`` note that names the MP it holds back (``held``) is one
+        hold until ``variable`` switches: the sequencer notes it again each time its ``p``
+        dips below the threshold and crosses it again, and the recording logs it once, at its
+        first note, with how long it lasted and how many times it was noted
+        (:func:`~cpmp.recordings.layout.hold_text`) — written when it ends (the switch,
+        a hold to another MP, the outcome or :meth:`close`).
+
+        Raises:
+            UnknownMPError: ``held`` is given and not an MP of ``variable``.
         """
         self._check_open()
         t = checked_time(t)
+        if kind == "hold" and held is not None:
+            check_mp(self.mp_names, variable, held)
+            current = self._holds.get(variable)
+            if current is not None and current.held == held:
+                current.count += 1
+                return
+            if current is not None:
+                self._end_hold(variable, t, "hold", held)
+            self._holds[variable] = _Hold(t, self._n_ticks - 1, held, str(text))
+            self._events.add("events/notes")
+        else:
+            record = self._rr.DynamicArchetype(
+                NOTE_ARCHETYPE,
+                components={"kind": str(kind), "variable": str(variable), "text": str(text)},
+            )
+            level = "WARN" if kind in ("recovery", "nonfinite", "give_up") else "INFO"
+            self._events.add("events/notes")
+            self._log_event("events/notes", t, f"{kind}: {text}", level, record)
+        self._last_note = f"{kind} at {t:.2f} s: {text}"
+        self._set_event_time(t)
+        self._log_status(t)
+
+    def _end_hold(self, variable: str, end: float, ended_by: HoldEnd, then: str = "") -> None:
+        """Log ``variable``'s open hold, at its first note, now that it ended at ``end`` [s].
+
+        Its ``cpmp.Note`` record has the sequencer's first text and, besides, ``held`` (the
+        MP held back), ``until`` [s] and ``count`` (times noted).
+        """
+        hold = self._holds.pop(variable)
         record = self._rr.DynamicArchetype(
             NOTE_ARCHETYPE,
-            components={"kind": str(kind), "variable": str(variable), "text": str(text)},
+            components={
+                "kind": "hold",
+                "variable": variable,
+                "text": hold.text,
+                "held": hold.held,
+                "until": float(end),
+                "count": hold.count,
+            },
         )
-        level = "WARN" if kind in ("recovery", "nonfinite", "give_up") else "INFO"
-        self._set_event_time(t)
-        line = event_text(t, f"{kind}: {text}")
-        self._events.add("events/notes")
-        self._rec.log("events/notes", self._rr.TextLog(line, level=level), record)
-        self._last_note = f"{kind} at {t:.2f} s: {text}"
-        self._log_status(t)
+        text = hold_text(hold.text, hold.t, end, ended_by, hold.count, variable, then)
+        self._log_event("events/notes", hold.t, f"hold: {text}", "INFO", record, hold.tick)
+
+    def _end_holds(self, end: float) -> None:
+        """Log every open hold as lasting until the episode's end at ``end`` [s]."""
+        for variable in list(self._holds):
+            self._end_hold(variable, max(end, self._holds[variable].t), "end")
 
     def log_start(
         self,
@@ -401,12 +501,10 @@ class EpisodeRecorder:
                 ),
             },
         )
-        self._set_event_time(t)
         self._start_line = start_text(decision)
         self._events.add("events/start")
-        self._rec.log(
-            "events/start", self._rr.TextLog(event_text(t, self._start_line), level="INFO"), record
-        )
+        self._log_event("events/start", t, self._start_line, "INFO", record)
+        self._set_event_time(t)
         document = start_markdown(decision, self._start_features, references, axes)
         self._rec.log(START_ENTITY, self._rr.TextDocument(document, media_type="text/markdown"))
         if len(axes) >= 2 and references:
@@ -457,9 +555,10 @@ class EpisodeRecorder:
             OUTCOME_ARCHETYPE, components={"outcome": str(outcome), "reason": str(reason)}
         )
         level = "WARN" if success is False else "INFO"
-        self._set_event_time(t)
+        self._end_holds(t)
         self._events.add("events/outcome")
-        self._rec.log("events/outcome", self._rr.TextLog(event_text(t, text), level=level), record)
+        self._log_event("events/outcome", t, text, level, record)
+        self._set_event_time(t)
         self._log_status(t, outcome=text)
 
     def close(self) -> Path:
@@ -467,6 +566,7 @@ class EpisodeRecorder:
         if self._closed:
             return self.path
         try:
+            self._end_holds(self._last_t if math.isfinite(self._last_t) else 0.0)
             self._flush_buffers()
             self._rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
             self._rec.flush()

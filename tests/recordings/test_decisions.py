@@ -1,7 +1,9 @@
 """What a recording must show to explain the sequencer's decisions, one test per defect seen in
 rerun 0.41's viewer (#22): the blueprint names the logged entities, transition lines break
 where their source MP is inactive, every series of a panel has its own colour, the start
-decision is recorded with its scores, a hold is noted once, the events log carries its times."""
+decision is recorded with its scores, a hold is noted once with its duration and count, the
+events log carries its times, no event row is wider than the log shows, no legend sits on a
+small plot."""
 
 from __future__ import annotations
 
@@ -13,9 +15,17 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from cpmp.errors import ConfigError, UnknownMPError
 from cpmp.experiment.reproduction import EpisodeLogger, start_references
-from cpmp.recordings import EpisodeRecorder, StartReference, read_recording, read_views
-from cpmp.recordings.layout import blueprint_paths, series_label
+from cpmp.recordings import (
+    EVENT_WIDTH,
+    EpisodeRecorder,
+    StartReference,
+    event_lines,
+    read_recording,
+    read_views,
+)
+from cpmp.recordings.layout import EVENT_INDENT, WARN_COLOR, blueprint_paths, series_label
 from cpmp.records import SequencerNote, StartDecision, StartOption, TickInfo, TransitionEvent
 from cpmp.worlds.two_point import make_demonstrations
 
@@ -25,7 +35,8 @@ DT = 0.1
 
 
 def _column(path: Path, entity: str, column: str) -> list:
-    """Values of one component column of one entity, in time order."""
+    """Values of one component column of one entity, in the viewer's order: by time, then as
+    logged (row id)."""
     rows = []
     for chunk in RrdReader(path).stream():
         if chunk.entity_path != f"/{entity}":
@@ -33,9 +44,10 @@ def _column(path: Path, entity: str, column: str) -> list:
         batch = chunk.to_record_batch()
         if column in batch.schema.names:
             times = batch.column("time").to_pylist() if "time" in batch.schema.names else None
+            row_ids = batch.column("rerun.controls.RowId").to_pylist()
             values = batch.column(column).to_pylist()
-            rows += zip(times or [0] * len(values), values, strict=True)
-    return [value for _, value in sorted(rows, key=lambda row: row[0])]
+            rows += zip(times or [0] * len(values), row_ids, values, strict=True)
+    return [value for *_, value in sorted(rows, key=lambda row: row[:2])]
 
 
 def _episode(path: Path, ticks: int = 6, start: bool = True) -> Path:
@@ -152,8 +164,9 @@ def test_the_start_decision_and_its_scores_are_recorded(tmp_path):
 
 
 def format_line(path: Path) -> str:
-    (line,) = _column(path, "events/start", "TextLog:text")
-    return line[0]
+    """The start's event text, its rows joined (a long event continues on indented rows)."""
+    rows = _column(path, "events/start", "TextLog:text")
+    return " ".join(row[0].strip() for row in rows)
 
 
 def test_an_episode_that_ends_at_its_first_tick_shows_its_start(tmp_path):
@@ -190,6 +203,173 @@ def test_a_hold_is_noted_once_until_its_variable_switches(tmp_path):
         logger(TickInfo(t, active={"a": "a_wait", "b": "b_go"}, features=np.zeros(4)))
     notes = read_recording(path).notes
     assert [round(n.t, 3) for n in notes] == [0.1, 0.8]
+    assert [n.text for n in notes] == [hold, hold.replace("a_go", "a_wait")]  # the first note
+    rows = _column(path, "events/notes", "TextLog:text")
+    assert _events(rows) == [
+        f"0.10 s hold: {hold}; held 0.50 s, until a switched to a_wait at 0.60 s (noted 2 times)",
+        f"0.80 s hold: {notes[1].text}; held 0.00 s, until the episode ended at 0.80 s",
+    ]
+    assert _column(path, "events/notes", "cpmp.Note:count") == [[2], [1]]
+    assert _column(path, "events/notes", "cpmp.Note:held") == [["a_wait"], ["a_back"]]
+    until = _column(path, "events/notes", "cpmp.Note:until")
+    assert [round(u[0], 3) for u in until] == [0.6, 0.8]
+
+
+def _events(rows: list) -> list[str]:
+    """The events of a text log's rows: a row that starts with its time begins one, an
+    indented row continues it (whitespace collapsed)."""
+    events: list[str] = []
+    for (row,) in rows:
+        if row.startswith(" " * EVENT_INDENT):
+            events[-1] += " " + row.strip()
+        else:
+            events.append(" ".join(row.split()))
+    return events
+
+
+def test_a_hold_ends_with_a_switch_to_another_mp_with_another_hold_or_the_outcome(tmp_path):
+    """What ended a hold is said: a switch of its variable (to any MP: noted on the tick of a
+    switch elsewhere it lasted 0 s), the coupling holding it to another MP, the outcome."""
+    path = tmp_path / "h.rrd"
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        for tick in range(10):
+            recorder.log_tick(tick * DT, [0.0] * 4, {}, {"a": "a_go", "b": "b_go"})
+        recorder.log_note(0.1, "hold", "a", "why a", held="a_wait")
+        recorder.log_note(0.3, "hold", "a", "why a again", held="a_wait")
+        recorder.log_note(0.4, "hold", "a", "why a_back", held="a_back")  # another MP held
+        recorder.log_note(0.5, "hold", "b", "why b", held="b_back")
+        recorder.log_transition(0.5, "b", "b_go", "b_back", 0.9)  # on the same tick
+        recorder.log_note(0.6, "hold", "b", "no target given")  # logged as it comes
+        recorder.log_note(0.7, "hold", "b", "no target given")
+        with pytest.raises(UnknownMPError, match="a_nowhere"):
+            recorder.log_note(0.7, "hold", "a", "x", held="a_nowhere")
+        recorder.log_outcome(0.9, "incomplete", "deadlock", success=False)
+    assert _events(_column(path, "events/notes", "TextLog:text")) == [
+        "0.10 s hold: why a; held 0.30 s, until 0.40 s, then held to a_back (noted 2 times)",
+        "0.40 s hold: why a_back; held 0.50 s, until the episode ended at 0.90 s",
+        "0.50 s hold: why b; held 0.00 s, until b switched to b_back at 0.50 s",
+        "0.60 s hold: no target given",
+        "0.70 s hold: no target given",
+    ]
+    assert [n.text for n in read_recording(path).notes][:2] == ["why a", "why a_back"]
+
+
+def test_no_event_row_is_wider_than_the_log_shows(tmp_path):
+    """rerun 0.41 shows a text log entry's first line only and cuts it at the panel's edge: a
+    long event is logged as rows of at most EVENT_WIDTH characters (what the events log shows
+    in the default layout at 1920 px), its continuation rows indented below its text, the
+    whole text kept; the record is in its first row, warnings are coloured (and the colour of
+    one row does not carry over to the next)."""
+    long_reason = "; ".join(
+        f"b runs b_go at progress 0.{i}1 (demonstrated >= 0.9)" for i in range(6)
+    )
+    names = {"arm": ["reach_" + "x" * 90, "lift"], "b": ["b_go", "b_back"]}
+    path = tmp_path / "long.rrd"
+    decision = StartDecision(0.0, "joint", [StartOption({"arm": "lift", "b": "b_go"}, -0.5)], {})
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=names) as recorder:
+        recorder.log_tick(0.0, [0.0] * 4, {}, {"arm": names["arm"][0], "b": "b_go"})
+        recorder.log_start(decision)
+        recorder.log_note(0.0, "hold", "arm", long_reason, held="lift")
+        recorder.log_transition(1.0, "arm", names["arm"][0], "lift", 0.8, kind="recovery")
+        recorder.log_note(1.0, "recovery", "arm", long_reason)
+        recorder.log_transition(1.5, "b", "b_go", "b_back", 0.9)
+        recorder.log_outcome(2.0, "incomplete", long_reason, success=False)
+    entities = ["events/start", "events/transitions", "events/notes", "events/outcome"]
+    entities += ["events/transitions/arm", "active/arm"]
+    for name in entities:
+        rows = [row[0] for row in _column(path, name, "TextLog:text")]
+        assert rows and max(len(row) for row in rows) <= EVENT_WIDTH, name
+        assert all(row[EVENT_INDENT - 1] == " " for row in rows)  # the text column
+        assert rows[0].lstrip()[0].isdigit()  # the first row starts with the time
+    notes = _events(_column(path, "events/notes", "TextLog:text"))
+    assert notes[0].startswith(f"0.00 s hold: {long_reason}; held 1.00 s, until arm switched")
+    assert notes[1] == f"1.00 s recovery: {long_reason}"
+    (arm,) = _events(_column(path, "active/arm", "TextLog:text"))
+    # a word longer than a row is broken across rows, none of it lost
+    assert arm.replace(" ", "") == f"0.00sarm:{names['arm'][0]}"
+    summary = read_recording(path)
+    assert summary.reason == long_reason and [n.text for n in summary.notes] == [long_reason] * 2
+    assert [e.kind for e in summary.transitions] == ["recovery", "switch"]
+    # warnings (the recovery, the failed outcome) coloured, the switch after them not
+    colours = {
+        row[0]: colour
+        for row, colour in zip(
+            _column(path, "events/transitions", "TextLog:text"),
+            _column(path, "events/transitions", "TextLog:color"),
+            strict=True,
+        )
+    }
+    warn = (WARN_COLOR[0] << 24) | (WARN_COLOR[1] << 16) | (WARN_COLOR[2] << 8) | 255
+    assert [c for text, c in colours.items() if "[recovery]" in text] == [[warn]]
+    assert [c for text, c in colours.items() if "[switch]" in text] == [[]]
+
+
+def test_event_lines_wrap_at_the_width_and_keep_every_word():
+    text = "left_fingers: preshape -> grasp " * 6
+    rows = event_lines(3.25, text, width=40)
+    assert rows[0].startswith("  3.25 s  left_fingers:")
+    assert all(len(row) <= 40 for row in rows) and len(rows) > 3
+    assert all(row.startswith(" " * EVENT_INDENT) and row[EVENT_INDENT] != " " for row in rows[1:])
+    assert " ".join(row.strip() for row in rows).split()[2:] == text.split()
+    assert event_lines(1234.5, "x") == ["1234.50 s  x"]
+    assert event_lines(0.0, "") == ["  0.00 s"]
+    with pytest.raises(ConfigError, match="width"):
+        event_lines(0.0, "x", width=12)
+
+
+def _blueprint_tree(path: Path) -> tuple[dict[str, dict], dict[str, tuple[int, list[str], str]]]:
+    """The stored blueprint: view id -> {name, legend_visible, monospace, columns}, and
+    container id -> (kind: 1 tabs, 2 horizontal, 3 vertical, 4 grid; children's ids; name)."""
+    reader = RrdReader(path)
+    views: dict[str, dict] = {}
+    containers: dict[str, tuple[int, list[str], str]] = {}
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        cells = {
+            n: batch.column(n)[batch.num_rows - 1].as_py()
+            for n in batch.schema.names
+            if ":" in n  # components (the time columns are timestamps)
+        }
+        parts = chunk.entity_path.strip("/").split("/")
+        key = "/".join(parts[:2])
+        if "ContainerBlueprint:container_kind" in cells:
+            kind = cells["ContainerBlueprint:container_kind"][0]
+            children = [c.strip("/") for c in cells["ContainerBlueprint:contents"]]
+            name = (cells.get("ContainerBlueprint:display_name") or [""])[0]
+            containers[key] = (kind, children, name)
+        view = views.setdefault(key, {}) if parts[0] == "view" else {}
+        if "ViewBlueprint:display_name" in cells:
+            view["name"] = cells["ViewBlueprint:display_name"][0]
+        if "PlotLegend:corner" in cells:
+            visible = cells.get("PlotLegend:visible")
+            view["legend_visible"] = True if visible is None else visible[0]
+        if "TextLogFormat:monospace_body" in cells:
+            view["monospace"] = cells["TextLogFormat:monospace_body"][0]
+        if "TextLogColumns:text_log_columns" in cells:
+            view["columns"] = cells["TextLogColumns:text_log_columns"]
+    return views, containers
+
+
+def test_no_legend_covers_a_small_plot(tmp_path):
+    """The feature panels are tabs, each plot the column's width (six small plots side by side
+    had legends over a third of their curves), each with its legend; a variable's tab shows one
+    legend, φ's (entry and the transitions draw each MP in its colour)."""
+    views, containers = _blueprint_tree(_episode(tmp_path / "e.rrd"))
+    parent = {child: key for key, (_, children, _) in containers.items() for child in children}
+    feature_views = [k for k, v in views.items() if v.get("name") in ("box", "left")]
+    assert len(feature_views) == 2
+    for key in feature_views:
+        kind, siblings, _ = containers[parent[key]]
+        assert kind == 1 and set(feature_views) <= set(siblings)  # tabs: one plot at a time
+        assert views[key]["legend_visible"] is True
+    tabs = {name: children for _, children, name in containers.values() if name in ("a", "b")}
+    assert set(tabs) == {"a", "b"}
+    for children in tabs.values():
+        shown = {views[c]["name"]: views[c]["legend_visible"] for c in children}
+        assert shown == {"φ (exit)": True, "entry 1 − φ": False, "p(switch to)": False}
+    events = next(v for v in views.values() if v.get("name") == "events")
+    assert events["monospace"] is True  # EVENT_WIDTH characters take a known width
+    assert {"kind": 2, "visible": False} in events["columns"]  # 2 = level: the text gets it
 
 
 def test_start_references_are_the_demonstrations_first_samples():

@@ -33,9 +33,9 @@ def test_status_markdown() -> None:
         "| left_pos | grasp |",
         "| right_fingers | - |",
         "",
-        "last transition: x -> y at 1.00 s",
-        "",
         "**outcome: ok**",
+        "",
+        "last transition: x -> y at 1.00 s",
     ]
     assert status_markdown("e", 0.0, {}, []).split("\n")[2:] == [
         "| variable | active MP |",
