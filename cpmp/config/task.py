@@ -16,6 +16,114 @@ from typing import Any
 
 from cpmp.errors import ConfigError
 
+MAX_SPEED_FACTOR = 4.0
+"""The largest speed factor a :class:`Pacing` may draw: at 4x the attractors of both worlds still
+take several control ticks to converge (the relay world's ``dt * gain`` stays below 1)."""
+
+
+@dataclass(frozen=True)
+class Pacing:
+    """How fast the MPs of a run go and whether they pause mid-MP (off by default).
+
+    Every *activation* draws its own pace: a speed factor log-uniform in ``speed`` (the MP's
+    commanded velocity, hence its attractor gain and speed limit, times the factor: the same
+    path in ``1 / factor`` of the time) and, with probability ``pause_probability``, one hold of
+    a duration uniform in ``pause`` seconds, which starts once the activation has covered a
+    fraction uniform in :data:`PAUSE_AT` of its initial goal distance (the MP stays active, its
+    variable stands still). :class:`cpmp.worlds.pacing.Pacer` applies it.
+
+    Attributes:
+        speed: ``[min, max]`` speed factor, ``0 < min <= max <= MAX_SPEED_FACTOR``; ``None``:
+            every MP at its nominal speed (factor 1).
+        pause: ``[min, max]`` hold duration [s], ``0 <= min <= max``; ``None``: no holds.
+        pause_probability: the probability that an activation holds once, in [0, 1].
+    """
+
+    speed: tuple[float, float] | None = None
+    pause: tuple[float, float] | None = None
+    pause_probability: float = 1.0
+
+    def __post_init__(self) -> None:
+        speed, pause, probability = _checked_pacing(
+            self.speed, self.pause, self.pause_probability, "Pacing.{}"
+        )
+        object.__setattr__(self, "speed", speed)
+        object.__setattr__(self, "pause", pause)
+        object.__setattr__(self, "pause_probability", probability)
+
+    @property
+    def varied(self) -> bool:
+        """Whether any MP runs off its nominal speed or holds."""
+        return self.speed is not None or (self.pause is not None and self.pause_probability > 0)
+
+
+PAUSE_AT: tuple[float, float] = (0.2, 0.8)
+"""A hold starts once the activation has covered this fraction (drawn uniformly) of its initial
+goal distance: a random point inside the motion, not at its very start or end."""
+
+
+def pacing_options(speed: object, pause: object, pause_probability: object, prefix: str) -> Pacing:
+    """A :class:`Pacing` from option values, each checked under its option's name.
+
+    Args:
+        speed: ``None`` or ``[min, max]`` speed factors.
+        pause: ``None`` or ``[min, max]`` hold durations [s].
+        pause_probability: in [0, 1].
+        prefix: the options' prefix in error messages (``demo``: ``demo_speed``, ...).
+
+    Returns:
+        The pacing.
+
+    Raises:
+        ConfigError: a value out of range, naming ``<prefix>_speed``, ``<prefix>_pause`` or
+            ``<prefix>_pause_probability``.
+    """
+    return Pacing(*_checked_pacing(speed, pause, pause_probability, prefix + "_{}"))
+
+
+def _checked_pacing(
+    speed: object, pause: object, pause_probability: object, name: str
+) -> tuple[tuple[float, float] | None, tuple[float, float] | None, float]:
+    """The pacing options checked; ``name`` formats an option's name in messages."""
+    speed_range = _range_option(speed, name.format("speed"), open_low=True)
+    if speed_range is not None and speed_range[1] > MAX_SPEED_FACTOR:
+        raise ConfigError(
+            f"{name.format('speed')} must be [min, max] with max <= {MAX_SPEED_FACTOR}, got "
+            f"{list(speed_range)}"
+        )
+    pause_range = _range_option(pause, name.format("pause"), open_low=False)
+    p = pause_probability
+    if isinstance(p, bool) or not isinstance(p, int | float) or not 0.0 <= p <= 1.0:
+        raise ConfigError(
+            f"{name.format('pause_probability')} must be a number in [0, 1], got {p!r}"
+        )
+    return speed_range, pause_range, float(p)
+
+
+def _range_option(value: object, name: str, open_low: bool) -> tuple[float, float] | None:
+    """``value`` as ``(min, max)``, or ``None``.
+
+    The numbers are finite, ``min <= max`` and ``min > 0`` (``>= 0`` unless ``open_low``).
+    """
+    if value is None:
+        return None
+    bound = "> 0" if open_low else ">= 0"
+    try:
+        lo_hi = tuple(value)  # type: ignore[call-overload]
+    except TypeError:
+        lo_hi = ()
+    numbers = all(
+        not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v) for v in lo_hi
+    )
+    if len(lo_hi) != 2 or not numbers:
+        raise ConfigError(f"{name} must be null or [min, max] (two numbers), got {value!r}")
+    lo, hi = float(lo_hi[0]), float(lo_hi[1])
+    if not (lo > 0.0 if open_low else lo >= 0.0) or lo > hi:
+        raise ConfigError(
+            f"{name} must be [min, max] with min {bound} and min <= max, got {[lo, hi]}"
+        )
+    return lo, hi
+
 
 @dataclass(frozen=True)
 class TaskConfig:
@@ -67,6 +175,19 @@ class TaskConfig:
         deadlock_time: no transition for this long while standing still is a deadlock [s].
         finger_goals: finger joint goal of each finger MP (``relax``, ``preshape``, ``grasp``,
             ``release``) [rad].
+        demo_speed: ``[min, max]`` speed factor of every activation of the scripted
+            demonstrator's MPs, drawn per activation (log-uniform); ``null``: nominal speed.
+            See :class:`Pacing`.
+        demo_pause: ``[min, max]`` [s] of one hold at a random point of an activation of the
+            demonstrator's MPs; ``null``: no holds.
+        demo_pause_probability: the probability that an activation of the demonstrator holds.
+        robot_speed: as ``demo_speed``, for the closed-loop robot (the MPs a policy runs in
+            :func:`cpmp.sim.run_episodes`).
+        robot_pause: as ``demo_pause``, for the closed-loop robot.
+        robot_pause_probability: as ``demo_pause_probability``, for the closed-loop robot.
+
+    The six pacing options (``demo_*``, ``robot_*``) are off by default; :meth:`to_dict` lists
+    them only when one of a kind is set, so that the records of unpaced runs keep their form.
     """
 
     width_range: tuple[float, float] = (0.10, 0.30)
@@ -113,6 +234,13 @@ class TaskConfig:
     finger_goals: dict[str, float] = field(
         default_factory=lambda: {"relax": 0.3, "preshape": 0.6, "grasp": 1.3, "release": 0.0}
     )
+
+    demo_speed: tuple[float, float] | None = None
+    demo_pause: tuple[float, float] | None = None
+    demo_pause_probability: float = 1.0
+    robot_speed: tuple[float, float] | None = None
+    robot_pause: tuple[float, float] | None = None
+    robot_pause_probability: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("width_range", "depth_range"):
@@ -162,6 +290,26 @@ class TaskConfig:
         object.__setattr__(
             self, "finger_goals", {k: float(v) for k, v in dict(self.finger_goals).items()}
         )
+        for kind in PACED_RUNS:
+            pacing = pacing_options(
+                getattr(self, f"{kind}_speed"),
+                getattr(self, f"{kind}_pause"),
+                getattr(self, f"{kind}_pause_probability"),
+                kind,
+            )
+            object.__setattr__(self, f"{kind}_speed", pacing.speed)
+            object.__setattr__(self, f"{kind}_pause", pacing.pause)
+            object.__setattr__(self, f"{kind}_pause_probability", pacing.pause_probability)
+
+    @property
+    def demo_pacing(self) -> Pacing:
+        """The scripted demonstrator's :class:`Pacing` (``demo_*`` options)."""
+        return Pacing(self.demo_speed, self.demo_pause, self.demo_pause_probability)
+
+    @property
+    def robot_pacing(self) -> Pacing:
+        """The closed-loop robot's :class:`Pacing` (``robot_*`` options)."""
+        return Pacing(self.robot_speed, self.robot_pause, self.robot_pause_probability)
 
     @classmethod
     def from_dict(cls, cfg: Mapping[str, Any] | None) -> TaskConfig:
@@ -173,9 +321,12 @@ class TaskConfig:
         if unknown:
             raise ConfigError(f"unknown task option(s) {unknown}; known: {sorted(known)}")
         values = dict(cfg)
-        for name in ("width_range", "depth_range"):
-            if name in values:
-                values[name] = tuple(values[name])
+        for name in ("width_range", "depth_range", *PACING_RANGES):
+            if values.get(name) is not None and not isinstance(values[name], str):
+                try:
+                    values[name] = tuple(values[name])
+                except TypeError:
+                    pass  # not a sequence: __post_init__ names the option
         try:
             return cls(**values)
         except TypeError as exc:
@@ -186,7 +337,22 @@ class TaskConfig:
         out = dataclasses.asdict(self)
         out["width_range"] = list(self.width_range)
         out["depth_range"] = list(self.depth_range)
+        for kind in PACED_RUNS:
+            names = [f"{kind}_speed", f"{kind}_pause", f"{kind}_pause_probability"]
+            if getattr(self, f"{kind}_speed") is None and getattr(self, f"{kind}_pause") is None:
+                for name in names:
+                    del out[name]
+            else:
+                for name in names[:2]:
+                    out[name] = None if out[name] is None else list(out[name])
         return out
+
+
+PACED_RUNS = ("demo", "robot")
+"""The runs a :class:`TaskConfig` paces: the scripted demonstrator's and the closed-loop
+robot's (options ``<run>_speed``, ``<run>_pause``, ``<run>_pause_probability``)."""
+PACING_RANGES = tuple(f"{run}_{option}" for run in PACED_RUNS for option in ("speed", "pause"))
+"""The pacing options given as ``[min, max]``."""
 
 
 def as_task_config(cfg: TaskConfig | Mapping[str, Any] | None) -> TaskConfig:
