@@ -34,6 +34,7 @@ their outcomes are :mod:`cpmp.worlds.relay.evaluation`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Literal, get_args
 
@@ -294,13 +295,32 @@ class RelayTask:
         }[active["gripper"]]
         return np.asarray(carrier, float), np.asarray(receiver, float), aperture
 
-    def advance(self, state: RelayState, episode: RelayEpisode, active: dict[str, str]) -> None:
-        """One Euler step of ``dt`` under the ``active`` MPs (modifies ``state``)."""
+    def advance(
+        self,
+        state: RelayState,
+        episode: RelayEpisode,
+        active: dict[str, str],
+        speed: Mapping[str, float] | None = None,
+    ) -> None:
+        """One Euler step of ``dt`` under the ``active`` MPs (modifies ``state``).
+
+        Args:
+            state: the state, advanced in place.
+            episode: the episode.
+            active: variable -> active MP.
+            speed: variable -> factor on its attractor gain this step (0: it holds; a variable
+                not named, or ``None``: 1); see :mod:`cpmp.worlds.relay.varied`.
+        """
         gc, gr, ga = self.goals(state, episode, active)
+        k_carrier, k_receiver, k_gripper = self.gain_carrier, self.gain_receiver, self.gain_gripper
+        if speed is not None:
+            k_carrier *= speed.get("carrier", 1.0)
+            k_receiver *= speed.get("receiver", 1.0)
+            k_gripper *= speed.get("gripper", 1.0)
         before = {"carrier": state.carrier.copy(), "receiver": state.receiver.copy()}
-        state.carrier = state.carrier + self.dt * self.gain_carrier * (gc - state.carrier)
-        state.receiver = state.receiver + self.dt * self.gain_receiver * (gr - state.receiver)
-        state.aperture += self.dt * self.gain_gripper * (ga - state.aperture)
+        state.carrier = state.carrier + self.dt * k_carrier * (gc - state.carrier)
+        state.receiver = state.receiver + self.dt * k_receiver * (gr - state.receiver)
+        state.aperture += self.dt * k_gripper * (ga - state.aperture)
         if state.holder in before:
             now = state.carrier if state.holder == "carrier" else state.receiver
             state.obj = state.obj + (now - before[state.holder])
