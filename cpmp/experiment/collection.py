@@ -77,7 +77,7 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
         rng = np.random.default_rng(seed)
         boxes = sample_boxes(rng, task, n_demos, balanced=True)
         names = [f"demo_{i:03d}" for i in range(n_demos)]
-        demos = _record_together(boxes, task, names, f"seed {seed} demos")
+        demos = _record_together(boxes, task, names, f"seed {seed} demos", seed)
         failed = [d.name for d in demos if not d.metadata.get("success")]
         if failed:
             raise RuntimeError(f"the scripted demonstrator failed on {failed}")
@@ -95,7 +95,9 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
     with timed(seconds, "expected", name):
         box_rng = np.random.default_rng(seed + settings.box_seed_offset)
         repro_boxes = [sample_box(box_rng, task) for _ in range(settings.n_boxes)]
-        expected = _record_together(repro_boxes, task, None, "expected")
+        expected = _record_together(
+            repro_boxes, task, None, "expected", seed + settings.box_seed_offset
+        )
     signatures = strategy_signatures(train)
     if settings.feature_noise > 0:
         train = add_feature_noise(train, settings.feature_noise, seed=seed)
@@ -103,14 +105,17 @@ def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> Se
 
 
 def _record_together(
-    boxes: Sequence[Box], task: TaskConfig, names: list[str] | None, desc: str
+    boxes: Sequence[Box], task: TaskConfig, names: list[str] | None, desc: str, seed: int
 ) -> list[Demonstration]:
     """The scripted demonstrations of ``boxes``, all boxes run together, with a progress bar.
 
-    :func:`cpmp.sim.record_demonstrations` gives the same data as one box at a time.
+    :func:`cpmp.sim.record_demonstrations` gives the same data as one box at a time; with the
+    task's ``demo_*`` pacing options, the demonstrator's pace is drawn from ``seed``.
     """
     bar = progress_bar(boxes, desc)
     try:
-        return record_demonstrations(boxes, task, names, on_result=lambda i, demo: bar.update(1))
+        return record_demonstrations(
+            boxes, task, names, on_result=lambda i, demo: bar.update(1), pacing_seed=seed
+        )
     finally:
         bar.close()

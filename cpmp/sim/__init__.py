@@ -9,7 +9,8 @@ Modules: ``scene`` (MJCF model, boxes, strategy regions), ``kinematics`` (arm FK
 ``mps`` (the MP library), ``control`` (MPs to joint targets), ``features`` (the 33 features),
 ``simulation`` (one episode's world), ``demonstrator`` (the scripted demonstrator),
 ``collect`` (recording demonstrations, one box or many together), ``policies`` (replay and
-batching of policies), ``runner`` (closed-loop episodes and their :data:`Outcome`). The options
+batching of policies), ``runner`` (closed-loop episodes and their :data:`Outcome`), ``paced``
+(the world with varied MP speeds and holds, :func:`~cpmp.sim.paced.paced_sim`). The options
 are :class:`~cpmp.config.task.TaskConfig`; the simulator's speed benchmark is
 :mod:`cpmp.benchmarks.sim_speed`.
 """

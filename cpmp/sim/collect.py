@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cpmp.config.task import TaskConfig, as_task_config
+from cpmp.config.task import Pacing, TaskConfig, as_task_config
 from cpmp.data.datafile import save_demonstrations
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
@@ -22,6 +22,30 @@ from cpmp.sim.demonstrator import ScriptedDemonstrator
 from cpmp.sim.policies import per_episode
 from cpmp.sim.scene import STRATEGIES, Box, correct_strategy, sample_box
 from cpmp.sim.simulation import Simulation, prepare_steps
+from cpmp.worlds.pacing import Pacer
+
+DEMO_STREAM = 0
+ROBOT_STREAM = 1
+"""The second word of a run's pacing seed ``(seed, stream, index)``: demonstrations and
+closed-loop episodes draw from different streams."""
+NO_PAUSE = frozenset({"left_pos/follow_right"})
+"""MPs that never hold: the left hand following the right one under a jointly held box (a hold
+would pull the hands apart)."""
+MIN_PACED_DISTANCE = 1e-3
+"""An activation that starts closer than this to its goal [m or rad] never holds."""
+
+
+def make_pacer(pacing: Pacing, cfg: TaskConfig, seed: tuple[int, ...]) -> Pacer | None:
+    """A run's :class:`~cpmp.worlds.pacing.Pacer`, or ``None`` when ``pacing`` varies nothing.
+
+    Args:
+        pacing: the task's ``demo_pacing`` or ``robot_pacing``.
+        cfg: the task (its control period).
+        seed: ``(seed, stream, index)`` of the run.
+    """
+    if not pacing.varied:
+        return None
+    return Pacer(pacing, seed, cfg.control_dt, NO_PAUSE, MIN_PACED_DISTANCE)
 
 
 def record_demonstration(
@@ -42,6 +66,7 @@ def record_demonstrations(
     cfg: TaskConfig | Mapping[str, Any] | None = None,
     names: Sequence[str | None] | None = None,
     on_result: Callable[[int, Demonstration], None] | None = None,
+    pacing_seed: int | None = None,
 ) -> list[Demonstration]:
     """Run the scripted demonstrator on every box, all together, recording each at control rate.
 
@@ -53,12 +78,15 @@ def record_demonstrations(
     or diverged physics) is left out of the following ticks.
 
     names: per box, the demonstration's name (``None``: unnamed). on_result: called with
-    ``(index, demonstration)`` as each recording ends (e.g. a progress bar).
+    ``(index, demonstration)`` as each recording ends (e.g. a progress bar). pacing_seed: with
+    the task's ``demo_*`` pacing options set, box ``i`` is paced from the seed
+    ``(pacing_seed, DEMO_STREAM, i)`` (default: the task's ``seed``).
     """
     cfg = as_task_config(cfg)
     boxes = list(boxes)
     names = per_episode(names, len(boxes), "names")
-    runs = [_Recording(box, cfg) for box in boxes]
+    base = cfg.seed if pacing_seed is None else int(pacing_seed)
+    runs = [_Recording(box, cfg, (base, DEMO_STREAM, i)) for i, box in enumerate(boxes)]
     out: list[Demonstration | None] = [None] * len(runs)
 
     def finish(index: int) -> None:
@@ -97,11 +125,12 @@ class _Recording:
     The loop of :func:`record_demonstration`, one tick at a time.
     """
 
-    def __init__(self, box: Box, cfg: TaskConfig) -> None:
+    def __init__(self, box: Box, cfg: TaskConfig, pacing_seed: tuple[int, ...]) -> None:
         self.box = box
         self.cfg = cfg
         self.sim = Simulation(cfg, box)
-        self.policy = ScriptedDemonstrator(self.sim)
+        self.pacer = make_pacer(cfg.demo_pacing, cfg, pacing_seed)
+        self.policy = ScriptedDemonstrator(self.sim, self.pacer)
         self.x = self.sim.features()
         self.active = self.policy.reset(0.0, self.x)
         self.features: list[np.ndarray] = []
@@ -141,6 +170,7 @@ class _Recording:
                 "diverged": self.diverged,
                 "duration": float((n - 1) * cfg.control_dt),
                 "control_dt": cfg.control_dt,
+                **({} if self.pacer is None else {"holds": len(self.pacer.holds)}),
             },
         )
 
@@ -179,13 +209,13 @@ def collect_demonstrations(
     """Record ``n_demos`` scripted demonstrations with boxes drawn from ``seed`` and save them.
 
     Demos are named ``demo_<i>_<strategy>``; all boxes run together
-    (:func:`record_demonstrations`). Returns the written path and the
-    demonstrations.
+    (:func:`record_demonstrations`, paced from ``seed`` where the task says). Returns the
+    written path and the demonstrations.
     """
     rng = np.random.default_rng(seed)
     boxes = sample_boxes(rng, cfg, n_demos, balanced)
     names = [f"demo_{i:03d}_{correct_strategy(box, cfg)}" for i, box in enumerate(boxes)]
-    demos = record_demonstrations(boxes, cfg, names=names)
+    demos = record_demonstrations(boxes, cfg, names=names, pacing_seed=seed)
     failed = [d.name for d in demos if not (d.metadata or {}).get("success")]
     if failed:
         raise RuntimeError(f"the scripted demonstrator failed on {failed}; this is a bug")

@@ -13,6 +13,11 @@ controllers of many simulations at once):
    to the joint ranges;
 5. fingers follow their joint-space attractor exactly (exponential step).
 
+A variable's pace (:attr:`MPController.speed`, set by a paced run: see
+:mod:`cpmp.worlds.pacing`) multiplies its commanded velocity after the speed limit (positions,
+orientations) or its attractor gain (fingers): the same path at that factor of the speed, and
+standing still at 0.
+
 The reference configuration is what the position actuators track; using it (not the measured
 joints) for the IK keeps the loop free of wind-up when a palm presses on the box.
 """
@@ -83,6 +88,9 @@ class MPController:
         self.fingers_ref: dict[str, np.ndarray] = {}
         self._latched: dict[str, np.ndarray] = {}
         self._previous: dict[str, str] = {}
+        self.speed: dict[str, float] = {}
+        """Per control variable the pace of its MP (factor on its commanded velocity; 0: it
+        holds); a variable not named runs at 1 (:meth:`Simulation.set_speeds`)."""
         self.ref_pos = np.zeros((2, 3))
         self.ref_rot = np.zeros((2, 3, 3))
         # per-tick constants: finger decay factor, joint-limit band edges [rad] and push gain
@@ -103,6 +111,7 @@ class MPController:
         self.fingers_ref = {h: f.copy() for h, f in fingers.items()}
         self._latched.clear()
         self._previous.clear()
+        self.speed = {}
 
     def update(self, active: Mapping[str, MP], box_pos: np.ndarray) -> None:
         """Advance the references one control tick for the ``active`` MPs.
@@ -127,13 +136,20 @@ class MPController:
         twist[LEFT, 3:] = rotation_error(active["left_rot"].target, rot[LEFT])
         twist[RIGHT, 3:] = rotation_error(active["right_rot"].target, rot[RIGHT])
         twist[:, 3:] *= self.cfg.rot_gain
+        if self.speed:
+            for row, hand in ((LEFT, "left"), (RIGHT, "right")):
+                twist[row, 3:] *= self.speed.get(f"{hand}_rot", 1.0)
         return twist
 
     def _follow_fingers(self, active: Mapping[str, MP]) -> None:
         """Fingers' exponential step towards the active finger MPs' goals; remember the MPs."""
         for hand in HANDS:
             goal = active[f"{hand}_fingers"].target
-            self.fingers_ref[hand] = goal + (self.fingers_ref[hand] - goal) * self._finger_decay
+            decay = self._finger_decay
+            pace = self.speed.get(f"{hand}_fingers", 1.0)
+            if pace != 1.0:
+                decay = math.exp(-pace * self.cfg.finger_gain * self.cfg.control_dt)
+            self.fingers_ref[hand] = goal + (self.fingers_ref[hand] - goal) * decay
         self._previous = {v: mp.name for v, mp in active.items()}
 
     def _velocity(
@@ -165,6 +181,9 @@ class MPController:
         speed = math.sqrt(v.dot(v))
         if speed > cfg.max_speed:
             v *= cfg.max_speed / speed
+        pace = self.speed.get(mp.variable, 1.0)
+        if pace != 1.0:
+            v *= pace
         if frame == "right_ee":
             v += right_velocity
         return v

@@ -25,6 +25,11 @@ old MP's activation: its learned progress is undefined there and the learned seq
 reproduce the switch. With settling, every activation ends on a short plateau in the guard's
 state, which is also where the sequencer's plateau rule (switch once the transition probability
 stops improving) fires. It also debounces contact guards.
+
+Pacing (task options ``demo_speed``, ``demo_pause``, ``demo_pause_probability``; off by
+default): given a :class:`~cpmp.worlds.pacing.Pacer`, the demonstrator runs each activation at
+its drawn speed and holds it once where drawn (:mod:`cpmp.worlds.pacing`), as a person
+demonstrating goes faster or slower and hesitates; the guards are unchanged.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from cpmp.sim.features import goal_distance
 from cpmp.sim.mps import IDLE
 from cpmp.sim.scene import HANDS, correct_strategy
 from cpmp.sim.simulation import Simulation
+from cpmp.worlds.pacing import Pacer
 
 REACH_MPS = ("reach_top", "reach_edge")
 
@@ -45,10 +51,15 @@ class ScriptedDemonstrator:
 
     It reads the full simulator state (not only ``x``), like a human demonstrator would.
     ``done`` becomes True when every variable has reached its final MP's goal.
+
+    Args:
+        sim: the simulation it demonstrates in.
+        pacer: paces its MPs (sets the simulation's speeds every tick); ``None``: nominal.
     """
 
-    def __init__(self, sim: Simulation) -> None:
+    def __init__(self, sim: Simulation, pacer: Pacer | None = None) -> None:
         self.sim = sim
+        self.pacer = pacer
         self.cfg = sim.cfg
         self.strategy = correct_strategy(sim.box, sim.cfg)
         self.hands: tuple[str, ...] = HANDS if self.strategy == "both" else (self.strategy,)
@@ -73,7 +84,13 @@ class ScriptedDemonstrator:
         self.done = False
         self._release_z = {}
         self._pending = {}
+        self._pace(active)
         return dict(active)
+
+    def _pace(self, active: dict[str, str]) -> None:
+        """The pacer's speeds of ``active`` (the next tick's MPs) to the simulation."""
+        if self.pacer is not None:
+            self.sim.set_speeds(self.pacer.speeds(active, self.sim.goal_distances(active)))
 
     # guards --------------------------------------------------------------------------------
     def _pos_error(self, hand: str) -> float:
@@ -114,6 +131,7 @@ class ScriptedDemonstrator:
                 self._release_z[hand] = float(ee[HANDS.index(hand)][2])
         self.done = self._finished(self.active)
         self.active = new
+        self._pace(new)
         return dict(new)
 
     def _guards(self) -> dict[str, str]:

@@ -18,7 +18,7 @@ from cpmp.config.task import TaskConfig, as_task_config
 from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import UnknownMPError
 from cpmp.records import BatchedPolicy, Policy, TickInfo, TransitionEvent
-from cpmp.sim.collect import record_demonstrations
+from cpmp.sim.collect import ROBOT_STREAM, make_pacer, record_demonstrations
 from cpmp.sim.policies import PolicyList, as_batched, per_episode
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import Simulation, prepare_steps
@@ -106,6 +106,7 @@ def run_episodes(
     max_time: float | None = None,
     on_tick: Sequence[Callable[[TickInfo], None] | None] | None = None,
     on_result: Callable[[int, EpisodeResult], None] | None = None,
+    pacing_seed: int | None = None,
 ) -> list[EpisodeResult]:
     """Execute one closed-loop episode per box, all together.
 
@@ -125,6 +126,9 @@ def run_episodes(
     expected: per box, the demonstrator's recording (recorded here where ``None``).
     on_tick: per box, a callback as in :func:`run_episode` (or ``None``).
     on_result: called with ``(index, result)`` as each episode ends (e.g. a progress bar).
+    pacing_seed: with the task's ``robot_*`` pacing options set, the robot's MPs in episode ``i``
+        are paced from the seed ``(pacing_seed, ROBOT_STREAM, i)`` (default: the task's
+        ``seed``); the policy is not told.
     """
     cfg = as_task_config(cfg)
     boxes = list(boxes)
@@ -139,8 +143,9 @@ def run_episodes(
     recorded = record_demonstrations([boxes[i] for i in missing], cfg)
     for i, demo in zip(missing, recorded, strict=True):
         expected[i] = demo
+    base = cfg.seed if pacing_seed is None else int(pacing_seed)
     runs = [
-        _Rollout(i, box, cfg, demo, tick, on_result)
+        _Rollout(i, box, cfg, demo, tick, on_result, (base, ROBOT_STREAM, i))
         for i, (box, demo, tick) in enumerate(zip(boxes, expected, callbacks, strict=True))
     ]
     x = np.stack([run.x for run in runs])
@@ -193,6 +198,7 @@ class _Rollout:
         expected: Demonstration,
         on_tick: Callable[[TickInfo], None] | None,
         on_result: Callable[[int, EpisodeResult], None] | None,
+        pacing_seed: tuple[int, ...],
     ) -> None:
         self.index = index
         self.on_result = on_result
@@ -201,6 +207,7 @@ class _Rollout:
         self.want = mp_sequences(expected)
         self.on_tick = on_tick
         self.sim = Simulation(cfg, box)
+        self.pacer = make_pacer(cfg.robot_pacing, cfg, pacing_seed)
         self.x = self.sim.features()
         self.active: dict[str, str] = {}
         self.initial: dict[str, str] = {}
@@ -259,9 +266,11 @@ class _Rollout:
             self.on_tick(tick)
 
     def before_tick(self) -> None:
-        """The ``on_tick`` callback, then the active MPs to the simulation."""
+        """The ``on_tick`` callback, then the active MPs (and their pace) to the simulation."""
         self._report_tick()
         self.sim.set_active(self.active)
+        if self.pacer is not None:
+            self.sim.set_speeds(self.pacer.speeds(self.active, self.sim.goal_distances()))
 
     def physics_step(self) -> bool:
         """One control tick of physics; False (and the episode ended) if it diverged."""

@@ -11,7 +11,7 @@ import numpy as np
 
 from cpmp.config.task import TaskConfig
 from cpmp.errors import CpmpError, UnknownMPError
-from cpmp.sim.control import MPController, update_controllers
+from cpmp.sim.control import MPController, rotation_angle, update_controllers
 from cpmp.sim.features import GoalDistances, box_size_features, compute_features, feature_names
 from cpmp.sim.kinematics import ArmKinematics
 from cpmp.sim.mps import MP, VARIABLES, build_library, container_center
@@ -179,6 +179,42 @@ class Simulation:
                 " set the MPs first, then prepare_steps(), then step()"
             )
         self.active = {v: str(active[v]) for v in self.variables}
+
+    def set_speeds(self, speeds: Mapping[str, float]) -> None:
+        """Pace the MPs of the next ticks: variable -> factor on its velocity (0: it holds).
+
+        A variable not named runs at its nominal speed (see :mod:`cpmp.sim.control`).
+        """
+        if self._control is not None:
+            raise CpmpError(
+                "set_speeds() changed the pace after prepare_steps() computed this tick's "
+                "control; set the MPs and speeds first, then prepare_steps(), then step()"
+            )
+        unknown = sorted(set(speeds) - set(self.variables))
+        if unknown:
+            raise UnknownMPError(f"unknown control variable(s) {unknown}; known: {self.variables}")
+        self.controller.speed = {v: float(f) for v, f in speeds.items()}
+
+    def goal_distances(self, active: Mapping[str, str] | None = None) -> dict[str, float]:
+        """Each variable's distance to the goal of an MP (default: the active ones).
+
+        Positions [m] of the end-effector site, orientations [rad] of the site, finger angles
+        [rad] (Euclidean over a hand's finger joints).
+        """
+        active = self.active if active is None else active
+        out = {}
+        ee_pos, ee_rot, fingers = self.ee_pos(), self.ee_rot(), self.finger_angles()
+        for variable in self.variables:
+            hand, kind = variable.split("_")
+            goal = self.goal(variable, active[variable])
+            i = HANDS.index(hand)
+            if kind == "pos":
+                out[variable] = float(np.linalg.norm(ee_pos[i] - goal))
+            elif kind == "rot":
+                out[variable] = float(rotation_angle(goal, ee_rot[i]))
+            else:
+                out[variable] = float(np.linalg.norm(fingers[hand] - goal))
+        return out
 
     def step(self) -> bool:
         """Run the active MPs for one control tick. Returns False if the physics diverged.
