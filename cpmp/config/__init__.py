@@ -31,6 +31,7 @@ from cpmp.config.predictors import (
     predictor_option_names,
 )
 from cpmp.config.sequencer import (
+    BRANCHES,
     COUPLINGS,
     NONFINITE_POLICIES,
     START_KERNELS,
@@ -43,6 +44,7 @@ from cpmp.config.trainer import SOLVERS, SolverOptions, TrainerConfig
 
 __all__ = [
     "ACTIVATIONS",
+    "BRANCHES",
     "COUPLINGS",
     "FIT_OPTIONS",
     "NONFINITE_POLICIES",

@@ -17,6 +17,8 @@ START_KERNELS = ("shared", "isotropic")
 """Values of :attr:`SequencerConfig.start_kernel`."""
 START_RULES = ("independent", "joint")
 """Values of :attr:`SequencerConfig.start_rule`."""
+BRANCHES = ("none", "learned")
+"""Values of :attr:`SequencerConfig.branch`."""
 
 
 @dataclass
@@ -74,6 +76,15 @@ class SequencerConfig:
             that measurement (a sensor slower than the loop) for up to this many seconds, and
             adds no evidence to the switching rule; unchanged for longer, the state counts as
             at rest (:mod:`cpmp.sequencer.timing`).
+        branch: at a node with several demonstrated successors (a cycle's exit: again or move
+            on), ``learned`` lets only the successor the demonstrator took in the most similar
+            states fire (a multinomial logistic regression on the features at the demonstrated
+            switches out of that node; :mod:`cpmp.sequencer.branches`); ``none`` (paper): the
+            most probable ``p`` fires.
+        joint: with ``coupling=context``, a switch always demonstrated in the same sample as
+            another variable's switch (a bowl served as the last pour ends) waits until that
+            variable has switched or its rule decides to switch in the same tick, and a
+            recovery takes both (:attr:`cpmp.sequencer.switching.Coupling.joint`).
     """
 
     threshold: float = 0.65
@@ -91,6 +102,8 @@ class SequencerConfig:
     start_rule: str = "joint"
     nonfinite: str = "hold"
     stale_time: float = 0.25
+    branch: str = "learned"
+    joint: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -130,14 +143,16 @@ class SequencerConfig:
             raise ConfigError(f"stale_time must be > 0 seconds, got {self.stale_time}")
         if not 0.0 <= self.min_exit < 1.0:
             raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
-        if not isinstance(self.recovery, bool):
-            raise ConfigError(f"recovery must be true or false, got {self.recovery!r}")
+        for name in ("recovery", "joint"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"{name} must be true or false, got {getattr(self, name)!r}")
         for name, allowed in (
             ("switch_rule", SWITCH_RULES),
             ("coupling", COUPLINGS),
             ("start_kernel", START_KERNELS),
             ("start_rule", START_RULES),
             ("nonfinite", NONFINITE_POLICIES),
+            ("branch", BRANCHES),
         ):
             if getattr(self, name) not in allowed:
                 raise ConfigError(

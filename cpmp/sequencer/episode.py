@@ -26,6 +26,7 @@ from cpmp.records import (
     TickInfo,
     TransitionEvent,
 )
+from cpmp.sequencer.branches import STAY
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
@@ -58,6 +59,8 @@ class PlanRow(NamedTuple):
         unseen: per successor, the number of other variables running an MP never seen at
             that switch (:meth:`~cpmp.sequencer.switching.Coupling.gates`).
         checks: the φ that add one inconsistency each while below their bound.
+        joints: per successor, the other variables' switches ``(variable, from, to)`` it is
+            demonstrated together with (:attr:`~cpmp.sequencer.switching.Coupling.joint`).
     """
 
     variable: str
@@ -67,6 +70,7 @@ class PlanRow(NamedTuple):
     exit_column: int
     unseen: list[int]
     checks: list[PhiCheck]
+    joints: list[list[tuple[str, str, str]]]
 
 
 class TransitionPlan(NamedTuple):
@@ -140,6 +144,7 @@ class SequencerEpisode:
         self._stall = StallDetector(model.feature_range, c.stall_time, c.rest_speed)
         self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
+        self._armed: dict[str, str] = {}
         self._last_t: float | None = None
         self._nonfinite = False
         self.gave_up: float | None = None
@@ -192,6 +197,7 @@ class SequencerEpisode:
             rule.reset()
             self._observe_entry(v, t, phi)
         self._holding = {v: None for v in model.graphs}
+        self._armed = {}
         state = np.asarray(x, dtype=np.float64).reshape(-1)
         self._stall.reset(self._clock.reset(t, state), state)
         self._last_t = t
@@ -279,11 +285,13 @@ class SequencerEpisode:
             self._plan = TransitionPlan(context, self._transition_plan(context))
         context, plan = self._plan
         coupled = self._coupled
+        joint = coupled and c.joint
         stopped = self.gave_up is not None
         held: dict[str, str] = {}
         rows = []
         fired = False
-        for v, current, names, columns, exit_column, unseen, checks in plan:
+        chosen_by: dict[str, str | None] = {}
+        for v, current, names, columns, exit_column, unseen, checks, _ in plan:
             exit_p = phi[exit_column]
             p = [exit_p * (1.0 - phi[i]) for i in columns]
             bad = unseen
@@ -293,26 +301,76 @@ class SequencerEpisode:
                     if phi[column] < bound:
                         bad[successor] += 1
             rows.append(TickRow(v, current, names, p, bad))
+            chosen_by[v] = self._branch_choice(v, current, names, unseen, state)
+        decided: dict[str, tuple[int, str]] = {}
+        for plan_row, row in zip(plan, rows, strict=True):
             if stopped:
-                continue
+                break
+            v, current, names, p, bad = row
+            exit_p = phi[plan_row.exit_column]
             gate = exit_p > c.min_exit
             allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
+            chosen = chosen_by[v]
+            if chosen is not None:
+                allowed = [ok and s == chosen for ok, s in zip(allowed, names, strict=True)]
             k = self._rules[v].update(m, p, allowed)
-            if coupled and gate and not all(allowed):
+            armed = self._armed.get(v)
+            if armed is not None and (armed not in names or p[names.index(armed)] <= c.threshold):
+                self._armed.pop(v)
+            if k is not None:
+                decided[v] = (k, names[k])
+            if gate and (coupled or chosen is not None) and not all(allowed):
                 top = 0 if len(p) == 1 else max(range(len(p)), key=p.__getitem__)
+                if chosen in names:
+                    top = names.index(chosen)
                 if p[top] > c.threshold and not allowed[top] and k != top:
                     held[v] = names[top]
                     if self._holding.get(v) != names[top]:
-                        self._note_hold(t, v, current, names[top], p[top], context, phi)
+                        stay = chosen == STAY
+                        self._note_hold(t, v, current, names[top], p[top], context, phi, stay)
             self._holding[v] = held.get(v)
-            if k is not None:
-                self._switch(t, m, v, names[k], p[k], state, phi, "switch")
-                fired = True
+        going = {v: target for v, (_, target) in decided.items()}
+        ready = {**self._armed, **going}
+        for plan_row, row in zip(plan, rows, strict=True):
+            v = row.variable
+            target = ready.get(v)
+            if target is None:
+                continue
+            k = row.successors.index(target)
+            waits = [
+                (u, a, b)
+                for u, a, b in (plan_row.joints[k] if joint else [])
+                if context[u] != b and ready.get(u) != b
+            ]
+            if waits:
+                if self._armed.get(v) != target:
+                    self._armed[v] = target
+                    self._note_joint(t, v, row.current, target, row.p[k], waits)
+                held[v] = target
+                self._holding[v] = target
+                continue
+            self._armed.pop(v, None)
+            self._switch(t, m, v, target, row.p[k], state, phi, "switch")
+            fired = True
         if not (fired or stopped) and c.recovery and reading.fresh and self._stall.stalled(m):
             self._resolve_stall(t, m, state, phi, rows, plan)
         active = dict(self.active)
         self._pending = _PendingTick(t, phi, rows, active, held)
         return dict(active)
+
+    def _branch_choice(
+        self, v: str, current: str, names: list[str], unseen: list[int], state: np.ndarray
+    ) -> str | None:
+        """The successor ``v``'s branching node ``current`` lets fire at ``state (d,)``.
+
+        Chosen among the successors demonstrated in the current context (all of them if none
+        is); ``None`` if the node does not branch (:mod:`cpmp.sequencer.branches`).
+        """
+        choice = self.model.branches.get(v, current)
+        if choice is None:
+            return None
+        among = [s for s, n in zip(names, unseen, strict=True) if n == 0] or names
+        return choice.choose(state, among)
 
     def _hold_nonfinite(
         self, t: float, state: np.ndarray, phi: list[float] | None
@@ -371,15 +429,20 @@ class SequencerEpisode:
         choice = recovery_choice(candidates, c.recovery_threshold)
         if choice is not None:
             v = choice.variable
+            context = dict(self.active)
             self._switch(t, m, v, choice.target, choice.p, state, phi, "recovery")
+            text = f"{v}: {choice.source} -> {choice.target} (p={choice.p:.2f})"
+            if self._coupled and c.joint:
+                # the switches it was always demonstrated together with come along
+                joint = model.coupling.joint.get((v, choice.source, choice.target), {})
+                for u, (a, b) in sorted(joint.items()):
+                    if context.get(u) == a and b in model.nodes.successors[(u, a)].names:
+                        row = next(r for r in rows if r.variable == u)
+                        q = row.p[row.successors.index(b)]
+                        self._switch(t, m, u, b, q, state, phi, "recovery")
+                        text += f" with {u}: {a} -> {b} (p={q:.2f}, demonstrated together)"
             self.notes.append(
-                SequencerNote(
-                    t,
-                    "recovery",
-                    v,
-                    f"stall of {c.stall_time:g} s resolved: {v}: {choice.source} -> "
-                    f"{choice.target} (p={choice.p:.2f})",
-                )
+                SequencerNote(t, "recovery", v, f"stall of {c.stall_time:g} s resolved: {text}")
             )
             return
         open_rows = [row for row in plan if 0 in row.unseen]
@@ -449,10 +512,12 @@ class SequencerEpisode:
             names, columns = nodes.successors[(v, current)]
             if not names:
                 continue
-            unseen_counts, checks = [], []
+            unseen_counts, checks, joints = [], [], []
             for k, s in enumerate(names):
                 unseen, bounds = model.coupling.gates((v, current, s), context, margin)
                 unseen_counts.append(len(unseen))
+                joint = model.coupling.joint.get((v, current, s), {})
+                joints.append([(u, a, b) for u, (a, b) in sorted(joint.items()) if u in context])
                 checks += [
                     PhiCheck(k, nodes.index[(b.variable, context[b.variable])], b.bound)
                     for b in bounds
@@ -460,7 +525,14 @@ class SequencerEpisode:
                 ]
             plan.append(
                 PlanRow(
-                    v, current, names, columns, nodes.index[(v, current)], unseen_counts, checks
+                    v,
+                    current,
+                    names,
+                    columns,
+                    nodes.index[(v, current)],
+                    unseen_counts,
+                    checks,
+                    joints,
                 )
             )
         return plan
@@ -474,21 +546,39 @@ class SequencerEpisode:
         p: float,
         context: dict[str, str],
         phi: list[float],
+        stay: bool = False,
     ) -> None:
-        """Note a transition the coupling holds back, with the reasons."""
+        """Note a transition the coupling (or, with ``stay``, the branch choice) holds back."""
         model = self.model
-        done = {u: phi[model.nodes.index[(u, mp)]] for u, mp in context.items()}
-        why = model.coupling.inconsistent(
-            (v, current, target), context, done, model.config.progress_margin
-        )
-        self.notes.append(
-            SequencerNote(
-                t,
-                "hold",
-                v,
-                "; ".join(why) + f", never seen at {v}: {current} -> {target} (held, p={p:.2f})",
+        if stay:
+            text = (
+                f"the demonstrator kept {current} in states like this one "
+                f"({v}: {current} -> {target} held, p={p:.2f})"
             )
+        else:
+            done = {u: phi[model.nodes.index[(u, mp)]] for u, mp in context.items()}
+            why = model.coupling.inconsistent(
+                (v, current, target), context, done, model.config.progress_margin
+            )
+            text = "; ".join(why) + f", never seen at {v}: {current} -> {target} (held, p={p:.2f})"
+        self.notes.append(SequencerNote(t, "hold", v, text))
+
+    def _note_joint(
+        self,
+        t: float,
+        v: str,
+        current: str,
+        target: str,
+        p: float,
+        waits: list[tuple[str, str, str]],
+    ) -> None:
+        """Note a switch that waits for the switches it was always demonstrated together with."""
+        others = "; ".join(f"{u}: {a} -> {b}" for u, a, b in waits)
+        text = (
+            f"waits for {others} (always demonstrated together with {v}: {current} -> "
+            f"{target}; held, p={p:.2f})"
         )
+        self.notes.append(SequencerNote(t, "hold", v, text))
 
     def _observe_entry(self, v: str, m: float, phi: list[float] | np.ndarray) -> None:
         """Give ``v``'s rule the ``p`` of its new node's successors measured at ``m`` [s].
@@ -521,6 +611,7 @@ class SequencerEpisode:
         """
         self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
         self.active[v] = target
+        self._armed.pop(v, None)
         self._rules[v].reset()
         self._observe_entry(v, m, phi)
         self._holding[v] = None

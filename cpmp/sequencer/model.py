@@ -12,7 +12,7 @@ and the batch depend on these records, not on the sequencer class.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -21,6 +21,7 @@ from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX
+from cpmp.sequencer.branches import BranchChoices
 from cpmp.sequencer.fit_data import start_keys
 from cpmp.sequencer.switching import Coupling
 
@@ -118,6 +119,7 @@ class TransitionModel:
             detector's unit; 0 for features it ignores).
         initial_combinations: the demonstrated initial MP per variable (distinct; what
             ``config.start_rule == "joint"`` chooses among).
+        branches: the learned choice at each node with several demonstrated successors.
     """
 
     graphs: dict[str, SequenceGraph]
@@ -126,3 +128,4 @@ class TransitionModel:
     coupling: Coupling
     feature_range: np.ndarray
     initial_combinations: list[dict[str, str]]
+    branches: BranchChoices = field(default_factory=lambda: BranchChoices({}))

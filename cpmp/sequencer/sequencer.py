@@ -37,6 +37,7 @@ from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
 from cpmp.predictors.training import check_logger, fit_predictor
 from cpmp.records import ReplayResult, SequencerNote, StartDecision, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
+from cpmp.sequencer.branches import BranchChoices, stay_examples
 from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.fit_data import (
     demo_progress,
@@ -75,6 +76,8 @@ PAPER_OPTIONS: dict[str, str | bool] = {
     "switch_rule": "paper",
     "coupling": "none",
     "recovery": False,
+    "branch": "none",
+    "joint": False,
 }
 """Fit options that turn :meth:`ConcurrentSequencer.fit`'s defaults into the paper's method:
 ``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` (the main job's
@@ -98,6 +101,7 @@ class ConcurrentSequencer:
         initial_combinations: Sequence[Mapping[str, str]] | None = None,
         coupling: Coupling | None = None,
         feature_range: np.ndarray | None = None,
+        branches: BranchChoices | None = None,
     ) -> None:
         self.graphs = dict(graphs)
         self.predictor = predictor.eval()
@@ -126,6 +130,15 @@ class ConcurrentSequencer:
                 f"feature_range has {self.feature_range.size} entries for "
                 f"{len(self.feature_names)} features"
             )
+        self.learned_branches = (
+            BranchChoices.learn(self.coupling, self.feature_range) if branches is None else branches
+        )
+        """The choices learned at the fit (:mod:`cpmp.sequencer.branches`; without them, those
+        at the nodes with several demonstrated successors, from the coupling)."""
+        self.branches = (
+            self.learned_branches if self.config.branch == "learned" else BranchChoices({})
+        )
+        """The choices the transition rule uses (none with ``branch=none``)."""
         self.transition_model = TransitionModel(
             self.graphs,
             self.nodes,
@@ -133,6 +146,7 @@ class ConcurrentSequencer:
             self.coupling,
             self.feature_range,
             self.initial_combinations,
+            self.branches,
         )
         """What each episode reads (:class:`~cpmp.sequencer.model.TransitionModel`)."""
         self._episode = SequencerEpisode(self.transition_model)
@@ -243,8 +257,46 @@ class ConcurrentSequencer:
         progress = demo_progress(graphs, data, [d.n_samples for d in demos])
         coupling = Coupling.learn(demos, sorted(graphs), progress=progress)
         feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
-        return cls(
+        seq = cls(
             graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range
+        )
+        margin = config.sequencer.progress_margin
+        stays = stay_examples(demos, sorted(graphs), progress, 0.2 if margin is None else margin)
+        stays = seq._confusing(stays)
+        summary["stay_choices"] = sorted(f"{v}: {mp}" for v, mp in stays)
+        return seq._with_branches(BranchChoices.learn(coupling, feature_range, stays))
+
+    def _confusing(
+        self, stays: Mapping[tuple[str, str], list[np.ndarray]]
+    ) -> dict[tuple[str, str], list[np.ndarray]]:
+        """The nodes among ``stays`` at one of whose stay states a transition's ``p`` is high.
+
+        There the progress predictor alone would have switched where the demonstrator stayed
+        (:func:`~cpmp.sequencer.branches.stay_examples`); the others need no stay choice.
+        """
+        out = {}
+        for (v, mp), states in sorted(stays.items()):
+            _, columns = self.nodes.successors[(v, mp)]
+            if not columns:
+                continue
+            phi = self.progress(np.stack(states))
+            p = phi[:, [self.nodes.index[(v, mp)]]] * (1.0 - phi[:, columns])
+            if float(p.max()) > self.config.threshold:
+                out[(v, mp)] = list(states)
+        return out
+
+    def _with_branches(self, branches: BranchChoices) -> ConcurrentSequencer:
+        """This sequencer with the learned choices ``branches``."""
+        return ConcurrentSequencer(
+            self.graphs,
+            self.predictor,
+            self.feature_names,
+            self.config,
+            self.fit_summary,
+            self.initial_combinations,
+            self.coupling,
+            self.feature_range,
+            branches,
         )
 
     # ----------------------------------------------------------------------------- inference
@@ -395,6 +447,7 @@ class ConcurrentSequencer:
                 "initial_combinations": self.initial_combinations,
                 "coupling": self.coupling.to_dict(),
                 "feature_range": self.feature_range.tolist(),
+                "branches": self.learned_branches.to_dict(),
             },
         )
 
@@ -418,6 +471,10 @@ class ConcurrentSequencer:
             # Written before the switching rules, coupling and recovery existed: keep its
             # behaviour (the plateau rule, graphs coupled through the features only).
             options.update(switch_rule="plateau", coupling="none", recovery=False)
+        if "branches" not in payload:
+            # Written before branch choices and joint switches existed: keep its behaviour.
+            options.setdefault("branch", "none")
+            options.setdefault("joint", False)
         graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
         predictor = predictor_from_spec(payload["predictor"]["spec"])
         state = payload["predictor"]["state"]
@@ -455,6 +512,7 @@ class ConcurrentSequencer:
             payload.get("initial_combinations", []),
             Coupling.from_dict(payload.get("coupling", [])),
             feature_range,
+            BranchChoices.from_dict(payload.get("branches", [])),
         )
 
     def with_config(self, **options: Any) -> ConcurrentSequencer:
@@ -469,6 +527,7 @@ class ConcurrentSequencer:
             self.initial_combinations,
             self.coupling,
             self.feature_range,
+            self.learned_branches,
         )
 
     def describe(self) -> str:
@@ -480,5 +539,9 @@ class ConcurrentSequencer:
             if lines:
                 used = "" if self.config.coupling == "context" else " (not used: coupling=none)"
                 parts.append(f"{v}: switch contexts{used}")
+                parts += lines
+            lines = self.branches.describe(v, self.feature_names)
+            if lines:
+                parts.append(f"{v}: branch choices")
                 parts += lines
         return "\n".join(parts)

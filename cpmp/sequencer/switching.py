@@ -39,7 +39,11 @@ progressed (the least expected progress, eq. 1, over the demonstrations). A tran
 context — the other variables' current MPs — contains an MP never seen for that switch, or an
 MP whose predicted progress φ is more than a margin below the least demonstrated one, is held
 back. It is learned from the labels alone (nothing task-specific), per other variable (a
-product of marginal sets, more lenient than requiring a demonstrated joint context).
+product of marginal sets, more lenient than requiring a demonstrated joint context). A switch
+that every demonstration made in the same sample as another variable's switch (a bowl served as
+the last pour ends) is *joint* with it (``joint=true``): it waits until the other variable has
+switched, or fires in the tick its rule decides to (a waiting switch stays armed while its ``p``
+is above the threshold), and a recovery takes both.
 
 **Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds of
 measurement time while the features are at rest (every feature moves slower than
@@ -257,11 +261,17 @@ class Coupling:
         instances: ``(variable, source)`` -> every demonstrated switch of ``variable`` out of
             ``source``: its target, the features at it and the other variables' MPs around
             it (what a recovery reads: :meth:`nearest_target`).
+        joint: ``(variable, source, target)`` -> other variable -> ``(from, to)`` when every
+            demonstration of that switch came in the same sample as the other variable's
+            switch ``from -> to``: the switch is made together with it (a bowl is served as
+            the last pour ends), so it may fire only once the other variable is in ``to`` or
+            ready to switch there (its ``p`` above the threshold and its branch choice there).
     """
 
     contexts: dict[Edge, dict[str, frozenset[str]]] = field(default_factory=dict)
     progress: dict[Edge, dict[str, dict[str, float]]] = field(default_factory=dict)
     instances: dict[tuple[str, str], list[SwitchInstance]] = field(default_factory=dict)
+    joint: dict[Edge, dict[str, tuple[str, str]]] = field(default_factory=dict)
 
     @classmethod
     def learn(
@@ -294,6 +304,7 @@ class Coupling:
         contexts: dict[Edge, dict[str, set[str]]] = {}
         progress_seen: dict[Edge, dict[str, dict[str, float]]] = {}
         instances: dict[tuple[str, str], list[SwitchInstance]] = {}
+        together: dict[Edge, list[dict[str, tuple[str, str]]]] = {}
         variables = list(variables)
         if progress is None:
             progress = [demo_labels(demo, variables, transform, labels) for demo in demos]
@@ -306,22 +317,32 @@ class Coupling:
                     ctx = contexts.setdefault(edge, {})
                     prog = progress_seen.setdefault(edge, {})
                     around = {}
+                    switched = {}
                     for u in variables:
                         if u == v:
                             continue
                         before, after = str(mps[u][i - 1]), str(mps[u][i])
                         ctx.setdefault(u, set()).update((before, after))
                         around[u] = frozenset((before, after))
-                        if before == after:
+                        if before != after:
+                            switched[u] = (before, after)
+                        else:
                             seen = prog.setdefault(u, {})
                             seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
+                    together.setdefault(edge, []).append(switched)
                     instances.setdefault(edge[:2], []).append(
                         SwitchInstance(edge[2], demo.features[i].copy(), around)
                     )
+        joint = {}
+        for edge, seen in together.items():
+            always = {u: pair for u, pair in seen[0].items() if all(s.get(u) == pair for s in seen)}
+            if always:
+                joint[edge] = always
         return cls(
             {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
             {e: c for e, c in progress_seen.items() if c},
             instances,
+            joint,
         )
 
     def inconsistent(
@@ -433,6 +454,8 @@ class Coupling:
                         + ")"
                     )
                 parts.append(part)
+            for u, (a, b) in sorted(self.joint.get((v, source, target), {}).items()):
+                parts.append(f"together with {u}: {a} -> {b}")
             lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
         return lines
 
@@ -448,6 +471,9 @@ class Coupling:
                     "progress": {
                         u: dict(sorted(q.items()))
                         for u, q in sorted(self.progress.get((v, s, t), {}).items())
+                    },
+                    "joint": {
+                        u: list(pair) for u, pair in sorted(self.joint.get((v, s, t), {}).items())
                     },
                 }
                 for (v, s, t), c in sorted(self.contexts.items())
@@ -469,7 +495,7 @@ class Coupling:
     def from_dict(cls, data: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> Coupling:
         """Inverse of :meth:`to_dict` (also reads the list form of checkpoint version 2)."""
         rows = data.get("switches", []) if isinstance(data, Mapping) else data
-        contexts, progress = {}, {}
+        contexts, progress, joint = {}, {}, {}
         for r in rows:
             edge = (str(r["variable"]), str(r["source"]), str(r["target"]))
             contexts[edge] = {str(u): frozenset(map(str, m)) for u, m in r["context"].items()}
@@ -479,6 +505,9 @@ class Coupling:
             }
             if prog:
                 progress[edge] = prog
+            pairs = {str(u): (str(a), str(b)) for u, (a, b) in (r.get("joint") or {}).items()}
+            if pairs:
+                joint[edge] = pairs
         instances: dict[tuple[str, str], list[SwitchInstance]] = {}
         for r in data.get("instances", []) if isinstance(data, Mapping) else []:
             instances.setdefault((str(r["variable"]), str(r["source"])), []).append(
@@ -488,7 +517,7 @@ class Coupling:
                     {str(u): frozenset(map(str, m)) for u, m in r["context"].items()},
                 )
             )
-        return cls(contexts, progress, instances)
+        return cls(contexts, progress, instances, joint)
 
 
 def indicator_features(x: np.ndarray) -> np.ndarray:
