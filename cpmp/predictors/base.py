@@ -230,6 +230,18 @@ class ProgressPredictor(nn.Module):
     def reset_state(self, n_streams: int) -> None:
         """Start ``n_streams`` fresh input streams (stateful banks); a no-op for the others."""
 
+    def set_validation(self, validation: list[NodeData] | None) -> None:
+        """Receive the fit's held-out data before :meth:`initialize` (default: not used).
+
+        :func:`~cpmp.predictors.training.fit_predictor` passes the validation data it scores
+        every epoch on, so that a bank can choose among models on them (``klr_sparse``
+        chooses its sparsity level).
+
+        Args:
+            validation: every node's held-out data in node order (a node may have none), or
+                ``None`` when the fit has none.
+        """
+
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
         """Data-dependent set-up before training (support points, initial weights)."""
 

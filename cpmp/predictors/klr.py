@@ -3,14 +3,18 @@
 ``klr``        support points equidistant by L1 arc length along each activation, their number
                ``max(min_support, ceil(support_scale * path length))`` (the paper's choice).
 ``klr_full``   every training sample is a support point (the standard, overfitting-prone KLR).
-``klr_sparse`` learnable sparsity: a generous candidate set, L1-penalised weights, optionally
-               learned positions and per-feature length-scales; near-zero supports are pruned.
+``klr_sparse`` learned sparsity on the default model: the supports a sparsity path keeps
+               (greedy forward selection, level chosen on validation data), or
+               (``method: l1``) L1-penalised weights on a generous candidate set, pruned.
 
 All three share one batched kernel evaluation over padded support sets ``(K, S, d)``.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,7 +32,10 @@ from cpmp.predictors.base import (
     soft_bce,
 )
 from cpmp.predictors.newton import NewtonInfo, newton_fit
+from cpmp.predictors.selection import NodeModel, NodeProblem, PathPoint, forward_selection_path
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
+
+log = logging.getLogger(__name__)
 
 
 class KLRPredictor(ProgressPredictor):
@@ -328,13 +335,54 @@ class FullKLRPredictor(KLRPredictor):
         return sum(int(node.x.shape[0]) for node in data)
 
 
+@dataclass(frozen=True)
+class SparsityLevel:
+    """One point of ``klr_sparse``'s sparsity path (a row of ``summary()["sparsity_path"]``).
+
+    Attributes:
+        level: the share of the fixed rule's support count the point was recorded at.
+        gamma_scale: the kernel width, as the factor of ``gamma`` of its path.
+        n_support: supports of all nodes together.
+        train_loss: Σ over nodes of the mean training BCE + ``½ l2 ||w||²``.
+        val_loss: Σ over nodes of the mean held-out BCE (the trainer's ``val/loss``), or
+            ``None`` without held-out data.
+        val_mae: mean |φ − eq. 1| over the graph nodes' held-out samples (``val/mae``), or
+            ``None``.
+        chosen: the fitted model is this point's.
+    """
+
+    level: float
+    gamma_scale: float
+    n_support: int
+    train_loss: float
+    val_loss: float | None
+    val_mae: float | None
+    chosen: bool = False
+
+
+@dataclass(frozen=True)
+class _Split:
+    """The problems a path is run on and where its held-out data came from."""
+
+    problems: list[NodeProblem]
+    candidates: list[torch.Tensor]
+    source: str
+
+
 class SparseKLRPredictor(KLRPredictor):
-    """``klr_sparse``: learn which of many candidate supports to keep (L1 + pruning)."""
+    """``klr_sparse``: the default model with the supports a sparsity path keeps.
+
+    ``method: forward`` (default): the fixed rule's supports are the candidates; greedy
+    forward selection (:func:`cpmp.predictors.selection.forward_selection_path`) records a
+    path per kernel width, the validation data choose its level and width, and the
+    trainer's convex solver solves the kept supports. ``method: l1``: L1-penalised weights
+    on a generous candidate set (Adam), pruned and re-fitted. See
+    :class:`~cpmp.config.SparseKLRConfig`.
+    """
 
     config: SparseKLRConfig
     kind: ClassVar[str] = "klr_sparse"
     config_class = SparseKLRConfig
-    convex: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -344,32 +392,238 @@ class SparseKLRPredictor(KLRPredictor):
         n_support: int = 1,
     ) -> None:
         super().__init__(node_keys, n_features, config, n_support)
+        l1 = config.method == "l1"
         self.log_feature_scale = nn.Parameter(
             torch.zeros(self.n_nodes, n_features, dtype=self.dtype_),
-            requires_grad=config.learn_lengthscales,
+            requires_grad=l1 and config.learn_lengthscales,
         )
-        self.support = nn.Parameter(self.support.clone(), requires_grad=config.learn_positions)
+        self.support = nn.Parameter(
+            self.support.clone(), requires_grad=l1 and config.learn_positions
+        )
         self.refit_info: list[NewtonInfo] = []
-        """Per-node outcome of the last Newton re-fit (empty before one)."""
+        """Per-node outcome of the last Newton re-fit (``l1``; empty before one)."""
+        self.sparsity_path: list[SparsityLevel] = []
+        """The path of the last fit (``forward``; empty before one)."""
+        self.sparsity_validation = "none"
+        """Where the path's held-out data came from: ``validation``, ``held-out activations``
+        or ``none``."""
+        self.n_support_rule = 0
+        """Supports the fixed rule places on the fit's data (the levels' reference)."""
+        self._validation: list[NodeData] | None = None
+
+    @property
+    def convex(self) -> bool:  # type: ignore[override]
+        """``forward`` is solved by Newton after its path; ``l1``'s sparsity phase by Adam."""
+        return self.config.method == "forward"
 
     def feature_weights(self) -> torch.Tensor:
-        """Per-node, per-feature kernel weights ``(K, d)``: γ times the learned scales."""
-        return self.gamma * torch.exp(self.log_feature_scale)
+        """Per-node, per-feature kernel weights ``(K, d)``.
+
+        γ (times the chosen width factor) times the path weights, times the learned scales
+        (``l1`` with ``learn_lengthscales``; 1 otherwise).
+        """
+        return self.gamma * self.feature_scale * torch.exp(self.log_feature_scale)
 
     def _support_rule(self) -> tuple[float, int, int | None]:
+        if self.config.method == "forward":
+            return super()._support_rule()
         return self.config.candidate_scale, self.config.min_candidates, None
 
     def _assign_support(self, support: torch.Tensor) -> None:
         del self.support
-        self.support = nn.Parameter(support, requires_grad=self.config.learn_positions)
+        learn = self.config.method == "l1" and self.config.learn_positions
+        self.support = nn.Parameter(support, requires_grad=learn)
 
     def _learned_kernel(self) -> bool:
-        return self.config.learn_positions or self.config.learn_lengthscales
+        return self.config.method == "l1" and (
+            self.config.learn_positions or self.config.learn_lengthscales
+        )
 
+    # ------------------------------------------------------------------ the sparsity path
+    def set_validation(self, validation: list[NodeData] | None) -> None:
+        """Keep the fit's held-out data for choosing the level (``forward``)."""
+        self._validation = validation
+
+    def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
+        """Place the candidates; ``forward``: run the path and keep the chosen supports."""
+        super().initialize(data, generator)
+        validation, self._validation = self._validation, None
+        if self.config.method != "forward":
+            return
+        with torch.no_grad():
+            self._select(data, validation, generator)
+
+    def _levels(self) -> list[float]:
+        """The levels the path is recorded at (up to ``level`` when it is set)."""
+        levels = sorted(set(self.config.path_levels))
+        if self.config.level is None:
+            return levels
+        return [lv for lv in levels if lv < self.config.level] + [self.config.level]
+
+    def _select(
+        self, data: list[NodeData], validation: list[NodeData] | None, generator: torch.Generator
+    ) -> None:
+        """Run the path per width, choose the level and width, keep their supports."""
+        masks = self.support_mask
+        candidates = [self.support[i, masks[i]].detach().clone() for i in range(self.n_nodes)]
+        self.n_support_rule = sum(len(c) for c in candidates)
+        kernels = [
+            self.node_kernel(i, node.x)[:, : len(candidates[i])].T.contiguous()
+            for i, node in enumerate(data)
+        ]
+        split = self._split(data, validation, candidates, kernels, generator)
+        levels = self._levels()
+        points: list[tuple[SparsityLevel, list[NodeModel]]] = []
+        for scale in self.config.gamma_scales:
+            for level, point in self._path(split.problems, split.candidates, levels, scale):
+                record = SparsityLevel(
+                    level, scale, point.n_support, point.train_loss, point.val_loss, point.val_mae
+                )
+                points.append((record, point.models))
+        best = self._choose([p for p, _ in points], levels[-1])
+        chosen, models = points[best]
+        if split.source == "held-out activations":  # choose on the split, fit on everything
+            problems = [
+                _problem(k, node.target, None, None, True)
+                for k, node in zip(kernels, data, strict=True)
+            ]
+            fitted = self._path(problems, candidates, [chosen.level], chosen.gamma_scale)
+            models = fitted[-1][1].models
+        self.sparsity_path = [
+            dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
+        ]
+        self.sparsity_validation = split.source
+        self._keep(candidates, models, chosen.gamma_scale)
+        log.info("%s", self.describe_path())
+
+    def _split(
+        self,
+        data: list[NodeData],
+        validation: list[NodeData] | None,
+        candidates: list[torch.Tensor],
+        kernels: list[torch.Tensor],
+        generator: torch.Generator,
+    ) -> _Split:
+        """The path's problems: the training data against the validation data.
+
+        Without validation data, ``holdout_fraction`` of each node's activations (nodes with
+        two or more; a start head shares its node's draw) are held out, and the candidates
+        are those placed along the remaining ones.
+        """
+        graph = [not node.key[1].startswith(START_PREFIX) for node in data]
+        if validation is not None and any(v.n_samples for v in validation):
+            problems = [
+                _problem(k, node.target, self.node_kernel(i, v.x)[:, : len(c)].T, v.target, g)
+                for i, (k, node, v, c, g) in enumerate(
+                    zip(kernels, data, validation, candidates, graph, strict=True)
+                )
+            ]
+            return _Split(problems, candidates, "validation")
+        seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
+        rng = np.random.default_rng(seed)
+        held: dict[str, set[int]] = {}
+        problems, kept = [], []
+        rule = (*self._support_rule(), "none")
+        for i, (node, g) in enumerate(zip(data, graph, strict=True)):
+            base = node.key[0] + "/" + node.key[1].removeprefix(START_PREFIX)
+            n_act = len(node.activations)
+            if base not in held:
+                n_out = round(self.config.holdout_fraction * n_act) if n_act >= 2 else 0
+                n_out = min(max(n_out, 1 if n_act >= 2 else 0), n_act - 1)
+                held[base] = set(rng.choice(n_act, size=n_out, replace=False).tolist())
+            out = held[base]
+            counts = [support_point_count(p, *rule) for p in node.paths]
+            ends = np.cumsum([0, *counts])
+            keep = [j for j in range(n_act) if j not in out]
+            cand = torch.cat([candidates[i][ends[j] : ends[j + 1]] for j in keep])
+            kept.append(cand)
+            x_tr = torch.as_tensor(np.concatenate([node.activations[j] for j in keep]))
+            y_tr = torch.as_tensor(np.concatenate([node.labels[j] for j in keep]))
+            x_va = [node.activations[j] for j in sorted(out)]
+            y_va = [node.labels[j] for j in sorted(out)]
+            k_tr = self._kernel_with(i, cand, x_tr)
+            k_va = (
+                self._kernel_with(i, cand, torch.as_tensor(np.concatenate(x_va))) if x_va else None
+            )
+            y_va_t = torch.as_tensor(np.concatenate(y_va)) if y_va else None
+            problems.append(_problem(k_tr, y_tr, k_va, y_va_t, g))
+        source = "held-out activations" if any(held.values()) else "none"
+        return _Split(problems, kept, source)
+
+    def _kernel_with(self, i: int, support: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """Kernel ``(C, P)`` of node ``i``'s kernel weights between ``support`` and ``x``."""
+        a = self.feature_weights()[i].double()
+        s, z = support.double(), x.double()
+        sq = (a * s * s).sum(-1)[:, None] - 2.0 * (a * s) @ z.T + ((z * z) @ a)[None, :]
+        return torch.exp(-sq.clamp_min(0.0))
+
+    def _path(
+        self, problems: list[NodeProblem], candidates: list[torch.Tensor], levels: list[float],
+        scale: float,
+    ) -> list[tuple[float, PathPoint]]:  # fmt: skip
+        """The path at kernel width factor ``scale``, recorded at ``levels``.
+
+        The kernel at ``scale`` is the base kernel to the power ``scale``.
+        """
+        if scale != 1.0:
+            problems = [
+                dataclasses.replace(
+                    p, kernel=p.kernel.pow(scale), val_kernel=p.val_kernel.pow(scale)
+                )
+                for p in problems
+            ]
+        n_rule = sum(len(c) for c in candidates)
+        totals = [max(len(problems), round(level * n_rule)) for level in levels]
+        points = forward_selection_path(problems, totals, self.config.l2, self.config.bias)
+        return list(zip(levels, points, strict=False))
+
+    def _choose(self, points: list[SparsityLevel], last: float) -> int:
+        """Index of the point of least validation loss (fewest supports on a tie).
+
+        With ``level`` set, among that level's points; without held-out data, the first
+        width's point at the last level.
+        """
+        allowed = [i for i, p in enumerate(points) if self.config.level is None or p.level == last]
+        scored = [i for i in allowed if points[i].val_loss is not None]
+        if not scored:
+            return next(i for i in allowed if points[i].level == last)
+        return min(scored, key=lambda i: (points[i].val_loss, points[i].n_support, i))
+
+    def _keep(self, candidates: list[torch.Tensor], models: list[NodeModel], scale: float) -> None:
+        """Make the chosen supports, weights and width the bank's."""
+        self.gamma = self.gamma * scale
+        self._set_supports(
+            [c[m.support].numpy(force=True) for c, m in zip(candidates, models, strict=True)]
+        )
+        with torch.no_grad():
+            for i, m in enumerate(models):
+                self.weight[i, : m.support.numel()] = m.weight.to(self.dtype_)
+                self.bias[i] = m.bias
+
+    def describe_path(self) -> str:
+        """The sparsity path as text: one line per point, the chosen one marked."""
+        chosen = next((p for p in self.sparsity_path if p.chosen), None)
+        if chosen is None:
+            return "klr_sparse: no sparsity path (method l1)"
+        lines = [
+            f"klr_sparse kept {chosen.n_support} of the fixed rule's {self.n_support_rule} "
+            f"supports (level {chosen.level:g}, gamma x {chosen.gamma_scale:g}), chosen on "
+            f"{self.sparsity_validation}; the path (level, gamma x, supports, val loss, val MAE):"
+        ]
+        for p in self.sparsity_path:
+            loss = "-" if p.val_loss is None else f"{p.val_loss:.5f}"
+            mae = "-" if p.val_mae is None else f"{p.val_mae:.4f}"
+            mark = "  <- chosen" if p.chosen else ""
+            lines.append(f"  {p.level:g}  {p.gamma_scale:g}  {p.n_support}  {loss}  {mae}{mark}")
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------ training and l1
     def training_loss(
         self, data: list[NodeData], rows: list[torch.Tensor] | None = None
     ) -> torch.Tensor:
-        """Penalised loss with the L1 term; a learned kernel is recomputed on every call."""
+        """``forward``: the KLR loss; ``l1``: with the L1 term (a learned kernel recomputed)."""
+        if self.config.method == "forward":
+            return super().training_loss(data, rows)
         if self._learned_kernel():
             self._cache = None
             kernels = [
@@ -381,12 +635,16 @@ class SparseKLRPredictor(KLRPredictor):
         return self._penalised_loss(data, kernels, self.config.l1, rows)
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
-        """Prune near-zero supports, compact the padded arrays, optionally re-fit the weights.
+        """``l1``: prune near-zero supports, compact the arrays, optionally re-fit the weights.
+
+        ``forward`` has nothing left to do (its supports were chosen before the solve).
 
         Args:
             data: every node's training data.
             solver: how the convex re-fit is solved (default: Newton).
         """
+        if self.config.method == "forward":
+            return
         with torch.no_grad():
             w = (self.weight * self.support_mask).abs()
             keep = (w >= self.config.prune_tol * w.max(dim=1, keepdim=True).values) & (w > 0)
@@ -440,8 +698,40 @@ class SparseKLRPredictor(KLRPredictor):
         opt.step(closure)
 
     def summary(self) -> dict[str, Any]:
-        """The kernel bank's facts and which kernel parts were learned."""
+        """The kernel bank's facts, the sparsity path and which kernel parts were learned.
+
+        ``forward``: ``sparsity_path`` (one dict per :class:`SparsityLevel`),
+        ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation`` and
+        ``n_support_rule``.
+        """
         out = super().summary()
+        out["sparsity_method"] = self.config.method
         out["learn_positions"] = self.config.learn_positions
         out["learn_lengthscales"] = self.config.learn_lengthscales
+        if self.sparsity_path:
+            chosen = next(p for p in self.sparsity_path if p.chosen)
+            out["sparsity_path"] = [dataclasses.asdict(p) for p in self.sparsity_path]
+            out["sparsity_level"] = chosen.level
+            out["sparsity_gamma_scale"] = chosen.gamma_scale
+            out["sparsity_validation"] = self.sparsity_validation
+            out["n_support_rule"] = self.n_support_rule
         return out
+
+
+def _problem(
+    kernel: torch.Tensor,
+    target: torch.Tensor,
+    val_kernel: torch.Tensor | None,
+    val_target: torch.Tensor | None,
+    graph_node: bool,
+) -> NodeProblem:
+    """A node's selection problem in float64 (no held-out data: zero held-out samples)."""
+    f64 = torch.float64
+    c = kernel.shape[0]
+    return NodeProblem(
+        kernel.to(f64).contiguous(),
+        target.to(f64),
+        torch.zeros(c, 0, dtype=f64) if val_kernel is None else val_kernel.to(f64).contiguous(),
+        torch.zeros(0, dtype=f64) if val_target is None else val_target.to(f64),
+        graph_node,
+    )

@@ -73,7 +73,7 @@ def penalised_loss(
     return (weight * bce_terms(z, target)).sum() + 0.5 * l2 * (w @ w)
 
 
-def _newton_direction(hessian: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
+def newton_direction(hessian: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
     """The Newton direction ``-H⁻¹ g``.
 
     By Cholesky; if ``H`` is not numerically positive definite, with growing diagonal
@@ -153,7 +153,7 @@ def newton_solve(
             break
         curvature = c * p * torch.sigmoid(-z)
         hessian = (x.T * curvature) @ x + torch.diag(reg)
-        direction = _newton_direction(hessian, grad)
+        direction = newton_direction(hessian, grad)
         slope = float(grad @ direction)
         decrement = max(-slope, 0.0) ** 0.5
         if decrement <= tol:

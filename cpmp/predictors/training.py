@@ -220,6 +220,7 @@ def fit_predictor(
     check_logger(logger, cfg.log_dir)
     generator = torch.Generator().manual_seed(seed)
     start = time.perf_counter()
+    predictor.set_validation(None if predictor.stateful else validation)
     predictor.initialize(data, generator)
     solver = solver_for(predictor, cfg)
     lr = None

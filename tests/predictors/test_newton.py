@@ -65,7 +65,14 @@ def test_gradient_vanishes_at_the_newton_solution(klr_fits):
 def test_newton_refit_of_sparse_klr_matches_lbfgs(train_demos):
     fits = {
         solver: ConcurrentSequencer.fit(
-            train_demos, "klr_sparse", seed=0, logger=None, epochs=30, solver=solver
+            train_demos,
+            "klr_sparse",
+            seed=0,
+            logger=None,
+            epochs=30,
+            solver=solver,
+            method="l1",
+            l2=1e-4,  # the L1 variant of klr_sparse, at klr's L2 weight
         )
         for solver in ("newton", "lbfgs")
     }

@@ -50,19 +50,6 @@ def test_klr_full_uses_every_sample(fitted, train_demos):
     assert counts["a/a_go"] == n_a_go
 
 
-def test_klr_sparse_prunes_candidates(fit_on_train):
-    dense = fit_on_train("klr_sparse", l1=0.0, prune_tol=0.0)
-    sparse = fit_on_train("klr_sparse", l1=0.05)
-    assert sparse.fit_summary["n_support_total"] < 0.7 * dense.fit_summary["n_support_total"]
-
-
-def test_klr_sparse_learned_positions_and_lengthscales(fit_on_train, test_demos):
-    seq = fit_on_train("klr_sparse", learn_positions=True, learn_lengthscales=True, epochs=150)
-    scales = seq.predictor.log_feature_scale.detach()
-    assert scales.abs().max() > 1e-3  # the length-scales actually moved
-    assert progress_errors(activation_progress(seq, test_demos))["mae"] < MAE_BOUND
-
-
 def test_batched_equals_single_and_shapes(fitted, test_demos):
     seq = fitted["klr"]
     x = test_demos[0].features[:7]
@@ -90,7 +77,7 @@ def test_packed_logits_equal_padded_kernel(fitted, test_demos, kind):
 
 
 def test_packed_cache_follows_parameter_changes(fit_on_train, test_demos):
-    seq = fit_on_train("klr_sparse", learn_lengthscales=True, epochs=20)
+    seq = fit_on_train("klr_sparse", method="l1", learn_lengthscales=True, epochs=20)
     model = seq.predictor
     z = torch.as_tensor(test_demos[0].features[:5])
     before = seq.progress(z.numpy())

@@ -177,11 +177,13 @@ def _rate_drops(lr):
     return [e for e in range(1, len(lr)) if lr[e] < lr[e - 1]]
 
 
-@pytest.mark.parametrize("kind", ["mlp", "klr_sparse"])
-def test_early_stopping_ends_an_easy_fit_before_its_budget(train_demos, tmp_path, kind):
+@pytest.mark.parametrize(
+    ("kind", "options"), [("mlp", {}), ("klr_sparse", {"method": "l1"})], ids=["mlp", "klr_sparse"]
+)
+def test_early_stopping_ends_an_easy_fit_before_its_budget(train_demos, tmp_path, kind, options):
     delta, patience, decay = 1e-3, 12, 5
     seq = ConcurrentSequencer.fit(
-        train_demos, kind, seed=0, logger="csv", log_dir=str(tmp_path), epochs=5000,
+        train_demos, kind, seed=0, logger="csv", log_dir=str(tmp_path), epochs=5000, **options,
         early_stopping_min_delta=delta, early_stopping_patience=patience,
         lr_decay_patience=decay,
     )  # fmt: skip
