@@ -192,7 +192,11 @@ class SparseKLRConfig(KLRConfig):
             the fixed rule's support count to keep, in (0, 1].
         path_levels: the levels at which the path is recorded and scored, each in (0, 1].
         gamma_scales: kernel widths tried along the path, as factors of ``gamma`` (1: the
-            default kernel; 0.25: twice as wide); each is a path of its own.
+            default kernel; 0.25: twice as wide); each is a path of its own. Default: the
+            default kernel only. A wider kernel wins on validation loss at a quarter of the
+            supports (simulator, 6 demos: held-out MAE 0.0215 against 0.0237) but loses the
+            closed loop: its smoother φ stays below the switching threshold (12 of 20 boxes
+            deadlocked, 4 complete; with the default kernel 13 complete, the default model 15).
         holdout_fraction: without validation data, the share of each node's activations
             (of nodes with at least two) held out to choose the level and width, in (0, 1).
         l2: as in :class:`KLRConfig`, lower by default (1e-6): fewer supports carry larger
@@ -213,7 +217,7 @@ class SparseKLRConfig(KLRConfig):
     method: str = "forward"
     level: float | None = None
     path_levels: tuple[float, ...] = (0.0625, 0.125, 0.1875, 0.25)
-    gamma_scales: tuple[float, ...] = (1.0, 0.25)
+    gamma_scales: tuple[float, ...] = (1.0,)
     holdout_fraction: float = 0.25
     l2: float = 1e-6
     candidate_scale: float = 8.0
