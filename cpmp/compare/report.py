@@ -1,339 +1,286 @@
-"""The results of the comparison (``cpmp-compare``).
+"""The comparison's report (``compare.md``), its episodes and its timings.
 
-The rows pooled over seeds (``compare.json``), the episodes and timings of every job, the
-Markdown table (``compare.md``) and the two figures (``compare_c_vs_d.png``,
-``compare_supports.png``).
+``compare.md`` shows every number of ``compare.json`` (:mod:`cpmp.compare.pooling`) with its
+95 % interval: the worlds, the paper's claims, each world's rows and the significance of
+every difference between them, the support-count axis, refused fits and the files.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
-from matplotlib import colormaps
-from matplotlib.ticker import NullFormatter, ScalarFormatter
-
-from cpmp.compare.rows import FitJob, RowSpec
+from cpmp.compare.pooling import RATES
+from cpmp.compare.rows import FitJob
 from cpmp.compare.runs import RowResult
 from cpmp.experiment.collection import SeedData
-from cpmp.experiment.output import PAPER_TABLE_I, jsonable, mean_std
-from cpmp.experiment.plots import new_figure, save_figure
-from cpmp.experiment.settings import ExperimentSettings
-
-ROW_FIELDS: tuple[str, ...] = (
-    "predictor",
-    "sequencer",
-    "D",
-    "mae",
-    "W",
-    "I",
-    "C",
-    "fit_s",
-    "tick_ms",
-    "supports",
-)
-"""Fields every row of ``compare.json`` has (``None`` where a number does not exist)."""
-
-
-# ---------------------------------------------------------------------------- pooling
-def aggregate_rows(
-    specs: Sequence[RowSpec], settings: ExperimentSettings, results: Mapping[str, RowResult]
-) -> list[dict[str, Any]]:
-    """One row per spec and D: the :data:`ROW_FIELDS` as means over the seeds whose fit succeeded.
-
-    The means (W/I/C: boxes of ``n_boxes``; mae in [0, 1]; fit_s [s]; tick_ms [ms]) come with
-    their population std (``*_std``), the per-seed values and any refused fits (``errors``).
-    """
-    rows = []
-    for spec in specs:
-        for d in spec.train_sizes:
-            per_seed = [results[spec.fit_key(seed, d)] for seed in settings.seeds]
-            ok = [r for r in per_seed if not r.error]
-            row: dict[str, Any] = {"predictor": spec.predictor, "sequencer": spec.sequencer, "D": d}
-            for key in ("mae", "W", "I", "C", "fit_s", "tick_ms", "supports", "diverged"):
-                row[key], std = mean_std([r.number(key) for r in ok])
-                if key in ("mae", "W", "I", "C"):
-                    row[f"{key}_std"] = std
-            row.update(
-                group=spec.group,
-                support_scale=spec.support_scale,
-                n_boxes=settings.n_boxes,
-                seeds=list(settings.seeds),
-                n_seeds=len(ok),
-                per_seed={
-                    key: [r.number(key) for r in per_seed]
-                    for key in ("W", "I", "C", "mae", "supports")
-                },
-                errors=[
-                    f"seed {seed}: {r.error}"
-                    for seed, r in zip(settings.seeds, per_seed, strict=True)
-                    if r.error
-                ],
-            )
-            rows.append(jsonable(row))
-    return rows
+from cpmp.experiment.output import PAPER_TABLE_I
 
 
 def job_episodes(
     results: Mapping[str, RowResult], jobs: Mapping[str, FitJob]
 ) -> list[dict[str, Any]]:
-    """Every reproduction episode of every job, labelled with its row, seed and D.
+    """Every closed-loop episode of every job, labelled with its world, row, seed and D.
 
     A fit shared by two rows is listed once, under the first.
     """
     out = []
     for key, (spec, seed, d) in jobs.items():
         label = {
+            "world": spec.world,
             "predictor": spec.predictor,
             "sequencer": spec.sequencer,
-            "support_scale": spec.support_scale,
+            "option": spec.option,
+            "value": spec.value,
             "seed": seed,
             "D": d,
         }
-        out += [{**label, **episode} for episode in results[key].episodes]
+        out += [{**label, "episode": i, **e} for i, e in enumerate(results[key].episodes)]
     return out
 
 
 def job_timings(
-    collected: Mapping[int, SeedData],
+    collected: Mapping[str, SeedData],
     results: Mapping[str, RowResult],
     jobs: Mapping[str, FitJob],
     seconds: float,
     workers: int,
 ) -> dict[str, Any]:
-    """Wall time of the run; wall and CPU seconds of every stage of every job.
+    """Wall time of the run; wall and CPU seconds of every collection and job stage.
 
-    These scale the run's cost to other box or seed counts.
+    These scale the run's cost to other episode or seed counts.
     """
     tasks = []
     for key, (spec, seed, d) in jobs.items():
         r = results[key]
         tasks.append(
             {
+                "world": spec.world,
                 "group": spec.group,
                 "predictor": spec.predictor,
                 "sequencer": spec.sequencer,
-                "support_scale": spec.support_scale,
+                "option": spec.option,
+                "value": spec.value,
                 "seed": seed,
                 "D": d,
                 "seconds": r.seconds,
                 "cpu_seconds": r.cpu_seconds,
-                "boxes": len(r.episodes),
+                "episodes": len(r.outcomes),
             }
         )
     return {
         "seconds": seconds,
         "workers": workers,
-        "collect_seconds": {str(s): data.seconds for s, data in collected.items()},
+        "collections": [
+            {"seed": data.seed, "seconds": data.seconds} for data in collected.values()
+        ],
         "jobs": tasks,
         "note": "per-job seconds are wall time inside a worker; cpu_seconds its process time",
     }
 
 
-# ------------------------------------------------------------------------------ reporting
-def _fmt(value: float | None, digits: int = 1) -> str:
-    """``value`` with ``digits`` decimals, ``–`` for ``None``."""
-    return "–" if value is None else f"{value:.{digits}f}"
-
-
-def _wic(row: Mapping[str, Any] | None) -> str:
-    """``W / I / C`` means (``± std`` of C over more than one seed)."""
-    if row is None or row.get("C") is None:
+# ------------------------------------------------------------------------------ formatting
+def interval_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
+    """``estimate [low, high]`` of an interval record, times ``scale`` (``–`` for none)."""
+    if value is None:
         return "–"
-    spread = f" ± {_fmt(row['C_std'])}" if row.get("n_seeds", 1) > 1 else ""
-    return f"{_fmt(row['W'])} / {_fmt(row['I'])} / {_fmt(row['C'])}{spread}"
+    est, low, high = (scale * value[k] for k in ("estimate", "low", "high"))
+    return f"{est:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
-def render_compare(
-    rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, seconds: float, workers: int
-) -> str:
-    """``compare.md``: the rows by predictor beside the paper's Table I, then the support sweep.
+def difference_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
+    """A signed difference ``+a [lo, hi]``, bold when significant (``–`` for none)."""
+    if value is None:
+        return "–"
+    est, low, high = (scale * value[k] for k in ("estimate", "low", "high"))
+    text = f"{est:+.{digits}f} [{low:+.{digits}f}, {high:+.{digits}f}]"
+    return f"**{text}**" if value["significant"] else text
 
-    Each row shows W / I / C per D, progress MAE, fit and tick time and support points.
-    """
-    sizes = list(settings.train_sizes)
-    largest = max(sizes)
+
+_ROW_HEADER = (
+    "| row | D | W [%] | I [%] | C [%] | MAE | fit [s] | tick [ms] | supports |",
+    "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+)
+
+
+def _row_line(row: Mapping[str, Any]) -> str:
+    """One row of a world's table: every number with its interval."""
+    cells = [interval_text(row[k], 100.0, 0) for k in RATES]
+    return (
+        f"| `{row['name']}` | {row['D']} | "
+        + " | ".join(cells)
+        + f" | {interval_text(row['mae'], 1.0, 3)} | {interval_text(row['fit_s'], 1.0, 1)} | "
+        f"{interval_text(row['tick_ms'], 1.0, 2)} | {interval_text(row['supports'], 1.0, 0)} |"
+    )
+
+
+def _paper_line(world: Mapping[str, Any], sizes: Sequence[int]) -> list[str]:
+    """The paper's Table I as rates, under the default simulated world (else nothing)."""
+    if world["kind"] != "sim" or world["options"] or world["feature_noise"]:
+        return []
+    out = []
+    for d in sizes:
+        p = PAPER_TABLE_I.get(str(d))
+        if p:
+            rates = " | ".join(f"{100 * p[k] / 20:.0f}" for k in RATES)
+            out.append(f"| paper, Table I (of 20 boxes) | {d} | {rates} | – | – | – | – |")
+    return out
+
+
+def _pairs_table(pairs: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Every pair's paired differences; bold cells exclude 0."""
     lines = [
-        f"# cpmp comparison `{settings.name}`",
-        "",
-        f"Seeds {settings.seeds}; {settings.n_boxes} random boxes per D and seed (the same "
-        f"boxes for every row); {3 * settings.demos_per_strategy} demonstrations per seed "
-        f"({3 * settings.train_per_strategy} train). W / I / C = wrong start / incomplete / "
-        "complete, mean over seeds; MAE = progress error on the held-out demonstrations "
-        "(goal_nearest: its nearest-neighbour estimate, which it does not use to switch); "
-        f"fit [s], tick [ms] (mean `step()` over a held-out demonstration) and support points "
-        f"at D = {largest}. Wall time {seconds / 60:.1f} min on {workers} worker(s).",
-        "",
-        "| predictor | sequencer | "
-        + " | ".join(f"D = {d}: W / I / C" for d in sizes)
-        + " | MAE ("
-        + " / ".join(map(str, sizes))
-        + ") | fit [s] | tick [ms] | supports |",
-        "| --- | --- | " + " | ".join("---" for _ in sizes) + " | --- | --- | --- | --- |",
+        "| D | a − b | ΔW [pp] | ΔI [pp] | ΔC [pp] | ΔMAE |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
-    paper = [PAPER_TABLE_I.get(str(d)) for d in sizes]
-    if any(paper):
-        cells = [f"{p['W']} / {p['I']} / {p['C']} (of 20)" if p else "–" for p in paper]
-        lines.append("| paper, Table I | paper | " + " | ".join(cells) + " | – | – | – | – |")
-    table = [r for r in rows if r["group"] != "support_sweep"]
-    keys = list(dict.fromkeys((r["predictor"], r["sequencer"]) for r in table))
-    for predictor, sequencer in keys:
-        by_d = {
-            r["D"]: r for r in table if (r["predictor"], r["sequencer"]) == (predictor, sequencer)
-        }
-        last = by_d.get(largest, {})
-        maes = " / ".join(_fmt(by_d.get(d, {}).get("mae"), 3) for d in sizes)
-        supports = last.get("supports")
+    for p in pairs:
+        cells = [difference_text(p[k], 100.0, 0) for k in RATES]
         lines.append(
-            f"| `{predictor}` | `{sequencer}` | "
-            + " | ".join(_wic(by_d.get(d)) for d in sizes)
-            + f" | {maes} | {_fmt(last.get('fit_s'))} | {_fmt(last.get('tick_ms'), 2)} | "
-            f"{'–' if supports is None else f'{supports:.0f}'} |"
+            f"| {p['D']} | `{p['a']}` − `{p['b']}` | "
+            + " | ".join(cells)
+            + f" | {difference_text(p['mae'], 1.0, 3)} |"
         )
+    return lines
+
+
+def _claims_table(claims: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Each claim's paired differences in every world and D."""
+    lines = [
+        "| claim (a − b) | world | D | ΔC [pp] | ΔI [pp] | ΔW [pp] | ΔMAE |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for c in claims:
+        lines.append(
+            f"| {c['claim']} (`{c['a']}` − `{c['b']}`) | {c['world']} | {c['D']} | "
+            f"{difference_text(c['C'], 100.0, 0)} | {difference_text(c['I'], 100.0, 0)} | "
+            f"{difference_text(c['W'], 100.0, 0)} | {difference_text(c['mae'], 1.0, 3)} |"
+        )
+    return lines
+
+
+def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The support-count axis: every point's supports, MAE, C, tick and fit time."""
+    lines = [
+        "| world | D | predictor | point | supports | MAE | C [%] | tick [ms] | fit [s] |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+
+    def order(r: Mapping[str, Any]) -> tuple[Any, ...]:
+        supports = r["supports"]["estimate"] if r["supports"] else 0.0
+        return (r["world"], r["D"], r["predictor"], supports)
+
+    for r in sorted(rows, key=order):
+        value = "default" if r["value"] is None else f"{r['value']:g}"
+        chosen = [x.get("sparsity_level") for x in r["per_seed"].get("sparsity", []) if x]
+        if r["value"] is None and chosen:
+            value += f" (chose {', '.join(f'{c:.3g}' for c in chosen)})"
+        lines.append(
+            f"| {r['world']} | {r['D']} | `{r['predictor']}` | {r['option']}={value} | "
+            f"{interval_text(r['supports'], 1.0, 0)} | {interval_text(r['mae'], 1.0, 3)} | "
+            f"{interval_text(r['C'], 100.0, 0)} | {interval_text(r['tick_ms'], 1.0, 2)} | "
+            f"{interval_text(r['fit_s'], 1.0, 1)} |"
+        )
+    return lines
+
+
+def render_compare(result: Mapping[str, Any], name: str, seconds: float, workers: int) -> str:
+    """``compare.md`` from ``compare.json``'s content (:func:`cpmp.compare.pooling.pool`).
+
+    Args:
+        result: the pooled rows, pairs, claims and worlds.
+        name: the ``experiment`` option's name.
+        seconds: the run's wall time [s].
+        workers: its worker processes.
+
+    Returns:
+        The Markdown text.
+    """
+    boot = result["bootstrap"]
+    level = f"{100 * boot['level']:.0f} %"
+    lines = [
+        f"# cpmp comparison `{name}`",
+        "",
+        f"Every number is the estimate over all seeds with its {level} interval in brackets: "
+        f"a hierarchical bootstrap ({boot['samples']} replicates, seed {boot['seed']}) that "
+        "resamples the seeds, then each drawn seed's episodes (or held-out demonstrations). "
+        "W / I / C = wrong start / incomplete / complete, in % of the episodes (a simulated "
+        "world's episodes are its random boxes, the same boxes for every row); MAE = progress "
+        "error against eq. 1 over every held-out sample (goal_nearest: its nearest-sample "
+        "estimate, which it does not use to switch); fit [s], tick [ms] (mean `step()` over "
+        "a held-out demonstration) and support points: intervals over the seeds. "
+        f"Wall time {seconds / 60:.1f} min on {workers} worker(s).",
+        "",
+        "| world | seeds | D | episodes per D and seed | held-out demos per seed |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for w in result["worlds"]:
+        held = w["test_demos"] if w["test_demos"] is not None else "the experiment's split"
+        sizes = ", ".join(map(str, w["train_sizes"]))
+        lines.append(
+            f"| {w['label']} | {', '.join(map(str, w['seeds']))} | {sizes} | {w['episodes']} "
+            f"| {held} |"
+        )
+    if result["claims"]:
+        lines += [
+            "",
+            "## The paper's claims",
+            "",
+            "Paired differences a − b (the same seeds, episodes and held-out demonstrations "
+            "in both rows) in percentage points of the episodes and in MAE; **bold**: "
+            f"significant (the {level} interval excludes 0 and a paired sign-flip test "
+            "agrees). D = all pools each seed's episodes of every D.",
+            "",
+            *_claims_table(result["claims"]),
+        ]
+    rows = result["rows"]
+    for w in result["worlds"]:
+        mine = [r for r in rows if r["world"] == w["name"] and r["group"] != "support_sweep"]
+        if not mine:
+            continue
+        sizes = sorted({r["D"] for r in mine})
+        lines += ["", f"## {w['label']}", "", *_ROW_HEADER]
+        lines += _paper_line(w, sizes)
+        lines += [_row_line(r) for r in sorted(mine, key=lambda r: r["D"])]
+        pairs = [p for p in result["pairs"] if p["world"] == w["name"]]
+        if pairs:
+            lines += [
+                "",
+                f"Differences between its rows (paired; **bold**: the {level} interval "
+                "excludes 0 and a paired sign-flip test agrees; no correction for the number "
+                "of pairs):",
+                "",
+                *_pairs_table(pairs),
+            ]
     sweep = [r for r in rows if r["group"] == "support_sweep"]
     if sweep:
         lines += [
             "",
-            f"## Support-density sweep (`{sweep[0]['predictor']}`)",
+            "## Support-count axis",
             "",
-            "| D | support_scale | supports | W / I / C | MAE | fit [s] | tick [ms] |",
-            "| --- | --- | --- | --- | --- | --- | --- |",
+            "Held-out MAE, complete episodes and tick cost against the support points (all "
+            "nodes) of each point (`compare_supports.png`); `default` is the predictor's own "
+            "choice.",
+            "",
+            *_supports_table(sweep),
         ]
-        for r in sorted(sweep, key=lambda r: (r["D"], r["support_scale"])):
-            supports = "–" if r["supports"] is None else f"{r['supports']:.0f}"
-            lines.append(
-                f"| {r['D']} | {r['support_scale']:g} | {supports} | {_wic(r)} | "
-                f"{_fmt(r['mae'], 3)} | {_fmt(r['fit_s'])} | {_fmt(r['tick_ms'], 2)} |"
-            )
     errors = [(r, e) for r in rows for e in r["errors"]]
     if errors:
         lines += ["", "## Refused fits", ""]
         lines += [
-            f"- `{r['predictor']}` + `{r['sequencer']}`, D = {r['D']}, {e}" for r, e in errors
+            f"- {r['world']}: `{r['name']}` + `{r['sequencer']}`, D = {r['D']}, {e}"
+            for r, e in errors
         ]
-    lines += ["", "## Files", ""]
     lines += [
-        "- `compare.json`: every row (means, stds, per-seed values, refused fits)",
-        "- `compare_c_vs_d.png`: complete episodes against D per predictor",
-        "- `compare_supports.png`: complete episodes and MAE against the support-point count",
-        "- `episodes.json`: every reproduction episode: row, seed, D, box, outcome, reason",
-        "- `timings.json`: wall and CPU seconds of every job",
-        "- `seed_<s>/demos.h5`: the demonstrations of each seed (mask/train, mask/test)",
+        "",
+        "## Files",
+        "",
+        "- `compare.json`: every row, pair and claim with its intervals (rates as fractions)",
+        "- `compare_c_vs_d.png`: complete episodes against D per row, one panel per world",
+        "- `compare_claims.png`: the claims' paired differences with their intervals",
+        "- `compare_supports.png`: MAE, complete episodes and tick cost against support points",
+        "- `episodes.json`: every closed-loop episode: world, row, seed, D, outcome",
+        "- `timings.json`: wall and CPU seconds of every collection and job",
+        "- `<world>/seed_<s>/demos.h5`: a simulated world's demonstrations (mask/train, "
+        "mask/test; worlds sharing a collection: the first)",
     ]
     return "\n".join(lines) + "\n"
-
-
-def _figure(width: float, height: float, ncols: int = 1) -> tuple[Any, Any]:
-    """A new figure of ``width`` x ``height`` inches and its row of ``ncols`` axes."""
-    figure = new_figure(width, height)
-    return figure, figure.subplots(1, ncols, squeeze=False)[0]
-
-
-_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "<", ">", "*")
-
-
-def _colours(n: int) -> list[Any]:
-    """``n`` distinguishable colours (tab10, then tab20)."""
-    cmap = colormaps["tab10" if n <= 10 else "tab20"]
-    return [cmap(i % cmap.N) for i in range(n)]
-
-
-def _percent(value: float | None, n: int) -> float:
-    """``value`` as a percentage of ``n`` (nan for ``None``)."""
-    return math.nan if value is None else 100.0 * value / n
-
-
-def plot_c_vs_d(
-    rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
-) -> Path:
-    """Complete episodes [% of boxes] against D, one line per predictor/sequencer.
-
-    Error bars are the std over seeds; the paper's Table I is dashed.
-    """
-    figure, (ax,) = _figure(8.5, 4.5)
-    table = [r for r in rows if r["group"] != "support_sweep"]
-    keys = list(dict.fromkeys((r["predictor"], r["sequencer"]) for r in table))
-    colours = _colours(len(keys))
-    for i, (predictor, sequencer) in enumerate(keys):
-        mine = sorted(
-            (r for r in table if (r["predictor"], r["sequencer"]) == (predictor, sequencer)),
-            key=lambda r: r["D"],
-        )
-        label = predictor if mine[0]["group"] == "predictors" else f"{sequencer} (no predictor)"
-        shift = 0.06 * (i - (len(keys) - 1) / 2)  # side by side: equal counts stay visible
-        ax.errorbar(
-            [r["D"] + shift for r in mine],
-            [_percent(r["C"], r["n_boxes"]) for r in mine],
-            yerr=[_percent(r["C_std"], r["n_boxes"]) for r in mine],
-            marker=_MARKERS[i % len(_MARKERS)],
-            color=colours[i],
-            capsize=3,
-            label=label,
-        )
-    paper = [
-        (d, PAPER_TABLE_I[str(d)]["C"]) for d in settings.train_sizes if str(d) in PAPER_TABLE_I
-    ]
-    if paper:
-        ax.plot(
-            [d for d, _ in paper],
-            [100.0 * c / 20 for _, c in paper],
-            "k--",
-            marker="s",
-            label="paper, Table I",
-        )
-    ax.set_xlabel("training demonstrations D")
-    ax.set_ylabel("complete [% of boxes]")
-    ax.set_xticks(list(settings.train_sizes))
-    ax.set_ylim(-5, 105)
-    ax.set_title(f"Closed-loop reproduction, seeds {settings.seeds}, {settings.n_boxes} boxes")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    return save_figure(figure, path)
-
-
-def plot_supports(
-    rows: Sequence[Mapping[str, Any]], settings: ExperimentSettings, path: Path
-) -> Path:
-    """The support sweep: complete episodes and progress MAE against the support points.
-
-    Complete episodes are in % of boxes, the support points on a log scale; one line per D.
-    """
-    figure, (left, right) = _figure(9.0, 3.8, ncols=2)
-    sweep = [r for r in rows if r["group"] == "support_sweep" and r["supports"] is not None]
-    for d in sorted({r["D"] for r in sweep}):
-        mine = sorted((r for r in sweep if r["D"] == d), key=lambda r: r["supports"])
-        x = [r["supports"] for r in mine]
-        left.errorbar(
-            x,
-            [_percent(r["C"], r["n_boxes"]) for r in mine],
-            yerr=[_percent(r["C_std"], r["n_boxes"]) for r in mine],
-            marker="o",
-            capsize=3,
-            label=f"D = {d}",
-        )
-        right.errorbar(
-            x, [r["mae"] for r in mine], yerr=[r["mae_std"] for r in mine], marker="o", capsize=3
-        )
-        for r in mine:
-            right.annotate(
-                f"{r['support_scale']:g}",
-                (r["supports"], r["mae"]),
-                fontsize=7,
-                xytext=(3, 3),
-                textcoords="offset points",
-            )
-    name = sweep[0]["predictor"] if sweep else "–"
-    for ax in (left, right):
-        ax.set_xscale("log")
-        ax.xaxis.set_major_formatter(ScalarFormatter())
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlabel("support points (all nodes)")
-    left.set_ylabel("complete [% of boxes]")
-    left.set_ylim(-5, 105)
-    right.set_ylabel("progress MAE (held-out)")
-    left.set_title(f"{name}: reproduction")
-    right.set_title(f"{name}: progress error (labels: support_scale)")
-    if sweep:
-        left.legend(fontsize=8)
-    return save_figure(figure, path)

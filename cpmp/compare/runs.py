@@ -1,21 +1,27 @@
 """The jobs of the comparison (``cpmp-compare``) and their scheduler.
 
-Per seed the demonstrations and the demonstrator's runs on the reproduction boxes are collected
-once (:func:`cpmp.experiment.collection.collect_seed`); each (seed, row, D) is then one job
-(:func:`run_row`): fit on the balanced subset of D training demos, progress MAE on the
-held-out demos, mean ``step()`` time over one held-out demonstration replayed open loop, and
-the closed-loop reproduction of every box. :func:`run_jobs` runs them serially or on spawned
-worker processes; every job seeds itself and depends only on its own inputs, so the numbers do
-not depend on the worker count or the order.
+A simulated world's seeds are collected once each (:func:`cpmp.experiment.collection.
+collect_seed`: the demonstrations and the demonstrator's runs on the reproduction boxes; worlds
+whose task and sizes agree share one collection, each adding its own feature noise); a
+synthetic world's data is made inside each job (it takes milliseconds). Each (world, seed, row,
+D) is then one job: fit on D training demos, progress MAE on the held-out demos (per
+demonstration, for the intervals), mean ``step()`` time over one held-out demonstration
+replayed open loop, and the closed loop (:func:`run_sim_row`: every reproduction box;
+:func:`run_synthetic_row`: the world's seeded episodes). :func:`run_jobs` runs them serially
+or on spawned worker processes; every job seeds itself and depends only on its own inputs, so
+the numbers do not depend on the worker count or the order.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -24,69 +30,126 @@ import torch
 from omegaconf import OmegaConf
 
 from cpmp.compare.rows import FitJob, RowSpec
+from cpmp.compare.worlds import EPISODE_SEED_OFFSET, TEST_SEED_OFFSET, World, synthetic_run
 from cpmp.config import TaskConfig
+from cpmp.data import Demonstration
+from cpmp.data.augment import add_feature_noise
 from cpmp.errors import CpmpError
-from cpmp.evaluation.offline import activation_progress, progress_errors
+from cpmp.evaluation.offline import activation_progress
 from cpmp.experiment.collection import SeedData, collect_seed
 from cpmp.experiment.fitting import fit_sequencer
-from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
+from cpmp.experiment.reproduction import reproduce_seed
 from cpmp.experiment.settings import ExperimentSettings, to_dict
 from cpmp.experiment.strategies import balanced_subset
 from cpmp.experiment.workers import spawned_pool
 
 log = logging.getLogger(__name__)
 
-_BY_TABLE_NAME = {"W": "wrong_start", "I": "incomplete", "C": "complete"}
-"""The attributes of :class:`RowResult` that ``compare.json`` names as in Table I."""
+
+@dataclass(frozen=True)
+class DemoError:
+    """The progress error on one held-out demonstration.
+
+    Attributes:
+        demo: its name.
+        mae: mean ``|φ - eq. 1|`` over its samples of known nodes.
+        samples: how many samples that mean is over (its weight in the pooled MAE).
+    """
+
+    demo: str
+    mae: float
+    samples: int
 
 
 @dataclass
 class RowResult:
-    """The numbers of one (seed, row, D) job (:func:`run_row`).
+    """The numbers of one (world, seed, row, D) job.
 
-    A refused fit leaves every number ``None`` but ``fit_s`` (also ``None``) and says why in
-    ``error``.
+    A refused fit leaves every number ``None`` and says why in ``error``.
 
     Attributes:
-        wrong_start: boxes whose episode started with the wrong strategy (W).
-        incomplete: boxes not completed (I; diverged physics included).
-        complete: boxes completed (C).
-        diverged: of the incomplete, those whose physics diverged.
-        mae: progress MAE on the held-out demonstrations, in [0, 1].
+        outcomes: each closed-loop episode's outcome (``complete``, ``wrong_start``,
+            ``incomplete``, and the simulator's ``diverged``), in episode order: episode ``i``
+            is the same box or episode in every row of the world.
+        demo_errors: the progress error of each held-out demonstration, in their order.
+        mae: progress MAE over every held-out sample, in [0, 1].
         fit_s: wall time of the fit [s].
         tick_ms: mean wall time of one ``step()`` [ms] (:func:`tick_ms`).
         supports: support points of all nodes (``None`` for a sequencer without them).
         error: the refused fit's error (``"ConfigError: ..."``), else ``None``.
-        episodes: one summary dict per box (outcome, reason, chosen strategy, ...).
+        sparsity: what a learned-sparsity fit chose (:data:`SPARSITY_KEYS` of its fit
+            summary: the level, the fixed rule's count, the path), else empty.
+        episodes: one summary dict per episode (outcome, reason or strategy, ...).
         seconds: wall time [s] per stage (``fit``, ``evaluate``, ``reproduce``).
         cpu_seconds: process time [s] per stage.
     """
 
-    wrong_start: int | None = None
-    incomplete: int | None = None
-    complete: int | None = None
-    diverged: int | None = None
+    outcomes: list[str] = field(default_factory=list)
+    demo_errors: list[DemoError] = field(default_factory=list)
     mae: float | None = None
     fit_s: float | None = None
     tick_ms: float | None = None
     supports: int | None = None
     error: str | None = None
+    sparsity: dict[str, Any] = field(default_factory=dict)
     episodes: list[dict[str, Any]] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     cpu_seconds: dict[str, float] = field(default_factory=dict)
 
-    def number(self, key: str) -> float | None:
-        """The number ``compare.json`` calls ``key`` (``W``, ``I``, ``C``, ``mae``, ...)."""
-        return getattr(self, _BY_TABLE_NAME.get(key, key))
+    def count(self, outcome: str) -> int:
+        """Episodes of ``W`` (wrong start), ``C`` (complete) or ``I`` (any other outcome)."""
+        return sum(table_outcome(o) == outcome for o in self.outcomes)
+
+
+SPARSITY_KEYS = (
+    "sparsity_level",
+    "sparsity_gamma_scale",
+    "sparsity_validation",
+    "n_support_rule",
+    "sparsity_path",
+)
+"""The fit-summary entries of ``klr_sparse`` a comparison keeps (its chosen level and path)."""
+
+
+def table_outcome(outcome: str) -> str:
+    """An episode's outcome as Table I counts it: ``W``, ``C`` or ``I`` (diverged is ``I``)."""
+    return {"wrong_start": "W", "complete": "C"}.get(outcome, "I")
 
 
 class CompareRuns(NamedTuple):
     """What :func:`run_jobs` returns."""
 
-    collected: dict[int, SeedData]
-    """The collected data by seed."""
+    collected: dict[str, SeedData]
+    """The collected data of the simulated worlds, by collection key."""
     results: dict[str, RowResult]
     """Each job's result by fit key."""
+
+
+# ------------------------------------------------------------------------ simulated worlds
+def world_config(plain: Mapping[str, Any], world: World) -> dict[str, Any]:
+    """The job's config (plain containers) as a simulated ``world`` runs it.
+
+    Its ``task`` options over the job's, its seeds, sizes and boxes in the ``experiment`` group;
+    feature noise 0 (the world adds its own after the shared collection).
+    """
+    experiment = {
+        **plain["experiment"],
+        "seeds": list(world.seeds),
+        "train_sizes": list(world.train_sizes),
+        "n_boxes": world.episodes,
+        "feature_noise": 0.0,
+    }
+    return {**plain, "experiment": experiment, "task": {**plain["task"], **world.options}}
+
+
+def collection_key(plain: Mapping[str, Any], world: World, seed: int) -> str:
+    """What a simulated world's seed collects: equal keys, one collection."""
+    cfg = world_config(plain, world)
+    sizes = {k: cfg["experiment"][k] for k in ("demos_per_strategy", "train_per_strategy")}
+    more = {k: cfg["experiment"][k] for k in ("n_boxes", "box_seed_offset", "max_time")}
+    return json.dumps(
+        {"task": cfg["task"], **sizes, **more, "seed": seed}, sort_keys=True, default=str
+    )
 
 
 def _collect(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
@@ -94,7 +157,19 @@ def _collect(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
     return collect_seed(OmegaConf.create(cfg), run_dir, seed)
 
 
-def tick_ms(seq: Any, demo: Any) -> float:
+def world_data(data: SeedData, world: World) -> SeedData:
+    """A shared collection as ``world`` uses it: its feature noise on the training demos.
+
+    The noise is drawn as :func:`~cpmp.experiment.collection.collect_seed` draws it (the
+    seed's generator), so a world with noise equals the main job run with that noise.
+    """
+    if not world.feature_noise:
+        return data
+    train = add_feature_noise(data.train, world.feature_noise, seed=data.seed)
+    return dataclasses.replace(data, train=train)
+
+
+def tick_ms(seq: Any, demo: Demonstration) -> float:
     """Mean wall time [ms] of one ``step()`` over ``demo``'s feature stream replayed open loop.
 
     The sequencer is ``reset`` on the demonstration's first sample first.
@@ -108,59 +183,137 @@ def tick_ms(seq: Any, demo: Any) -> float:
     return 1e3 * elapsed / max(len(demo.time) - 1, 1)
 
 
-def run_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -> RowResult:
-    """One (seed, row, D) job: fit, progress MAE, tick time and closed-loop reproduction.
+def demo_errors(seq: Any, demos: Sequence[Demonstration]) -> list[DemoError]:
+    """The progress error of each of ``demos``, in their order.
+
+    From :func:`~cpmp.evaluation.offline.activation_progress`; their sample-weighted mean is
+    the MAE over every held-out sample.
+    """
+    sums: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    for record in activation_progress(seq, demos):
+        sums[record.demo] = sums.get(record.demo, 0.0) + float(
+            abs(record.predicted - record.expected).sum()
+        )
+        counts[record.demo] = counts.get(record.demo, 0) + len(record.expected)
+    return [DemoError(name, sums[name] / counts[name], counts[name]) for name in sums]
+
+
+class _Stages:
+    """Wall and process time of a job's stages, into a :class:`RowResult`."""
+
+    def __init__(self, out: RowResult) -> None:
+        self.out = out
+
+    @contextmanager
+    def __call__(self, key: str) -> Iterator[None]:
+        """Time the ``with`` block as stage ``key``."""
+        start, start_cpu = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.out.seconds[key] = time.perf_counter() - start
+            self.out.cpu_seconds[key] = time.process_time() - start_cpu
+
+
+def _fit_and_score(
+    cfg: Mapping[str, Any],
+    spec: RowSpec,
+    train: Sequence[Demonstration],
+    test: Sequence[Demonstration],
+    seed: int,
+    out: RowResult,
+) -> Any:
+    """Fit ``spec`` on ``train``, score it on ``test`` into ``out``; the sequencer or ``None``.
+
+    A refused fit (:class:`~cpmp.errors.CpmpError`) is ``out.error`` and returns ``None``.
+    """
+    torch.manual_seed(seed)  # fits draw from their own generators; this is a safety net
+    trainer = {**to_dict(cfg.get("trainer")), "progress_bar": False}  # no log_dir: no logger
+    stage = _Stages(out)
+    try:
+        with stage("fit"):
+            seq = fit_sequencer(train, spec.predictor_cfg, spec.sequencer_cfg, trainer, seed)
+    except CpmpError as err:
+        out.error = f"{type(err).__name__}: {err}"
+        return None
+    out.fit_s = out.seconds["fit"]
+    out.supports = seq.fit_summary.get("n_support_total")
+    out.sparsity = {k: seq.fit_summary[k] for k in SPARSITY_KEYS if k in seq.fit_summary}
+    with stage("evaluate"):
+        out.demo_errors = demo_errors(seq, test)
+        total = sum(e.samples for e in out.demo_errors)
+        out.mae = sum(e.mae * e.samples for e in out.demo_errors) / total
+        out.tick_ms = tick_ms(seq, test[0])
+    return seq
+
+
+def run_sim_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -> RowResult:
+    """One (simulated world, seed, row, D) job: fit, MAE, tick time, every reproduction box.
 
     Args:
-        cfg: the job's composed config as plain containers.
+        cfg: the world's config as plain containers (:func:`world_config`).
         spec: the row.
-        data: the seed's collected data.
+        data: the seed's collected data with the world's noise (:func:`world_data`).
         d: the training size.
 
     Returns:
-        The row's numbers for this seed; a refused fit (a :class:`~cpmp.errors.CpmpError`)
-        is a result with its ``error``.
+        The row's numbers for this seed (a refused fit: its ``error``).
     """
-    torch.manual_seed(data.seed)  # fits draw from their own generators; this is a safety net
     settings = ExperimentSettings.from_cfg(cfg["experiment"])
     task = TaskConfig.from_dict(cfg["task"])
-    trainer = {**to_dict(cfg.get("trainer")), "progress_bar": False}  # no log_dir: no logger
     out = RowResult()
-    seconds, cpu = out.seconds, out.cpu_seconds
-
-    def timed(key: str, start: float, start_cpu: float) -> None:
-        seconds[key] = time.perf_counter() - start
-        cpu[key] = time.process_time() - start_cpu
-
-    subset = balanced_subset(data.train, d)
-    start, start_cpu = time.perf_counter(), time.process_time()
-    try:
-        seq = fit_sequencer(subset, spec.predictor_cfg, spec.sequencer_cfg, trainer, data.seed)
-    except CpmpError as err:
-        timed("fit", start, start_cpu)
-        out.error = f"{type(err).__name__}: {err}"
+    seq = _fit_and_score(cfg, spec, balanced_subset(data.train, d), data.test, data.seed, out)
+    if seq is None:
         return out
-    timed("fit", start, start_cpu)
-    out.fit_s = seconds["fit"]
-    out.supports = seq.fit_summary.get("n_support_total")
-    start, start_cpu = time.perf_counter(), time.process_time()
-    out.mae = progress_errors(activation_progress(seq, data.test))["mae"]
-    out.tick_ms = tick_ms(seq, data.test[0])
-    timed("evaluate", start, start_cpu)
-    start, start_cpu = time.perf_counter(), time.process_time()
-    episodes = reproduce_seed(
-        seq,
-        data,
-        task,
-        record="none",
-        max_time=settings.max_time,
-        label=f"seed {data.seed} D{d} {spec.label()}: ",
-    )
-    timed("reproduce", start, start_cpu)
-    summary = summarize_episodes(episodes)
-    out.wrong_start, out.incomplete, out.complete = summary["W"], summary["I"], summary["C"]
-    out.diverged = summary["diverged"]
+    with _Stages(out)("reproduce"):
+        episodes = reproduce_seed(
+            seq,
+            data,
+            task,
+            record="none",
+            max_time=settings.max_time,
+            label=f"seed {data.seed} D{d} {spec.label()}: ",
+        )
+    out.outcomes = [e.outcome for e in episodes]
     out.episodes = [e.to_dict() for e in episodes]
+    return out
+
+
+def run_synthetic_row(
+    cfg: Mapping[str, Any], spec: RowSpec, world: World, seed: int, d: int
+) -> RowResult:
+    """One (synthetic world, seed, row, D) job: fit, MAE, tick time, the world's episodes.
+
+    The training demonstrations are the first ``d`` of the world's seed ``seed``, the held-out
+    ones ``world.test_demos`` of seed ``seed + TEST_SEED_OFFSET``, the episodes
+    ``world.episodes`` drawn from ``seed + EPISODE_SEED_OFFSET`` (the same in every row).
+
+    Args:
+        cfg: the job's config as plain containers (its ``trainer`` group).
+        spec: the row.
+        world: the synthetic world.
+        seed: the seed.
+        d: the training size.
+
+    Returns:
+        The row's numbers for this seed (a refused fit: its ``error``).
+    """
+    out = RowResult()
+    run = synthetic_run(str(world.world), world.options, seed, max(world.train_sizes))
+    test = synthetic_run(
+        str(world.world), world.options, seed + TEST_SEED_OFFSET, world.test_demos
+    ).demonstrations
+    train = run.demonstrations[:d]
+    if world.feature_noise:
+        train = add_feature_noise(train, world.feature_noise, seed=seed)
+    seq = _fit_and_score(cfg, spec, train, test, seed, out)
+    if seq is None:
+        return out
+    with _Stages(out)("reproduce"):
+        episodes = run.evaluate(seq, world.episodes, seed + EPISODE_SEED_OFFSET)
+    out.outcomes = [e.outcome for e in episodes]
+    out.episodes = [{"outcome": e.outcome, "strategy": e.strategy} for e in episodes]
     return out
 
 
@@ -170,36 +323,65 @@ def _say(text: str) -> None:
     log.info("%s", text)
 
 
+class _Task(NamedTuple):
+    """One unit of work of the scheduler: a collection or a job."""
+
+    kind: str
+    """``collect`` or ``row``."""
+    key: str
+    """The collection key or the fit key."""
+
+
 def run_jobs(
     plain: dict[str, Any],
     run_dir: Path,
-    settings: ExperimentSettings,
+    worlds: Mapping[str, World],
     jobs: Mapping[str, FitJob],
     workers: int,
     started: float,
 ) -> CompareRuns:
-    """Collect every seed, then run its jobs, in this process or on spawned workers.
+    """Collect every simulated seed, run every job, in this process or on spawned workers.
 
     With one worker everything runs serially in this process; else on ``workers`` spawned
-    processes, each given the next job as it frees up: collections first, then the job
-    expected to take longest (the same row and D of an earlier seed tells; rows not yet
-    measured go first, largest D first). The order changes no number.
+    processes, each given the next task as it frees up: collections first, then the job
+    expected to take longest (the same world, row and D of an earlier seed tells; rows not
+    yet measured go first, largest D first). The order changes no number.
 
     Args:
         plain: the job's composed config as plain containers (what the workers get).
-        run_dir: where each seed's ``seed_<s>/demos.h5`` goes.
-        settings: the ``experiment`` group.
+        run_dir: where each simulated seed's ``<world>/seed_<s>/demos.h5`` goes.
+        worlds: the worlds by name.
         jobs: fit key -> its job, one entry per fit (:func:`~cpmp.compare.rows.fit_jobs`).
         workers: worker processes (1: everything in this process).
         started: ``time.perf_counter()`` at the run's start (for the progress lines).
 
     Returns:
-        The collected data by seed, and each job's :func:`run_row` result by fit key.
+        The collected data by collection key, and each job's result by fit key.
     """
-    collected: dict[int, SeedData] = {}
+    configs = {name: world_config(plain, w) for name, w in worlds.items() if w.kind == "sim"}
+    needs: dict[str, str] = {}  # fit key -> collection key (simulated worlds)
+    first: dict[str, tuple[str, int]] = {}  # collection key -> (world, seed) collecting it
+    for key, job in jobs.items():
+        world = worlds[job.spec.world]
+        if world.kind == "sim":
+            needs[key] = collection_key(plain, world, job.seed)
+            first.setdefault(needs[key], (world.name, job.seed))
+    collected: dict[str, SeedData] = {}
     results: dict[str, RowResult] = {}
     order = {key: i for i, key in enumerate(sorted(jobs, key=lambda k: -jobs[k].d))}
     done = 0
+
+    def collect_args(ckey: str) -> tuple[Any, ...]:
+        name, seed = first[ckey]
+        return configs[name], run_dir / name, seed
+
+    def row_call(key: str) -> tuple[Callable[..., RowResult], tuple[Any, ...]]:
+        spec, seed, d = jobs[key]
+        world = worlds[spec.world]
+        if world.kind == "sim":
+            data = world_data(collected[needs[key]], world)
+            return run_sim_row, (configs[world.name], spec, data, d)
+        return run_synthetic_row, (plain, spec, world, seed, d)
 
     def report(key: str, result: RowResult) -> None:
         nonlocal done
@@ -208,70 +390,72 @@ def run_jobs(
         if result.error:
             what = f"refused: {result.error}"
         else:
-            counts = f"{result.wrong_start}/{result.incomplete}/{result.complete}"
+            counts = "/".join(str(result.count(k)) for k in ("W", "I", "C"))
             what = (
-                f"W/I/C {counts} of {settings.n_boxes}, "
-                f"MAE {result.mae:.3f}, fit {result.fit_s:.1f} s, "
-                f"tick {result.tick_ms:.2f} ms"
+                f"W/I/C {counts} of {len(result.outcomes)}, MAE {result.mae:.3f}, "
+                f"fit {result.fit_s:.1f} s, tick {result.tick_ms:.2f} ms"
             )
         elapsed = time.perf_counter() - started
         _say(f"[{done}/{len(jobs)}] seed {seed} D={d} {spec.label()}: {what} ({elapsed:.0f} s)")
 
-    def collected_now(seed: int) -> None:
-        _say(f"seed {seed}: demonstrations collected ({time.perf_counter() - started:.0f} s)")
+    def collected_now(ckey: str) -> None:
+        name, seed = first[ckey]
+        elapsed = time.perf_counter() - started
+        _say(f"{name} seed {seed}: demonstrations collected ({elapsed:.0f} s)")
 
     if workers <= 1:
-        for seed in settings.seeds:
-            collected[seed] = _collect(plain, run_dir, seed)
-            collected_now(seed)
-            for key in sorted((k for k in jobs if jobs[k].seed == seed), key=order.__getitem__):
-                spec, _, d = jobs[key]
-                results[key] = run_row(plain, spec, collected[seed], d)
-                report(key, results[key])
+        for key in sorted(jobs, key=lambda k: (list(worlds).index(jobs[k].spec.world), order[k])):
+            ckey = needs.get(key)
+            if ckey is not None and ckey not in collected:
+                collected[ckey] = _collect(*collect_args(ckey))
+                collected_now(ckey)
+            function, args = row_call(key)
+            results[key] = function(*args)
+            report(key, results[key])
         return CompareRuns(collected, results)
 
     def identity(key: str) -> tuple[Any, ...]:
         spec, _, d = jobs[key]
-        return (spec.group, spec.predictor, spec.sequencer, spec.support_scale, d)
+        return (spec.world, spec.group, spec.predictor, spec.sequencer, spec.point(), d)
 
     measured: dict[tuple[Any, ...], float] = {}
-    seeds = list(settings.seeds)
-    ready: list[str] = []
+    to_collect = list(first)
+    ready = [k for k in jobs if k not in needs]
 
-    def next_job() -> tuple[str, Any] | None:
-        if seeds:
-            return "collect", seeds.pop(0)
+    def next_task() -> _Task | None:
+        if to_collect:
+            return _Task("collect", to_collect.pop(0))
         if not ready:
             return None
         key = min(ready, key=lambda k: (-measured.get(identity(k), math.inf), order[k]))
         ready.remove(key)
-        return "row", key
+        return _Task("row", key)
 
-    pending: dict[Future, tuple[str, Any]] = {}
+    pending: dict[Future, _Task] = {}
     with spawned_pool(workers) as pool:
 
         def fill() -> None:
-            while len(pending) < workers and (job := next_job()) is not None:
-                what, key = job
-                if what == "collect":
-                    future = pool.submit(_collect, plain, run_dir, key)
+            while len(pending) < workers and (task := next_task()) is not None:
+                if task.kind == "collect":
+                    future = pool.submit(_collect, *collect_args(task.key))
                 else:
-                    spec, seed, d = jobs[key]
-                    future = pool.submit(run_row, plain, spec, collected[seed], d)
-                pending[future] = job
+                    function, args = row_call(task.key)
+                    future = pool.submit(function, *args)
+                pending[future] = task
 
         fill()
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in sorted(finished, key=lambda f: str(pending[f])):
-                what, key = pending.pop(future)
-                if what == "row":
-                    results[key] = future.result()
-                    measured.setdefault(identity(key), sum(results[key].seconds.values()))
-                    report(key, results[key])
+            for future in sorted(finished, key=lambda f: pending[f]):
+                task = pending.pop(future)
+                if task.kind == "row":
+                    results[task.key] = future.result()
+                    seconds = sum(results[task.key].seconds.values())
+                    measured.setdefault(identity(task.key), seconds)
+                    report(task.key, results[task.key])
                     continue
-                collected[key] = future.result()
-                collected_now(key)
-                ready.extend(k for k in jobs if jobs[k].seed == key)
+                collected[task.key] = future.result()
+                collected_now(task.key)
+                ready.extend(k for k in jobs if needs.get(k) == task.key)
             fill()
     return CompareRuns(collected, results)
