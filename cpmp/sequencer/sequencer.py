@@ -272,9 +272,12 @@ class ConcurrentSequencer:
         """The nodes among ``stays`` at one of whose stay states a transition's ``p`` is high.
 
         There the progress predictor alone would have switched where the demonstrator stayed
-        (:func:`~cpmp.sequencer.branches.stay_examples`); the others need no stay choice.
+        (:func:`~cpmp.sequencer.branches.stay_examples`); the others need no stay choice. A
+        stateful predictor (``dtw``) has no φ of a state on its own: none then.
         """
-        out = {}
+        out: dict[tuple[str, str], list[np.ndarray]] = {}
+        if self.predictor.stateful:
+            return out
         for (v, mp), states in sorted(stays.items()):
             _, columns = self.nodes.successors[(v, mp)]
             if not columns:
