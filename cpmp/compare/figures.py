@@ -95,8 +95,8 @@ def plot_c_vs_d(result: Mapping[str, Any], path: Path) -> Path:
 def plot_claims(result: Mapping[str, Any], path: Path) -> Path:
     """Each claim's paired difference a − b in C [pp] and in MAE, per world and D.
 
-    One row of points per (claim, world, D), its 95 % interval as a bar; a bar that does not
-    cross the dashed zero line is a significant difference.
+    One row of points per (claim, world, D), its 95 % interval as a bar; a filled point is a
+    significant difference (the interval excludes 0 and the sign-flip test agrees).
     """
     claims = result["claims"]
     figure = new_figure(10.0, 1.2 + 0.28 * max(len(claims), 1))
@@ -109,10 +109,20 @@ def plot_claims(result: Mapping[str, Any], path: Path) -> Path:
         labels.append(f"{c['world']}, D = {c['D']}")
         for ax, key, scale in ((left, "C", 100.0), (right, "mae", 1.0)):
             est, below, above = _bars(c[key], scale)
-            ax.errorbar([est], [y], xerr=[[below], [above]], fmt="o", color=colour, capsize=3, ms=4)
+            significant = bool(c[key] and c[key]["significant"])
+            ax.errorbar(
+                [est],
+                [y],
+                xerr=[[below], [above]],
+                fmt="o",
+                color=colour,
+                mfc=colour if significant else "white",
+                capsize=3,
+                ms=5,
+            )
     for ax in (left, right):
         ax.axvline(0.0, color="k", ls="--", lw=0.8)
-        ax.invert_yaxis()
+    left.invert_yaxis()  # the axes share y: once inverts both
     left.set_yticks(range(len(labels)), labels, fontsize=7)
     left.set_xlabel("ΔC = C(a) − C(b) [percentage points]")
     right.set_xlabel("ΔMAE = MAE(a) − MAE(b)")

@@ -92,9 +92,15 @@ def difference_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits:
     """A signed difference ``+a [lo, hi]``, bold when significant (``–`` for none)."""
     if value is None:
         return "–"
-    est, low, high = (scale * value[k] for k in ("estimate", "low", "high"))
-    text = f"{est:+.{digits}f} [{low:+.{digits}f}, {high:+.{digits}f}]"
+    est, low, high = (_signed(scale * value[k], digits) for k in ("estimate", "low", "high"))
+    text = f"{est} [{low}, {high}]"
     return f"**{text}**" if value["significant"] else text
+
+
+def _signed(value: float, digits: int) -> str:
+    """``value`` with its sign and ``digits`` decimals; one that rounds to 0 is ``+0``."""
+    text = f"{value:+.{digits}f}"
+    return text.replace("-", "+") if float(text) == 0.0 else text
 
 
 _ROW_HEADER = (

@@ -19,6 +19,8 @@ def test_interval_and_difference_text():
     assert difference_text({**value, "significant": True}, 100.0, 0) == "**+75 [+60, +88]**"
     low = {"estimate": -0.01, "low": -0.03, "high": 0.01, "significant": False}
     assert difference_text(low, 1.0, 3) == "-0.010 [-0.030, +0.010]"
+    tiny = {"estimate": -0.004, "low": -0.02, "high": 0.0, "significant": False}
+    assert difference_text(tiny, 100.0, 0) == "+0 [-2, +0]"  # no "-0"
 
 
 def test_every_row_number_has_an_interval_and_significance_is_bold():
