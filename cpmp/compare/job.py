@@ -86,6 +86,7 @@ def run_compare(cfg: Any, run_dir: str | Path) -> Path:
         results,
         job.compare.claims,
         BootstrapOptions(stats.samples, stats.level, stats.seed),
+        reference=job.compare.sweep.predictor,
     )
     seconds = time.perf_counter() - started
     write_json(run_dir / "timings.json", job_timings(collected, results, jobs, seconds, workers))

@@ -256,13 +256,28 @@ def pool(
     results: Mapping[str, RowResult],
     claims: Sequence[ClaimSettings],
     options: BootstrapOptions,
+    reference: str | None = None,
 ) -> dict[str, Any]:
     """``compare.json``: the worlds, every row, every pair's and every claim's differences.
 
     Rates are fractions of the episodes (``W``, ``I``, ``C``), the MAE in [0, 1]; every
-    number is ``{"estimate", "low", "high", "level", "seeds", "units"}``.
+    number is ``{"estimate", "low", "high", "level", "seeds", "units"}``. Each point of the
+    support axis also gets its paired difference to ``reference``'s row of the same world and
+    D (``vs_reference``; the swept predictor at its own options), where that row exists.
     """
     rows = pooled_rows(specs, worlds, results)
+    records = [row_record(r, options) for r in rows]
+    compared = {
+        (r.world.name, r.d): r
+        for r in rows
+        if r.spec.group == "predictors" and r.spec.predictor == reference
+    }
+    for row, record in zip(rows, records, strict=True):
+        base = compared.get((row.world.name, row.d))
+        if row.spec.group == "support_sweep" and base is not None:
+            record["vs_reference"] = jsonable(
+                {"reference": base.name(), **difference_record(row, base, options)}
+            )
     return {
         "worlds": [
             jsonable(
@@ -282,7 +297,7 @@ def pool(
             for w in worlds.values()
         ],
         "bootstrap": {"samples": options.samples, "level": options.level, "seed": options.seed},
-        "rows": [row_record(r, options) for r in rows],
+        "rows": records,
         "pairs": pair_rows(rows, options),
         "claims": claim_rows(rows, claims, options),
     }

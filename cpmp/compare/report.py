@@ -167,8 +167,9 @@ def _claims_table(claims: Sequence[Mapping[str, Any]]) -> list[str]:
 def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     """The support-count axis: every point's supports, MAE, C, tick and fit time."""
     lines = [
-        "| world | D | predictor | point | supports | MAE | C [%] | tick [ms] | fit [s] |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| world | D | predictor | point | supports | MAE | C [%] | tick [ms] | fit [s] "
+        "| ΔC [pp] vs reference | ΔMAE vs reference |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
 
     def order(r: Mapping[str, Any]) -> tuple[Any, ...]:
@@ -176,6 +177,7 @@ def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         return (r["world"], r["D"], r["predictor"], supports)
 
     for r in sorted(rows, key=order):
+        vs = r.get("vs_reference") or {}
         value = "default" if r["value"] is None else f"{r['value']:g}"
         chosen = [x.get("sparsity_level") for x in r["per_seed"].get("sparsity", []) if x]
         if r["value"] is None and chosen:
@@ -184,7 +186,8 @@ def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
             f"| {r['world']} | {r['D']} | `{r['predictor']}` | {r['option']}={value} | "
             f"{interval_text(r['supports'], 1.0, 0)} | {interval_text(r['mae'], 1.0, 3)} | "
             f"{interval_text(r['C'], 100.0, 0)} | {interval_text(r['tick_ms'], 1.0, 2)} | "
-            f"{interval_text(r['fit_s'], 1.0, 1)} |"
+            f"{interval_text(r['fit_s'], 1.0, 1)} | {difference_text(vs.get('C'), 100.0, 0)} | "
+            f"{difference_text(vs.get('mae'), 1.0, 3)} |"
         )
     return lines
 
@@ -259,13 +262,18 @@ def render_compare(result: Mapping[str, Any], name: str, seconds: float, workers
             ]
     sweep = [r for r in rows if r["group"] == "support_sweep"]
     if sweep:
+        reference = next(
+            (r["vs_reference"]["reference"] for r in sweep if "vs_reference" in r), "–"
+        )
         lines += [
             "",
             "## Support-count axis",
             "",
             "Held-out MAE, complete episodes and tick cost against the support points (all "
             "nodes) of each point (`compare_supports.png`); `default` is the predictor's own "
-            "choice.",
+            "choice. Δ: the point minus the swept predictor's own row of the same world and D "
+            f"(`{reference}`), "
+            "paired; **bold**: significant.",
             "",
             *_supports_table(sweep),
         ]

@@ -49,10 +49,12 @@ def test_support_axis_table_lists_each_point():
             for d in s.train_sizes:
                 inputs["results"][s.fit_key(seed, d)] = result(20, supports=supports)
     inputs["specs"] = [*inputs["specs"], point, default]
-    text = render_compare(pool(**inputs), "fake", 60.0, 1)
-    assert "## Support-count axis" in text
+    text = render_compare(pool(**inputs, reference="a"), "fake", 60.0, 1)
+    assert "## Support-count axis" in text and "own row of the same world and D (`a`)" in text
     assert "| w | 3 | `a` | support_scale=0.5 | 40 [40, 40] |" in text
     assert "| w | 3 | `a` | support_scale=default | 100 [100, 100] |" in text
+    point = next(line for line in text.splitlines() if "support_scale=0.5 |" in line)
+    assert point.endswith("| **-25 [-33, -17]** | +0.000 [+0.000, +0.000] |")  # 20 vs 30 of 40
 
 
 def test_episodes_are_labelled_with_world_row_seed_and_d():

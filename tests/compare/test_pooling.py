@@ -86,3 +86,24 @@ def test_units_of_each_number():
     assert tick is not None and list(tick.values) == [0.5]
     assert units(RowResult(error="x"), "C") is None
     assert units(RowResult(outcomes=["diverged"]), "I").values.tolist() == [1.0]  # diverged is I
+
+
+def test_support_points_differ_from_the_reference_row_paired():
+    """A support point of ``a`` that completes 20 of 40 where ``a`` itself completes 30: its
+    ``vs_reference`` is a 25-point drop, significant; a point equal to ``a`` differs by 0."""
+    inputs = fake_inputs()
+    low = spec("a", group="support_sweep", option="support_scale", value=0.5)
+    same = spec("a", group="support_sweep", option="support_scale", value=4.0)
+    for seed in SEEDS:
+        for d in low.train_sizes:
+            inputs["results"][low.fit_key(seed, d)] = result(20, wrong=2)
+            inputs["results"][same.fit_key(seed, d)] = result(30, wrong=2, mae=0.05)
+    inputs["specs"] = [*inputs["specs"], low, same]
+    rows = pool(**inputs, reference="a")["rows"]
+    points = {(r["value"], r["D"]): r for r in rows if r["group"] == "support_sweep"}
+    drop = points[(0.5, 3)]["vs_reference"]
+    assert drop["reference"] == "a"
+    assert drop["C"]["estimate"] == pytest.approx(-0.25, abs=1e-12) and drop["C"]["significant"]
+    assert points[(4.0, 6)]["vs_reference"]["C"]["estimate"] == 0.0
+    assert all("vs_reference" not in r for r in rows if r["group"] != "support_sweep")
+    assert all("vs_reference" not in r for r in pool(**inputs)["rows"])  # no reference named
