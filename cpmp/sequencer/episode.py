@@ -302,7 +302,7 @@ class SequencerEpisode:
                         bad[successor] += 1
             rows.append(TickRow(v, current, names, p, bad))
             chosen_by[v] = self._branch_choice(v, current, names, unseen, state)
-        decided: dict[str, tuple[int, str]] = {}
+        going: dict[str, str] = {}
         for plan_row, row in zip(plan, rows, strict=True):
             if stopped:
                 break
@@ -318,7 +318,7 @@ class SequencerEpisode:
             if armed is not None and (armed not in names or p[names.index(armed)] <= c.threshold):
                 self._armed.pop(v)
             if k is not None:
-                decided[v] = (k, names[k])
+                going[v] = names[k]
             if gate and (coupled or chosen is not None) and not all(allowed):
                 top = 0 if len(p) == 1 else max(range(len(p)), key=p.__getitem__)
                 if chosen in names:
@@ -329,7 +329,6 @@ class SequencerEpisode:
                         stay = chosen == STAY
                         self._note_hold(t, v, current, names[top], p[top], context, phi, stay)
             self._holding[v] = held.get(v)
-        going = {v: target for v, (_, target) in decided.items()}
         ready = {**self._armed, **going}
         for plan_row, row in zip(plan, rows, strict=True):
             v = row.variable
