@@ -16,6 +16,9 @@ ones before it):
 * ``episode``: :class:`SequencerEpisode`, the state machine of one episode;
 * ``batch``: :class:`BatchedSequencer`, N episodes with one predictor call per tick, and
   :class:`EpisodeBatch`, what every batched policy shares;
+* ``fit``: the fit itself (graphs, the predictor bank trained in Lightning, what the fit found);
+  the one module that imports Lightning, not imported by this package: ``ConcurrentSequencer.
+  fit_config`` imports it when it is called, so that loading and stepping never do;
 * ``sequencer``: :class:`ConcurrentSequencer`, on top of all of them.
 """
 

@@ -3,9 +3,9 @@
 Per-node training data, the non-finite and degenerate-node checks, label-glitch and label-typo
 warnings.
 
-:meth:`cpmp.sequencer.ConcurrentSequencer.fit_config` builds one :class:`~cpmp.predictors.NodeData`
-per node (its scaled samples and progress targets, eq. 1) with :func:`node_training_data`,
-fits them with :func:`cpmp.predictors.training.fit_predictor`, then reports what it found with
+:func:`cpmp.sequencer.fit.fit_parts` builds one :class:`~cpmp.predictors.NodeData` per node
+(its scaled samples and progress targets, eq. 1) with :func:`node_training_data`, fits them
+with :func:`cpmp.predictors.training.fit_predictor`, then reports what it found with
 :func:`glitch_warnings` and :func:`fit_warnings`; :func:`initial_combinations` are the
 demonstrated starts of ``start_rule="joint"``.
 """
@@ -13,7 +13,6 @@ demonstrated starts of ``start_rule="joint"``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -22,9 +21,7 @@ from cpmp.data import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
-from cpmp.predictors.datamodule import held_out_split
 from cpmp.progress import expected_progress, path_length, path_trajectory, progress_labels
-from cpmp.sequencer.inputs import checked_demonstrations
 
 
 def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
@@ -96,57 +93,6 @@ def node_training_data(
             )
         )
     return out
-
-
-@dataclass(frozen=True)
-class FitDemos:
-    """The demonstrations a fit trains on and those it validates on.
-
-    Attributes:
-        train: the training demonstrations.
-        validation: the validation demonstrations (``None``: the fit is not validated).
-    """
-
-    train: list[Demonstration]
-    validation: list[Demonstration] | None
-
-
-def fit_demos(
-    demos: Sequence[Demonstration],
-    validation: Sequence[Demonstration] | None,
-    val_fraction: float,
-    seed: int,
-) -> FitDemos:
-    """Split a fit's demonstrations into training and validation ones.
-
-    Args:
-        demos: the (checked) training demonstrations.
-        validation: demonstrations given for validation (checked here: their features must
-            be the training ones), or ``None``.
-        val_fraction: without ``validation``, the share of ``demos`` held out for it
-            (:func:`cpmp.predictors.datamodule.held_out_split`, drawn with ``seed``); ``0``:
-            none.
-        seed: the fit's seed.
-
-    Returns:
-        The training and the validation demonstrations.
-
-    Raises:
-        DataError: validation demonstrations with other features than the training ones.
-    """
-    demos = list(demos)
-    if validation is not None:
-        val, names = checked_demonstrations(validation, "validation of ConcurrentSequencer.fit")
-        if names != list(demos[0].feature_names):
-            raise DataError(
-                f"the validation demonstrations have features {names[:4]}... but the training "
-                f"ones {list(demos[0].feature_names)[:4]}...; they must match"
-            )
-        return FitDemos(demos, val)
-    if val_fraction <= 0.0:
-        return FitDemos(demos, None)
-    split = held_out_split(len(demos), val_fraction, seed)
-    return FitDemos([demos[i] for i in split.train], [demos[i] for i in split.val])
 
 
 def node_validation_data(

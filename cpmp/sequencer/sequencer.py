@@ -12,8 +12,10 @@ demonstrated, and resolve stalls (:mod:`cpmp.sequencer.switching`).
 ``ConcurrentSequencer.fit(demos)`` with no options gives cpmp's recommended configuration;
 ``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` the paper's method.
 ``seq.batched(n)`` (:class:`~cpmp.sequencer.batch.BatchedSequencer`) runs ``n`` episodes with one
-predictor call per tick. What a fit trains on and checks: :mod:`cpmp.sequencer.fit_data`; the state
-machine of one episode: :mod:`cpmp.sequencer.episode`.
+predictor call per tick. The fit itself: :mod:`cpmp.sequencer.fit` (the one module here that imports
+Lightning, imported by :meth:`ConcurrentSequencer.fit_config` when it is called, so that loading and
+stepping a checkpoint never do); what it trains on and checks: :mod:`cpmp.sequencer.fit_data`; the
+state machine of one episode: :mod:`cpmp.sequencer.episode`.
 """
 
 from __future__ import annotations
@@ -22,38 +24,28 @@ import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
-from lightning.pytorch.loggers import Logger
 
 from cpmp.config import FitConfig, SequencerConfig
 from cpmp.data import Demonstration
-from cpmp.errors import ConfigError, DataError
-from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.errors import ConfigError
+from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
-from cpmp.predictors import PREDICTORS, ProgressPredictor, predictor_from_spec
-from cpmp.predictors.training import check_logger, fit_predictor
+from cpmp.predictors import ProgressPredictor, predictor_from_spec
 from cpmp.records import ReplayResult, SequencerNote, StartDecision, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
 from cpmp.sequencer.branches import BranchChoices, stay_examples
 from cpmp.sequencer.episode import SequencerEpisode
-from cpmp.sequencer.fit_data import (
-    demo_progress,
-    fit_demos,
-    fit_warnings,
-    glitch_warnings,
-    initial_combinations,
-    node_training_data,
-    node_validation_data,
-    nonfinite_parameters,
-    start_keys,
-)
-from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
-from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
+from cpmp.sequencer.fit_data import nonfinite_parameters
+from cpmp.sequencer.inputs import checked_features, checked_time
 from cpmp.sequencer.model import NodeIndex, TransitionModel
-from cpmp.sequencer.switching import Coupling, indicator_features
+from cpmp.sequencer.switching import Coupling
+
+if TYPE_CHECKING:
+    from lightning.pytorch.loggers import Logger
 
 log = logging.getLogger(__name__)
 
@@ -221,50 +213,30 @@ class ConcurrentSequencer:
             DataError: bad demonstrations, or a fit with non-finite parameters.
             ConfigError: a bad option or logger.
         """
+        from cpmp.sequencer.fit import fit_parts  # lazy: Lightning, only to fit, not to step
+
         config = config or FitConfig()
-        predictor = config.predictor
-        demos, feature_names = checked_demonstrations(demos, "ConcurrentSequencer.fit")
-        check_logger(logger, config.trainer.log_dir)
-        glitches: list[LabelGlitch] = []
-        if config.repair_glitches:
-            demos, glitches = repair_glitches(demos, config.variables)
-        split = fit_demos(demos, validation, config.trainer.val_fraction, config.seed)
-        demos = split.train
-        graphs = build_graphs(demos, config.variables)
-        node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        if config.sequencer.start_kernel == "isotropic":
-            node_keys += start_keys(graphs)
-        model = PREDICTORS[predictor](node_keys, len(feature_names), config.predictor_config)
-        all_x = np.concatenate([d.features for d in demos], axis=0)
-        model.scaler.fit(all_x, model.config.feature_scaling)
-        data = node_training_data(graphs, model, config.subsample)
-        val = None
-        if split.validation is not None:
-            val = node_validation_data(graphs, model, split.validation)
-        summary = fit_predictor(model, data, config.trainer, config.seed, val, logger)
-        bad = nonfinite_parameters(model)
-        if bad:
-            raise DataError(
-                f"the {predictor} fit produced non-finite parameters ({', '.join(bad)}); "
-                "check the feature magnitudes and the options gamma / l2 / lr"
-            )
-        summary["n_demos"] = len(demos)
-        summary["label_glitches"] = [g.to_dict() for g in glitches]
-        summary["warnings"] = glitch_warnings(graphs, demos) + fit_warnings(model, data)
-        for text in [g.describe() for g in glitches] + summary["warnings"]:
+        fitted = fit_parts(demos, config, validation, logger)
+        for text in [g.describe() for g in fitted.glitches] + fitted.summary["warnings"]:
             log.warning("%s", text)
-        combos = initial_combinations(demos, sorted(graphs))
-        progress = demo_progress(graphs, data, [d.n_samples for d in demos])
-        coupling = Coupling.learn(demos, sorted(graphs), progress=progress)
-        feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
+        graphs = fitted.graphs
         seq = cls(
-            graphs, model, feature_names, config.sequencer, summary, combos, coupling, feature_range
+            graphs,
+            fitted.predictor,
+            fitted.feature_names,
+            config.sequencer,
+            fitted.summary,
+            fitted.initial_combinations,
+            fitted.coupling,
+            fitted.feature_range,
         )
         margin = config.sequencer.progress_margin
-        stays = stay_examples(demos, sorted(graphs), progress, 0.2 if margin is None else margin)
+        stays = stay_examples(
+            fitted.demos, sorted(graphs), fitted.progress, 0.2 if margin is None else margin
+        )
         stays = seq._confusing(stays)
-        summary["stay_choices"] = sorted(f"{v}: {mp}" for v, mp in stays)
-        return seq._with_branches(BranchChoices.learn(coupling, feature_range, stays))
+        fitted.summary["stay_choices"] = sorted(f"{v}: {mp}" for v, mp in stays)
+        return seq._with_branches(BranchChoices.learn(fitted.coupling, fitted.feature_range, stays))
 
     def _confusing(
         self, stays: Mapping[tuple[str, str], list[np.ndarray]]
