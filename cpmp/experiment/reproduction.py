@@ -161,6 +161,7 @@ def reproduce(
     max_time: float | None = None,
     label: str = "",
     train: Sequence[Demonstration] = (),
+    pacing_seed: int | None = None,
 ) -> list[EpisodeRecord]:
     """Run ``seq`` closed-loop on every box; classify outcomes and measure switch distances.
 
@@ -169,7 +170,9 @@ def reproduce(
     with ``seq.batched``); every number equals a run of one box at a time. ``record``: which
     episodes are written into ``record_dir`` as ``.rrd`` (nothing without ``record_dir``);
     a recording compares its start with the starts of ``train`` (the demonstrations ``seq``
-    was fitted on) in :data:`START_AXES`.
+    was fitted on) in :data:`START_AXES`. ``pacing_seed``: with the task's ``robot_*`` pacing
+    options set, the robot's pace in episode ``i`` is drawn from ``(pacing_seed, ROBOT_STREAM,
+    i)`` (:func:`~cpmp.sim.runner.run_episodes`; ``None``: from the task's ``seed``).
     """
     out: list[EpisodeRecord] = []
     if not boxes:
@@ -211,6 +214,7 @@ def reproduce(
             max_time=max_time,
             on_tick=callbacks,
             on_result=lambda i, result: bar.update(1),
+            pacing_seed=pacing_seed,
         )
     except BaseException:
         for recorder in recorders:
@@ -264,9 +268,13 @@ def reproduce_seed(
     """:func:`reproduce` on one seed's reproduction boxes.
 
     ``data.boxes`` run against the demonstrator's runs ``data.expected``, the chosen strategies
-    told apart by ``data.signatures``. ``options``: the keywords of :func:`reproduce`.
+    told apart by ``data.signatures``; a paced robot (the task's ``robot_*`` options) is paced
+    from the run's seed ``data.seed``, as the demonstrations were. ``options``: the other
+    keywords of :func:`reproduce`.
     """
-    return reproduce(seq, data.boxes, data.expected, task, data.signatures, **options)
+    return reproduce(
+        seq, data.boxes, data.expected, task, data.signatures, pacing_seed=data.seed, **options
+    )
 
 
 def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
