@@ -32,7 +32,7 @@ from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
 from cpmp.worlds import relay, two_point
-from cpmp.worlds.outcomes import Outcome, episode_outcome
+from cpmp.worlds.outcomes import Outcome
 from cpmp.worlds.relay.varied import DEMO_PACING, ROBOT_PACING, paced_relay
 
 WorldKind = Literal["sim", "synthetic"]
@@ -105,14 +105,11 @@ def _two_point(options: Mapping[str, Any], seed: int, n_demos: int) -> Synthetic
     def evaluate(policy: Policy, n: int, episode_seed: int) -> list[EpisodeResult]:
         # two_point.evaluate returns counts only: the same draw and scoring, one per episode
         rng = np.random.default_rng(episode_seed)
-        out = []
-        for _ in range(n):
-            episode = task.sample_episode(rng)
-            sequences, done = task.rollout(episode, policy)
-            started_right = {v: s[0] for v, s in sequences.items()} == task.initial_mps(episode)
-            strategy = "parallel" if episode.parallel else "sequential"
-            out.append(EpisodeResult(episode_outcome(started_right, done), strategy))
-        return out
+        episodes = [task.sample_episode(rng) for _ in range(n)]
+        return [
+            EpisodeResult(task.outcome(e, run), "parallel" if e.parallel else "sequential")
+            for e, run in zip(episodes, task.rollouts(episodes, policy), strict=True)
+        ]
 
     return SyntheticRun(two_point.make_demonstrations(n_demos, seed=seed, task=task), evaluate)
 

@@ -3,6 +3,9 @@
 The relay and repetition worlds step the same way (:class:`SteppedTask`): a scripted demonstrator
 records a demonstration (:func:`record_script`) and a policy runs closed-loop
 (:func:`run_policy`) in one loop each, the world's features passed in as a function of the state.
+:func:`run_policies` runs many episodes of one policy, all at once where the policy batches
+(a fitted sequencer's ``batched(n)``: one predictor call per tick for every running episode),
+with the same results as :func:`run_policy` one episode at a time.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ Strategy = TypeVar("Strategy")
 
 Features = Callable[[State], np.ndarray]
 """The world's feature vector ``(d,)`` of a state."""
+EpisodeFeatures = Callable[[State, Episode], np.ndarray]
+"""The world's feature vector ``(d,)`` of a state of an episode."""
 
 
 class SteppedTask(Protocol[State, Episode]):
@@ -238,3 +243,58 @@ def run_policy(
         note_switches(seqs, active)
         reached = task.at_goal(state, episode)
     return PolicyRun(seqs, t, initial, reached, state)
+
+
+def run_policies(
+    task: SteppedTask[State, Episode],
+    episodes: Sequence[Episode],
+    policy: Policy,
+    features: EpisodeFeatures[State, Episode],
+    variables: Sequence[str],
+) -> list[PolicyRun[State]]:
+    """Run ``policy`` closed-loop on every one of ``episodes``, as :func:`run_policy` does.
+
+    A policy with ``batched(n)`` (a fitted :class:`~cpmp.sequencer.ConcurrentSequencer`) runs
+    every episode at once: one batched ``reset``, then one ``step`` per tick over the episodes
+    still running (each stops at its goal state, all at ``max_time``); each episode's run is
+    the one :func:`run_policy` gives it. Any other policy runs the episodes one after another.
+
+    Args:
+        task: the world.
+        episodes: the episodes.
+        policy: the policy (a fresh ``reset`` per episode, or one batch of them).
+        features: the world's features ``(d,)`` of a state of an episode.
+        variables: the control variables.
+
+    Returns:
+        One run per episode, in order.
+    """
+    make_batch = getattr(policy, "batched", None)
+    if make_batch is None or not episodes:
+        return [
+            run_policy(task, e, policy, lambda s, e=e: features(s, e), variables) for e in episodes
+        ]
+    n = len(episodes)
+    batch = make_batch(n)
+    states = [task.initial_state(e) for e in episodes]
+    x = np.stack([features(s, e) for s, e in zip(states, episodes, strict=True)])
+    active = [dict(a) for a in batch.reset(0.0, x)]
+    initial = [dict(a) for a in active]
+    seqs = [{v: [a[v]] for v in variables} for a in active]
+    reached = np.array([task.at_goal(s, e) for s, e in zip(states, episodes, strict=True)])
+    times = [0.0] * n
+    t = 0.0
+    while not reached.all() and t < task.max_time - 1e-9:
+        live = ~reached
+        rows = np.flatnonzero(live).tolist()
+        for i in rows:
+            task.advance(states[i], episodes[i], active[i])
+            x[i] = features(states[i], episodes[i])
+        t = round(t + task.dt, 10)
+        stepped = batch.step(t, x, live=live)
+        for i in rows:
+            active[i] = dict(stepped[i])
+            note_switches(seqs[i], active[i])
+            reached[i] = task.at_goal(states[i], episodes[i])
+            times[i] = t
+    return [PolicyRun(seqs[i], times[i], initial[i], bool(reached[i]), states[i]) for i in range(n)]

@@ -16,6 +16,7 @@ synchronise through the shared features only.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -180,6 +181,53 @@ class SyntheticTask:
                 return TwoPointRollout(seqs, True)
         return TwoPointRollout(seqs, False)
 
+    def rollouts(
+        self, episodes: Sequence[TwoPointEpisode], policy: Policy
+    ) -> list[TwoPointRollout]:
+        """Run ``policy`` closed-loop on every one of ``episodes``, as :meth:`rollout` does.
+
+        A policy with ``batched(n)`` (a fitted :class:`~cpmp.sequencer.ConcurrentSequencer`)
+        runs them all at once, one ``step`` per tick over the episodes still running, with the
+        results :meth:`rollout` gives each; any other policy runs them one after another.
+
+        Args:
+            episodes: the episodes.
+            policy: the policy.
+
+        Returns:
+            One rollout per episode, in order.
+        """
+        make_batch = getattr(policy, "batched", None)
+        if make_batch is None or not episodes:
+            return [self.rollout(e, policy) for e in episodes]
+        n = len(episodes)
+        batch = make_batch(n)
+        p = np.array([e.start for e in episodes], dtype=float)  # (N, 2)
+        context = np.array([[e.context] for e in episodes])  # (N, 1)
+        active = [dict(a) for a in batch.reset(0.0, np.hstack([p, context]))]
+        seqs = [{v: [a[v]] for v in VARIABLES} for a in active]
+        done = np.zeros(n, dtype=bool)
+        gain = np.asarray(self.gain)
+        t = 0.0
+        while t < self.max_time and not done.all():
+            live = ~done
+            rows = np.flatnonzero(live).tolist()
+            goals = np.array([self.goals(episodes[i], active[i]) for i in rows])
+            p[rows] = p[rows] + self.dt * gain * (goals - p[rows])
+            t = round(t + self.dt, 10)
+            stepped = batch.step(t, np.hstack([p, context]), live=live)
+            for i in rows:
+                active[i] = dict(stepped[i])
+                note_switches(seqs[i], active[i])
+                home = active[i]["a"] == "a_back" and active[i]["b"] == "b_back"
+                done[i] = home and bool(np.all(np.abs(p[i]) < 0.01))
+        return [TwoPointRollout(seqs[i], bool(done[i])) for i in range(n)]
+
+    def outcome(self, episode: TwoPointEpisode, run: TwoPointRollout) -> Outcome:
+        """The outcome of ``run``, a closed-loop run of ``episode`` (:func:`evaluate`)."""
+        started_right = {v: s[0] for v, s in run.sequences.items()} == self.initial_mps(episode)
+        return episode_outcome(started_right, run.done)
+
 
 def evaluate(
     seq: Policy, task: SyntheticTask | None = None, n_episodes: int = 20, seed: int = 0
@@ -203,13 +251,10 @@ def evaluate(
     positive_count(n_episodes, "n_episodes")
     task = task or SyntheticTask()
     rng = np.random.default_rng(seed)
-    outcomes = []
-    for _ in range(n_episodes):
-        episode = task.sample_episode(rng)
-        seqs, done = task.rollout(episode, seq)
-        started_right = {v: s[0] for v, s in seqs.items()} == task.initial_mps(episode)
-        outcomes.append(episode_outcome(started_right, done))
-    return count_outcomes(outcomes)
+    episodes = [task.sample_episode(rng) for _ in range(n_episodes)]
+    return count_outcomes(
+        task.outcome(e, r) for e, r in zip(episodes, task.rollouts(episodes, seq), strict=True)
+    )
 
 
 def make_demonstrations(

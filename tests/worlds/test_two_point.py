@@ -72,3 +72,21 @@ def test_curved_trajectories_run_from_the_start_to_the_end_region():
         assert np.max(np.abs(demo.features[0] - 0.1)) <= 0.06
         assert np.max(np.abs(demo.features[-1] - 0.9)) <= 0.06
     assert not np.array_equal(demos[0].features, demos[1].features)
+
+
+def test_rollouts_of_a_fitted_sequencer_equal_its_rollouts_one_at_a_time(fitted_klr):
+    """A fitted sequencer runs every episode at once (its ``batched``); each episode's run is
+    the one :meth:`SyntheticTask.rollout` gives it, and :func:`evaluate` counts them."""
+    task = SyntheticTask(max_time=3.0)  # short: some episodes end home, others at the limit
+    rng = np.random.default_rng(3)
+    episodes = [task.sample_episode(rng) for _ in range(10)]
+    batched = task.rollouts(episodes, fitted_klr)
+    single = [task.rollout(e, fitted_klr) for e in episodes]
+    assert batched == single
+    outcomes = [task.outcome(e, r) for e, r in zip(episodes, batched, strict=True)]
+    assert {"complete", "incomplete", "wrong_start"} <= set(outcomes)
+    counts = evaluate(fitted_klr, task, n_episodes=10, seed=3)
+    assert counts == {o: outcomes.count(o) for o in counts}
+    assert task.rollouts(episodes[:2], Replay(make_demonstrations(1)[0])) == [
+        task.rollout(e, Replay(make_demonstrations(1)[0])) for e in episodes[:2]
+    ]

@@ -48,7 +48,7 @@ from cpmp.worlds.common import (
     ScriptPolicy,
     positive_count,
     record_script,
-    run_policy,
+    run_policies,
     seeded_episodes,
 )
 from cpmp.worlds.outcomes import episode_outcome
@@ -250,16 +250,19 @@ def evaluate(
         seed: seeds the episodes and their pacing (use another than the demonstrations').
 
     Returns:
-        One score per episode, in order.
+        One score per episode, in order (a fitted sequencer runs them all at once,
+        :func:`~cpmp.worlds.common.run_policies`).
 
     Raises:
         ConfigError: ``n_episodes`` is not a positive integer.
     """
     positive_count(n_episodes, "n_episodes")
     task = task or PacedRelayTask(pacing=ROBOT_PACING)
+    episodes = task.episodes(n_episodes, seed, ROBOT_STREAM)
     scores = []
-    for episode in task.episodes(n_episodes, seed, ROBOT_STREAM):
-        run = run_policy(task, episode, policy, lambda s, e=episode: task.features(s, e), VARIABLES)
+    for episode, run in zip(
+        episodes, run_policies(task, episodes, policy, task.features, VARIABLES), strict=True
+    ):
         outcome = episode_outcome(run.initial == task.initial_mps(episode), run.reached_goal)
         scores.append(EpisodeScore(outcome, episode.strategy, run.time))
     return scores
