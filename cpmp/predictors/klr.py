@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -31,6 +32,7 @@ from cpmp.predictors.base import (
     ProgressPredictor,
     soft_bce,
 )
+from cpmp.predictors.inducing import RefineProblem, padded_samples, refine
 from cpmp.predictors.newton import NewtonInfo, newton_fit
 from cpmp.predictors.selection import NodeModel, NodeProblem, PathPoint, forward_selection_path
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
@@ -409,6 +411,8 @@ class SparseKLRPredictor(KLRPredictor):
         or ``none``."""
         self.n_support_rule = 0
         """Supports the fixed rule places on the fit's data (the levels' reference)."""
+        self.refine_summary: dict[str, float | int] = {}
+        """The last refinement's loss before and after and its evaluations (empty: none)."""
         self._validation: list[NodeData] | None = None
 
     @property
@@ -463,10 +467,17 @@ class SparseKLRPredictor(KLRPredictor):
     def _select(
         self, data: list[NodeData], validation: list[NodeData] | None, generator: torch.Generator
     ) -> None:
-        """Run the path per width, choose the level and width, keep their supports."""
+        """Run the path per width, choose the level and width, keep their supports.
+
+        Only the graph nodes are sparsified: a start head is evaluated once per episode, at
+        the start, where its choice among a variable's initial nodes rests on the fixed
+        rule's supports at the activations' starts, so it keeps them (and the default
+        kernel).
+        """
         masks = self.support_mask
         candidates = [self.support[i, masks[i]].detach().clone() for i in range(self.n_nodes)]
-        self.n_support_rule = sum(len(c) for c in candidates)
+        graph = [i for i, node in enumerate(data) if not node.key[1].startswith(START_PREFIX)]
+        self.n_support_rule = sum(len(candidates[i]) for i in graph)
         kernels = [
             self.node_kernel(i, node.x)[:, : len(candidates[i])].T.contiguous()
             for i, node in enumerate(data)
@@ -475,26 +486,72 @@ class SparseKLRPredictor(KLRPredictor):
         levels = self._levels()
         points: list[tuple[SparsityLevel, list[NodeModel]]] = []
         for scale in self.config.gamma_scales:
-            for level, point in self._path(split.problems, split.candidates, levels, scale):
+            for level, point in self._path([split.problems[i] for i in graph], levels, scale):
                 record = SparsityLevel(
                     level, scale, point.n_support, point.train_loss, point.val_loss, point.val_mae
                 )
                 points.append((record, point.models))
         best = self._choose([p for p, _ in points], levels[-1])
-        chosen, models = points[best]
-        if split.source == "held-out activations":  # choose on the split, fit on everything
-            problems = [
-                _problem(k, node.target, None, None, True)
-                for k, node in zip(kernels, data, strict=True)
-            ]
-            fitted = self._path(problems, candidates, [chosen.level], chosen.gamma_scale)
-            models = fitted[-1][1].models
+        chosen, graph_models = points[best]
+        kept_from = list(split.candidates)
+        refine_all = self.config.refine_iter > 0
+        if split.source == "held-out activations":
+            # choose on the split, then select again on every activation
+            problems = [_problem(kernels[i], data[i].target, None, None, True) for i in graph]
+            fitted = self._path(problems, [chosen.level], chosen.gamma_scale)
+            graph_models, kept_from = fitted[-1][1].models, list(candidates)
+        models = [
+            NodeModel(torch.arange(len(c)), torch.zeros(len(c), dtype=torch.float64), 0.0)
+            for c in candidates
+        ]
+        for i, model in zip(graph, graph_models, strict=True):
+            models[i] = model
+        for i in set(range(self.n_nodes)) - set(graph):
+            kept_from[i] = candidates[i]
         self.sparsity_path = [
             dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
         ]
         self.sparsity_validation = split.source
-        self._keep(candidates, models, chosen.gamma_scale)
+        self._keep(kept_from, models, chosen.gamma_scale, graph)
+        if refine_all:  # the moved supports learn from every activation
+            self._refine(data, graph)
         log.info("%s", self.describe_path())
+
+    def _refine(self, data: list[NodeData], nodes: list[int]) -> None:
+        """Move the kept supports of ``nodes`` and rescale their kernels on every sample.
+
+        See :mod:`cpmp.predictors.inducing`; the trainer's convex solver then re-solves the
+        weights on every sample.
+        """
+        cfg = self.config
+        idx = torch.tensor(nodes, dtype=torch.long)
+        x, target, sample_weight = padded_samples(
+            [data[i].x for i in nodes], [data[i].target for i in nodes], cfg.refine_samples
+        )
+        mask = self.support_mask[idx]
+        s = max(int(mask.sum(1).max()), 1)
+        problem = RefineProblem(
+            x,
+            target,
+            sample_weight,
+            self.support.detach()[idx, :s].double(),
+            mask[:, :s],
+            (self.gamma * self.feature_scale * torch.exp(self.log_feature_scale))[idx].double(),
+            self.weight.detach()[idx, :s].double(),
+            self.bias.detach()[idx].double(),
+        )
+        result = refine(problem, cfg.l2, cfg.refine_iter, cfg.bias)
+        with torch.no_grad():
+            self.support[idx, :s] = result.support.to(self.dtype_)
+            self.log_feature_scale[idx] += result.log_scale.to(self.dtype_)
+            self.weight[idx, :s] = result.weight.to(self.dtype_)
+            self.bias[idx] = result.bias.to(self.dtype_)
+        self._cache = None
+        self.refine_summary = {
+            "loss_start": result.loss_start,
+            "loss": result.loss,
+            "evaluations": result.evaluations,
+        }
 
     def _split(
         self,
@@ -558,12 +615,13 @@ class SparseKLRPredictor(KLRPredictor):
         return torch.exp(-sq.clamp_min(0.0))
 
     def _path(
-        self, problems: list[NodeProblem], candidates: list[torch.Tensor], levels: list[float],
-        scale: float,
-    ) -> list[tuple[float, PathPoint]]:  # fmt: skip
+        self, problems: list[NodeProblem], levels: list[float], scale: float
+    ) -> list[tuple[float, PathPoint]]:
         """The path at kernel width factor ``scale``, recorded at ``levels``.
 
-        The kernel at ``scale`` is the base kernel to the power ``scale``.
+        A level's support total is ``floor(level * n_support_rule)`` (at least one per node),
+        whichever candidates the problems hold. The kernel at ``scale`` is the base kernel to
+        the power ``scale``.
         """
         if scale != 1.0:
             problems = [
@@ -572,8 +630,8 @@ class SparseKLRPredictor(KLRPredictor):
                 )
                 for p in problems
             ]
-        n_rule = sum(len(c) for c in candidates)
-        totals = [max(len(problems), round(level * n_rule)) for level in levels]
+        n_rule = self.n_support_rule
+        totals = [max(len(problems), math.floor(level * n_rule + 1e-9)) for level in levels]
         points = forward_selection_path(problems, totals, self.config.l2, self.config.bias)
         return list(zip(levels, points, strict=False))
 
@@ -589,16 +647,29 @@ class SparseKLRPredictor(KLRPredictor):
             return next(i for i in allowed if points[i].level == last)
         return min(scored, key=lambda i: (points[i].val_loss, points[i].n_support, i))
 
-    def _keep(self, candidates: list[torch.Tensor], models: list[NodeModel], scale: float) -> None:
-        """Make the chosen supports, weights and width the bank's."""
+    def _keep(
+        self,
+        candidates: list[torch.Tensor],
+        models: list[NodeModel],
+        scale: float,
+        scaled: list[int],
+    ) -> None:
+        """Make the chosen supports, weights and width the bank's.
+
+        The width factor ``scale`` applies to the nodes ``scaled``; the others keep the
+        default kernel (their ``log_feature_scale`` undoes it).
+        """
         self.gamma = self.gamma * scale
         self._set_supports(
             [c[m.support].numpy(force=True) for c, m in zip(candidates, models, strict=True)]
         )
         with torch.no_grad():
+            self.log_feature_scale.zero_()
             for i, m in enumerate(models):
                 self.weight[i, : m.support.numel()] = m.weight.to(self.dtype_)
                 self.bias[i] = m.bias
+                if i not in scaled:
+                    self.log_feature_scale[i] = -math.log(scale)
 
     def describe_path(self) -> str:
         """The sparsity path as text: one line per point, the chosen one marked."""
@@ -615,6 +686,13 @@ class SparseKLRPredictor(KLRPredictor):
             mae = "-" if p.val_mae is None else f"{p.val_mae:.4f}"
             mark = "  <- chosen" if p.chosen else ""
             lines.append(f"  {p.level:g}  {p.gamma_scale:g}  {p.n_support}  {loss}  {mae}{mark}")
+        if self.refine_summary:
+            r = self.refine_summary
+            lines.append(
+                f"then refined (supports moved, kernels rescaled) on every training activation: "
+                f"training loss {r['loss_start']:.5f} -> {r['loss']:.5f} in "
+                f"{r['evaluations']} evaluations"
+            )
         return "\n".join(lines)
 
     # ------------------------------------------------------------------ training and l1
@@ -701,8 +779,10 @@ class SparseKLRPredictor(KLRPredictor):
         """The kernel bank's facts, the sparsity path and which kernel parts were learned.
 
         ``forward``: ``sparsity_path`` (one dict per :class:`SparsityLevel`),
-        ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation`` and
-        ``n_support_rule``.
+        ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``,
+        ``n_support_rule`` (the graph nodes') and, after a refinement, ``refine``
+        (``loss_start``, ``loss``, ``evaluations``); always ``n_support_graph`` (the supports a
+        control tick evaluates) and ``n_support_start`` (the start heads', at the fixed rule).
         """
         out = super().summary()
         out["sparsity_method"] = self.config.method
@@ -715,6 +795,12 @@ class SparseKLRPredictor(KLRPredictor):
             out["sparsity_gamma_scale"] = chosen.gamma_scale
             out["sparsity_validation"] = self.sparsity_validation
             out["n_support_rule"] = self.n_support_rule
+        if self.refine_summary:
+            out["refine"] = dict(self.refine_summary)
+        counts = out["support_counts"]
+        start = [k for k in counts if k.split("/", 1)[1].startswith(START_PREFIX)]
+        out["n_support_start"] = sum(counts[k] for k in start)
+        out["n_support_graph"] = out["n_support_total"] - out["n_support_start"]
         return out
 
 

@@ -1,0 +1,89 @@
+"""The inducing-point refinement (cpmp.predictors.inducing): its written-out gradient, that it
+never ends worse than it started, and what it leaves alone."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from cpmp.predictors.inducing import RefineProblem, _Objective, padded_samples, refine
+
+
+@pytest.fixture
+def problem() -> RefineProblem:
+    """Three nodes, 1-D progress along a line in 2-D with the second feature irrelevant; the
+    second node has one padded support slot, the third fewer samples (padded rows)."""
+    gen = torch.Generator().manual_seed(0)
+    k, p, s = 3, 40, 4
+    t = torch.linspace(0.0, 1.0, p, dtype=torch.float64)
+    x = torch.stack(
+        [torch.stack([4.0 * t, torch.rand(p, generator=gen, dtype=torch.float64)], 1)] * k
+    )
+    weight = torch.full((k, p), 1.0 / p, dtype=torch.float64)
+    weight[2, 30:] = 0.0
+    weight[2, :30] = 1.0 / 30
+    x[2, 30:] = 0.0
+    mask = torch.ones(k, s, dtype=torch.bool)
+    mask[1, 3] = False
+    support = x[:, [2, 14, 26, 38]].clone() * mask[:, :, None]
+    return RefineProblem(
+        x=x,
+        target=t.expand(k, p).clone() * (weight > 0),
+        sample_weight=weight,
+        support=support,
+        mask=mask,
+        base_weights=torch.tensor([[0.5, 0.5]] * k, dtype=torch.float64),
+        weight=torch.zeros(k, s, dtype=torch.float64),
+        bias=torch.zeros(k, dtype=torch.float64),
+    )
+
+
+def test_gradient_is_the_loss_derivative(problem):
+    objective = _Objective(problem, l2=1e-3, fit_bias=True)
+    gen = torch.Generator().manual_seed(1)
+    theta = objective.pack(
+        problem.support
+        + 0.1 * torch.randn(problem.support.shape, generator=gen, dtype=torch.float64),
+        0.3 * torch.randn(3, 2, generator=gen, dtype=torch.float64),
+        torch.randn(3, 4, generator=gen, dtype=torch.float64) * problem.mask,
+        torch.randn(3, generator=gen, dtype=torch.float64),
+    )
+    loss, grad = objective(theta)
+    leaf = theta.clone().requires_grad_(True)
+    (auto,) = torch.autograd.grad(objective(leaf)[0], leaf)
+    assert float(loss) == pytest.approx(float(objective(leaf)[0].detach()))
+    torch.testing.assert_close(grad, auto, rtol=1e-9, atol=1e-12)
+
+
+def test_refinement_lowers_the_loss_and_leaves_padding_alone(problem):
+    result = refine(problem, l2=1e-4, max_iter=40)
+    assert result.evaluations > 0
+    assert result.loss < 0.9 * result.loss_start
+    # the padded slot keeps its place and a zero weight
+    assert torch.equal(result.support[1, 3], problem.support[1, 3])
+    assert float(result.weight[1, 3]) == 0.0
+    # the irrelevant second feature's kernel weight shrinks against the first's
+    assert bool((result.log_scale[:, 1] < result.log_scale[:, 0]).all())
+
+
+def test_no_iterations_return_the_start(problem):
+    result = refine(problem, l2=1e-4, max_iter=0)
+    assert result.evaluations == 0 and result.loss == result.loss_start
+    assert torch.equal(result.support, problem.support)
+    assert torch.count_nonzero(result.log_scale) == 0
+
+
+def test_fixed_bias_stays(problem):
+    result = refine(problem, l2=1e-4, max_iter=20, fit_bias=False)
+    assert torch.count_nonzero(result.bias) == 0
+
+
+def test_padded_samples_stride_and_weights():
+    xs = [torch.arange(10.0).reshape(5, 2), torch.arange(4.0).reshape(2, 2)]
+    ys = [torch.linspace(0, 1, 5), torch.tensor([0.0, 1.0])]
+    x, y, c = padded_samples(xs, ys, per_node=3)
+    assert x.shape == (2, 3, 2) and x.dtype == torch.float64
+    torch.testing.assert_close(x[0], xs[0][::2].double())  # every 2nd of 5: 3 rows
+    torch.testing.assert_close(y[0], ys[0][::2].double())
+    torch.testing.assert_close(c[0], torch.full((3,), 1.0 / 3, dtype=torch.float64))
+    assert c[1].tolist() == [0.5, 0.5, 0.0]  # two rows and a padded one
