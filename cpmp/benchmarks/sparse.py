@@ -12,11 +12,14 @@ and on the simulator (``sim``: the main job's full-run demonstrations of seed ``
 Both predictors are fitted the same way, without validation demonstrations (as
 ``cpmp-compare`` fits them): ``klr_sparse`` then chooses its level on held-out activations of
 its training demonstrations, so the held-out demonstrations it is scored on played no part in
-its fit. Per world, D and seed: the fit time (the faster of ``repeats`` fits), supports,
-held-out MAE, the tick cost (the predictor's call on one feature vector, and a whole
-``step()`` of the sequencer, each the mean over one held-out demonstration replayed open
-loop) and C; then the ratios sparse / default (C: the difference). Written as JSON
-(atomically); nothing here asserts a number.
+its fit. Per world, D and seed: the fit time (the faster of ``repeats`` fits), supports
+(those a control tick evaluates, the graph nodes', and all of them with the start heads,
+which are evaluated once per episode and which ``klr_sparse`` leaves at the fixed rule),
+held-out MAE, the tick cost (the predictor's call on one feature vector for the graph
+nodes, as :meth:`ConcurrentSequencer.step` makes it, and on a batch of :data:`BATCH` vectors
+as batched rollouts make it, and a whole ``step()``, each the mean over one held-out
+demonstration replayed open loop) and C; then the ratios sparse / default (C: the
+difference). Written as JSON (atomically); nothing here asserts a number.
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ HELD_OUT_SEED = 1000
 """Held-out demonstrations and episodes of seed ``s`` are drawn with ``HELD_OUT_SEED + s``."""
 TARGETS = {"mae": 1.1, "supports": 0.25, "tick": 0.5, "fit": 2.0, "complete": -1.0}
 """Issue #23's bounds on the ratios sparse / default (``complete``: on the difference)."""
+BATCH = 256
+"""Feature vectors per call of the batched tick cost (``batch_ms``)."""
 SIM_DEMOS_PER_STRATEGY, SIM_TRAIN_PER_STRATEGY = 5, 3
 """The main job's full run (``experiment=full``): 15 demonstrations, 9 train / 6 test."""
 
@@ -181,24 +186,36 @@ def tick_costs(seq: ConcurrentSequencer, demo: Demonstration) -> dict[str, float
     """Mean wall time [ms] per tick over ``demo`` replayed open loop.
 
     Returns:
-        ``predictor_ms``: the predictor's call on one feature vector (all heads);
-        ``step_ms``: a whole :meth:`ConcurrentSequencer.step`.
+        ``predictor_ms``: the predictor's call on one feature vector (the graph nodes' heads,
+        as a control tick evaluates them); ``batch_ms``: on :data:`BATCH` of them at once
+        (the demonstration's rows, repeated as needed); ``step_ms``: a whole
+        :meth:`ConcurrentSequencer.step`.
     """
     x = torch.as_tensor(np.ascontiguousarray(demo.features))
     predictor = seq.predictor
+    heads = len(seq.node_keys)
+    batch = x[torch.arange(BATCH) % x.shape[0]]
     with torch.no_grad():
-        predictor(x[:1])  # caches built
+        predictor(x[:1], heads)  # caches built
         start = time.perf_counter()
         for row in x[1:]:
-            predictor(row[None])
+            predictor(row[None], heads)
         forward = time.perf_counter() - start
+        start = time.perf_counter()
+        for _ in range(len(x) - 1):
+            predictor(batch, heads)
+        batched = time.perf_counter() - start
     seq.reset(float(demo.time[0]), demo.features[0])
     start = time.perf_counter()
     for t, row in zip(demo.time[1:], demo.features[1:], strict=True):
         seq.step(float(t), row)
     step = time.perf_counter() - start
     n = max(len(demo.time) - 1, 1)
-    return {"predictor_ms": 1e3 * forward / n, "step_ms": 1e3 * step / n}
+    return {
+        "predictor_ms": 1e3 * forward / n,
+        "batch_ms": 1e3 * batched / n,
+        "step_ms": 1e3 * step / n,
+    }
 
 
 def measure(
@@ -217,7 +234,8 @@ def measure(
         times.append(time.perf_counter() - start)
     row = {
         "fit_s": min(times),
-        "supports": int(seq.fit_summary["n_support_total"]),
+        "supports": sum(seq.predictor.support_counts()[f"{v}/{m}"] for v, m in seq.node_keys),
+        "supports_all": int(seq.fit_summary["n_support_total"]),
         "mae": float(progress_errors(activation_progress(seq, world.test))["mae"]),
         **tick_costs(seq, world.test[0]),
         "complete": world.complete(seq),
@@ -234,7 +252,9 @@ def ratios(default: dict[str, Any], sparse: dict[str, Any]) -> dict[str, Any]:
     out = {
         "mae": sparse["mae"] / default["mae"],
         "supports": sparse["supports"] / default["supports"],
+        "supports_all": sparse["supports_all"] / default["supports_all"],
         "tick": sparse["predictor_ms"] / default["predictor_ms"],
+        "batch": sparse["batch_ms"] / default["batch_ms"],
         "step": sparse["step_ms"] / default["step_ms"],
         "fit": sparse["fit_s"] / default["fit_s"],
         "complete": sparse["complete"] - default["complete"],
@@ -284,7 +304,8 @@ def run_sparse_benchmark(
 def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per world and D, the seeds pooled: mean measures and the ratios of the means."""
     out: dict[str, dict[str, Any]] = {}
-    keys = ("fit_s", "supports", "mae", "predictor_ms", "step_ms", "complete")
+    keys = ("fit_s", "supports", "supports_all", "mae", "predictor_ms", "batch_ms", "step_ms")
+    keys += ("complete",)
     for name in dict.fromkeys(r["world"] for r in rows):
         for d in dict.fromkeys(r["D"] for r in rows if r["world"] == name):
             group = [r for r in rows if r["world"] == name and r["D"] == d]
@@ -304,7 +325,8 @@ def _line(row: dict[str, Any]) -> str:
     r = row["ratios"]
     return (
         f"{row['world']} D{row['D']} seed {row['seed']}: mae x{r['mae']:.2f}, supports "
-        f"x{r['supports']:.2f}, tick x{r['tick']:.2f} (step x{r['step']:.2f}), fit "
+        f"x{r['supports']:.2f} (all x{r['supports_all']:.2f}), tick x{r['tick']:.2f} (batch "
+        f"x{r['batch']:.2f}, step x{r['step']:.2f}), fit "
         f"x{r['fit']:.2f}, C {row['sparse']['complete']} vs {row['default']['complete']}"
     )
 
@@ -312,8 +334,9 @@ def _line(row: dict[str, Any]) -> str:
 def markdown(result: dict[str, Any]) -> str:
     """The pooled ratios as a Markdown table (a target missed is marked ``!``)."""
     lines = [
-        "| world | D | MAE x | supports x | tick x | step x | fit x | C sparse - default |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| world | D | MAE x | supports x | all supports x | tick x | batch tick x | step x "
+        "| fit x | C sparse - default |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, by_d in result["summary"].items():
         for d, s in by_d.items():
@@ -324,7 +347,8 @@ def markdown(result: dict[str, Any]) -> str:
 
             lines.append(
                 f"| {name} | {d} | {cell('mae', '.2f')} | {cell('supports', '.2f')} | "
-                f"{cell('tick', '.2f')} | {r['step']:.2f} | {cell('fit', '.2f')} | "
+                f"{r['supports_all']:.2f} | {cell('tick', '.2f')} | {r['batch']:.2f} | "
+                f"{r['step']:.2f} | {cell('fit', '.2f')} | "
                 f"{cell('complete', '+.1f')} |"
             )
     return "\n".join(lines) + "\n"

@@ -11,7 +11,7 @@ import pytest
 from cpmp.benchmarks.sparse import TARGETS, SparseSettings, main, ratios, run_sparse_benchmark
 from cpmp.errors import ConfigError
 
-TIMES = ("fit_s", "predictor_ms", "step_ms")
+TIMES = ("fit_s", "predictor_ms", "step_ms", "batch_ms")
 
 
 def _untimed(result):
@@ -33,9 +33,14 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     (row,) = result["rows"]
     assert (row["world"], row["D"], row["seed"]) == ("two_point", 3, 0)
     for kind in ("default", "sparse"):
-        assert set(row[kind]) >= {"fit_s", "supports", "mae", "predictor_ms", "step_ms", "complete"}
+        assert set(row[kind]) >= {"fit_s", "supports", "supports_all", "mae", "complete"}
+        assert set(row[kind]) >= {"predictor_ms", "batch_ms", "step_ms"}
+        # the graph nodes' supports (a tick's); the start heads keep the fixed rule's
+        assert row[kind]["supports"] < row[kind]["supports_all"]
         assert 0 <= row[kind]["complete"] <= 4 and 0 < row[kind]["mae"] < 1
-    assert row["sparse"]["supports"] <= round(0.25 * row["default"]["supports"])
+    start = row["default"]["supports_all"] - row["default"]["supports"]
+    assert row["sparse"]["supports_all"] - row["sparse"]["supports"] == start
+    assert row["sparse"]["supports"] <= 0.25 * row["default"]["supports"]
     assert row["sparse"]["validation"] == "held-out activations"
     assert row["ratios"] == ratios(row["default"], row["sparse"])
     assert row["ratios"]["supports"] == row["sparse"]["supports"] / row["default"]["supports"]
