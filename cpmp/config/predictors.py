@@ -167,7 +167,7 @@ class SparseKLRConfig(KLRConfig):
     candidate, of any node, with the largest estimated loss decrease; Newton re-fits along
     the way, :mod:`cpmp.predictors.selection`), recorded at support totals that are fractions
     (*levels*) of the fixed rule's count, once per kernel width in ``gamma_scales``. The
-    level and width of least validation loss are kept, then solved exactly by the trainer's
+    level and width of least held-out progress MAE are kept, then solved exactly by the trainer's
     convex solver. The validation data are the fit's (held-out demonstrations; the main job's
     test split, ``trainer.val_fraction``, or ``validation=`` of
     :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any, ``holdout_fraction`` of

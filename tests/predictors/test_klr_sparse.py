@@ -31,14 +31,14 @@ def klr_count(fit_on_train):
     return fit_on_train("klr").fit_summary["n_support_total"]
 
 
-def test_chosen_level_is_the_validation_optimum_of_the_path(validated, test_demos):
+def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_demos):
     summary = validated.fit_summary
     path = summary["sparsity_path"]
     config = validated.predictor.config
     assert summary["sparsity_validation"] == "validation"
     assert len(path) == len(config.path_levels) * len(config.gamma_scales)
     assert all(p["val_loss"] is not None and p["val_mae"] is not None for p in path)
-    best = min(path, key=lambda p: (p["val_loss"], p["n_support"]))
+    best = min(path, key=lambda p: (p["val_mae"], p["val_loss"], p["n_support"]))
     assert [p["chosen"] for p in path] == [p is best for p in path]
     assert (summary["sparsity_level"], summary["sparsity_gamma_scale"]) == (
         best["level"],
@@ -77,8 +77,8 @@ def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit
     summary = fit_on_train("klr_sparse").fit_summary
     assert summary["sparsity_validation"] == "held-out activations"
     path = summary["sparsity_path"]
-    assert all(p["val_loss"] is not None for p in path)
-    best = min(path, key=lambda p: (p["val_loss"], p["n_support"]))
+    assert all(p["val_loss"] is not None and p["val_mae"] is not None for p in path)
+    best = min(path, key=lambda p: (p["val_mae"], p["val_loss"], p["n_support"]))
     assert best["chosen"] and summary["sparsity_level"] == best["level"]
     # the chosen level is then fitted on every activation: the level's share of the rule
     level, n_rule = summary["sparsity_level"], summary["n_support_rule"]
