@@ -184,7 +184,7 @@ class SparseKLRConfig(KLRConfig):
     on every training activation. A subset of the rule's fixed points leaves gaps the default
     kernel was not made to bridge; moved supports close them (held-out MAE at a quarter of the
     supports, two_point / relay / simulator with 3 demonstrations: 0.053 / 0.059 / 0.040 kept
-    in place, 0.026 / 0.040 / 0.033 refined, against the default model's 0.028 / 0.035 / 0.030).
+    in place, 0.023 / 0.037 / 0.031 refined, against the default model's 0.028 / 0.035 / 0.030).
     When the level was chosen on held-out activations, the refinement on every activation
     replaces a second path on them. The summary adds ``refine`` (the loss before and after,
     and the evaluations spent).
