@@ -80,6 +80,22 @@ def job_timings(
 
 
 # ------------------------------------------------------------------------------ formatting
+def seeds_text(seeds: Sequence[int]) -> str:
+    """Seeds as a short list: runs of three or more consecutive seeds as ``first-last``.
+
+    E.g. ``[0, 1, ..., 39, 50, 51]`` -> ``"0-39, 50, 51"``.
+    """
+    parts: list[str] = []
+    ordered = sorted(set(seeds))
+    start = 0
+    for i in range(1, len(ordered) + 1):
+        if i == len(ordered) or ordered[i] != ordered[i - 1] + 1:
+            run = ordered[start:i]
+            parts += [f"{run[0]}-{run[-1]}"] if len(run) >= 3 else [str(x) for x in run]
+            start = i
+    return ", ".join(parts)
+
+
 def interval_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
     """``estimate [low, high]`` of an interval record, times ``scale`` (``–`` for none)."""
     if value is None:
@@ -226,8 +242,7 @@ def render_compare(result: Mapping[str, Any], name: str, seconds: float, workers
         held = w["test_demos"] if w["test_demos"] is not None else "the experiment's split"
         sizes = ", ".join(map(str, w["train_sizes"]))
         lines.append(
-            f"| {w['label']} | {', '.join(map(str, w['seeds']))} | {sizes} | {w['episodes']} "
-            f"| {held} |"
+            f"| {w['label']} | {seeds_text(w['seeds'])} | {sizes} | {w['episodes']} | {held} |"
         )
     if result["claims"]:
         lines += [

@@ -8,7 +8,13 @@ import re
 from fake_runs import SEEDS, fake_inputs, result, spec
 
 from cpmp.compare.pooling import pool
-from cpmp.compare.report import difference_text, interval_text, job_episodes, render_compare
+from cpmp.compare.report import (
+    difference_text,
+    interval_text,
+    job_episodes,
+    render_compare,
+    seeds_text,
+)
 from cpmp.compare.rows import FitJob
 
 
@@ -21,6 +27,12 @@ def test_interval_and_difference_text():
     assert difference_text(low, 1.0, 3) == "-0.010 [-0.030, +0.010]"
     tiny = {"estimate": -0.004, "low": -0.02, "high": 0.0, "significant": False}
     assert difference_text(tiny, 100.0, 0) == "+0 [-2, +0]"  # no "-0"
+
+
+def test_seeds_text_shortens_runs_of_three_or_more():
+    assert seeds_text([*range(40), 50, 51]) == "0-39, 50, 51"
+    assert seeds_text([4, 0, 2, 1]) == "0-2, 4"
+    assert seeds_text([7]) == "7"
 
 
 def test_every_row_number_has_an_interval_and_significance_is_bold():
