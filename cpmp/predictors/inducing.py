@@ -116,7 +116,9 @@ def padded_samples(
 class _Objective:
     """The batched penalised loss and its gradient in one flat parameter vector."""
 
-    def __init__(self, problem: RefineProblem, l2: float, fit_bias: bool) -> None:
+    def __init__(
+        self, problem: RefineProblem, l2: float, fit_bias: bool, anchor: float = 0.0
+    ) -> None:
         self.x = problem.x.double()
         self.x_sq = self.x * self.x
         self.target = problem.target.double()
@@ -129,6 +131,8 @@ class _Objective:
         k, s, d = problem.support.shape
         self.shapes = ((k, s, d), (k, d), (k, s), (k,))
         self.sizes = [math.prod(shape) for shape in self.shapes]
+        self.anchor = float(anchor)
+        self.u0 = (problem.support.double() * self.unit).reshape(-1)
 
     def pack(
         self,
@@ -184,10 +188,21 @@ class _Objective:
             + (col[:, :, None] * support * support).sum(1)
         )
         g_l = -a * spread
-        return loss, torch.cat([g_s.reshape(-1), g_l.reshape(-1), g_w.reshape(-1), g_b])
+        g_u = g_s.reshape(-1)
+        if self.anchor > 0.0:  # ½·2λ: the pull back to the starting points, in kernel widths
+            du = theta[: self.sizes[0]] - self.u0
+            loss = loss + self.anchor * (du * du).sum()
+            g_u = g_u + 2.0 * self.anchor * du
+        return loss, torch.cat([g_u, g_l.reshape(-1), g_w.reshape(-1), g_b])
 
 
-def refine(problem: RefineProblem, l2: float, max_iter: int, fit_bias: bool = True) -> RefineResult:
+def refine(
+    problem: RefineProblem,
+    l2: float,
+    max_iter: int,
+    fit_bias: bool = True,
+    anchor: float = 0.0,
+) -> RefineResult:
     """Move the supports and rescale the kernels of every node (LBFGS, strong Wolfe).
 
     Args:
@@ -195,12 +210,15 @@ def refine(problem: RefineProblem, l2: float, max_iter: int, fit_bias: bool = Tr
         l2: weight of ``½ l2 ||w||²`` per node.
         max_iter: LBFGS iterations at most.
         fit_bias: learn the intercepts (else they stay as given).
+        anchor: weight ``λ`` of ``λ Σ ||u - u₀||²``, which pulls each support back to its
+            starting point (``u``: positions in units of the starting kernel's width); 0:
+            free.
 
     Returns:
         The refined model; never worse in loss than the start (LBFGS's line search only
         accepts decreases).
     """
-    objective = _Objective(problem, l2, fit_bias)
+    objective = _Objective(problem, l2, fit_bias, anchor)
     k, _, d = problem.support.shape
     log_scale = torch.zeros(k, d, dtype=torch.float64)
     theta = objective.pack(problem.support, log_scale, problem.weight, problem.bias)

@@ -540,7 +540,7 @@ class SparseKLRPredictor(KLRPredictor):
             self.weight.detach()[idx, :s].double(),
             self.bias.detach()[idx].double(),
         )
-        result = refine(problem, cfg.l2, cfg.refine_iter, cfg.bias)
+        result = refine(problem, cfg.l2, cfg.refine_iter, cfg.bias, cfg.refine_anchor)
         with torch.no_grad():
             self.support[idx, :s] = result.support.to(self.dtype_)
             self.log_feature_scale[idx] += result.log_scale.to(self.dtype_)

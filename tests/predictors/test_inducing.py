@@ -39,7 +39,7 @@ def problem() -> RefineProblem:
 
 
 def test_gradient_is_the_loss_derivative(problem):
-    objective = _Objective(problem, l2=1e-3, fit_bias=True)
+    objective = _Objective(problem, l2=1e-3, fit_bias=True, anchor=0.3)
     gen = torch.Generator().manual_seed(1)
     theta = objective.pack(
         problem.support
@@ -87,3 +87,12 @@ def test_padded_samples_stride_and_weights():
     torch.testing.assert_close(y[0], ys[0][::2].double())
     torch.testing.assert_close(c[0], torch.full((3,), 1.0 / 3, dtype=torch.float64))
     assert c[1].tolist() == [0.5, 0.5, 0.0]  # two rows and a padded one
+
+
+def test_anchor_pulls_the_supports_back(problem):
+    free = refine(problem, l2=1e-4, max_iter=40)
+    held = refine(problem, l2=1e-4, max_iter=40, anchor=100.0)
+    moved_free = (free.support - problem.support).abs().max()
+    moved_held = (held.support - problem.support).abs().max()
+    assert moved_held < 0.1 * moved_free
+    assert held.loss < held.loss_start  # the weights and scales still learn

@@ -13,7 +13,7 @@ from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 # Held-out MAE on this data (seed 0 train / seed 1 test) as measured: klr 0.028, klr_sparse
-# 0.017 with the test demos as validation data, 0.014 choosing on held-out activations. The
+# 0.021 with the test demos as validation data, 0.019 choosing on held-out activations. The
 # bound is about twice the default's: a regression that doubles the error fails.
 MAE_BOUND = 0.06
 
@@ -141,6 +141,8 @@ def test_summary_describes_the_path(validated):
         ("refine_iter", -1),
         ("refine_iter", 2.5),
         ("refine_samples", 0),
+        ("refine_anchor", -0.1),
+        ("refine_anchor", float("nan")),
     ],
 )
 def test_bad_options_are_config_errors_naming_the_option(option, value):
@@ -208,6 +210,6 @@ def test_refined_model_predicts_held_out_progress(validated, fit_on_train, test_
     kept = fit_on_train("klr_sparse", refine_iter=0)
     kept_mae = progress_errors(activation_progress(kept, test_demos))["mae"]
     moved_mae = progress_errors(activation_progress(fit_on_train("klr_sparse"), test_demos))["mae"]
-    # measured on this data: default 0.028, kept in place 0.035, refined 0.014
+    # measured on this data: default 0.028, kept in place 0.035, refined 0.019
     assert moved_mae < kept_mae
     assert moved_mae < 1.1 * default
