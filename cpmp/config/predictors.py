@@ -221,9 +221,10 @@ class SparseKLRConfig(KLRConfig):
             the closed loop needs φ high: on the simulator (6 demos, seed 0) 9 of 20 boxes
             complete free, 14 at 0.01, 15 kept in place (the default model: 15), while kept in
             place two_point's held-out MAE at 3 demos is 1.14x the default's (0.95x at 0.01).
-        l2: as in :class:`KLRConfig`, lower by default (1e-6): fewer supports carry larger
-            weights, which the fixed rule's 1e-4 held back (held-out MAE on the simulator's
-            9-demo fit 0.0216 at 1e-4, 0.0178 at 1e-6, at a quarter of the supports).
+        l2: as in :class:`KLRConfig`, and the same default: the start heads keep the fixed
+            rule's supports, and their one-class fits choose the initial node only at
+            ``klr``'s penalty (at 1e-6, relay with 6 demos started wrongly in 20 of 20
+            episodes).
         candidate_scale: ``l1``: candidates per unit path length (pruned after training).
         min_candidates: ``l1``: minimum candidates per activation.
         l1: ``l1``: weight of the sparsity penalty ``l1 * mean|w|`` per node.
@@ -244,7 +245,6 @@ class SparseKLRConfig(KLRConfig):
     refine_iter: int = 60
     refine_samples: int = 128
     refine_anchor: float = 0.01
-    l2: float = 1e-4
     candidate_scale: float = 8.0
     min_candidates: int = 8
     l1: float = 1e-2
