@@ -162,36 +162,41 @@ class SparseKLRConfig(KLRConfig):
 
     ``klr_sparse`` starts from cpmp's default model (``klr_path``: the same RBF kernel,
     path feature weighting, global scaling and denoised labels) and learns which of the fixed
-    rule's support points to keep. With ``method: forward`` (the default) it follows a
-    *sparsity path*: greedy forward selection over all nodes (each added support is the
-    candidate, of any node, with the largest estimated loss decrease; Newton re-fits along
-    the way, :mod:`cpmp.predictors.selection`), recorded at support totals that are fractions
-    (*levels*) of the fixed rule's count, once per kernel width in ``gamma_scales``. The
-    level and width of least held-out progress MAE are kept, then solved exactly by the trainer's
-    convex solver. The validation data are the fit's (held-out demonstrations; the main job's
-    test split, ``trainer.val_fraction``, or ``validation=`` of
+    rule's support points of the graph nodes to keep. With ``method: forward`` (the default)
+    it follows a *sparsity path*: greedy forward selection over all graph nodes (each added
+    support is the candidate, of any node, with the largest estimated loss decrease; Newton
+    re-fits along the way, :mod:`cpmp.predictors.selection`), recorded at support totals that
+    are fractions (*levels*) of the graph nodes' fixed-rule count, once per kernel width in
+    ``gamma_scales``. The level and width of least held-out progress MAE are kept (then the
+    loss, then fewer supports, break ties). The validation data are the fit's (held-out
+    demonstrations; the main job's test split, ``trainer.val_fraction``, or ``validation=`` of
     :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any, ``holdout_fraction`` of
     each node's activations (seeded by the fit's seed) is held out to choose, and the chosen
-    level and width are then fitted on every activation. The fit summary reports the path:
-    ``sparsity_path`` (one record per width and level: ``level``, ``gamma_scale``,
-    ``n_support``, ``train_loss``, ``val_loss``, ``val_mae``, ``chosen``),
-    ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation`` (``validation``,
-    ``held-out activations`` or ``none``) and ``n_support_rule`` (the fixed rule's count).
+    level and width are then selected again on every activation. The start heads keep the
+    fixed rule's supports: they are evaluated once per episode, and sparsified their one-class
+    fits chose the wrong initial node in 4-19 of 20 episodes (two_point, relay).
 
     The kept supports are then *refined* (``refine_iter`` > 0, the default): their positions,
     one kernel-weight factor per node and feature, the weights and the bias are optimised
     together by LBFGS on the training loss (inducing points, :mod:`cpmp.predictors.inducing`),
-    on every training activation. A subset of the rule's fixed points leaves gaps the default
-    kernel was not made to bridge; moved supports close them (held-out MAE at a quarter of the
-    supports, two_point / relay / simulator with 3 demonstrations: 0.053 / 0.059 / 0.040 kept
-    in place, 0.023 / 0.037 / 0.031 refined, against the default model's 0.028 / 0.035 / 0.030).
-    When the level was chosen on held-out activations, the refinement on every activation
-    replaces a second path on them. The summary adds ``refine`` (the loss before and after,
-    and the evaluations spent).
+    on every training activation, each support anchored to its path point
+    (``refine_anchor``); the trainer's convex solver then solves the weights on every sample.
+    A subset of the rule's fixed points leaves gaps the default kernel was not made to bridge;
+    moved supports close them (held-out MAE at a quarter of the supports, two_point / relay /
+    simulator with 3 demonstrations of seed 0: 0.053 / 0.059 / 0.040 kept in place, 0.026 /
+    0.037 / 0.035 refined, against the default model's 0.028 / 0.035 / 0.030;
+    ``scripts/bench_sparse.py``).
 
-    To fit at a given support count (an ablation axis), set ``level``: the model then has
-    ``round(level * n_support_rule)`` supports (at least one per node); the width is still
-    chosen on the validation data, and the path up to that level is still reported.
+    The fit summary reports the path: ``sparsity_path`` (one record per width and level:
+    ``level``, ``gamma_scale``, ``n_support``, ``train_loss``, ``val_loss``, ``val_mae``,
+    ``chosen``), ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``
+    (``validation``, ``held-out activations`` or ``none``), ``n_support_rule`` (the graph
+    nodes' fixed-rule count), ``refine`` (the loss before and after, the evaluations spent),
+    ``n_support_graph`` and ``n_support_start``.
+
+    To fit at a given support count (an ablation axis), set ``level``: the graph nodes then
+    have ``floor(level * n_support_rule)`` supports (at least one per node); the width is
+    still chosen on the validation data, and the path up to that level is still reported.
 
     ``method: l1`` is the earlier variant, kept for comparison: a generous candidate set, an
     L1 penalty trained by Adam, pruning and a convex re-fit (the options from
