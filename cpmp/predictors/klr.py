@@ -494,7 +494,6 @@ class SparseKLRPredictor(KLRPredictor):
         best = self._choose([p for p, _ in points], levels[-1])
         chosen, graph_models = points[best]
         kept_from = list(split.candidates)
-        refine_all = self.config.refine_iter > 0
         if split.source == "held-out activations":
             # choose on the split, then select again on every activation
             problems = [_problem(kernels[i], data[i].target, None, None, True) for i in graph]
@@ -513,7 +512,7 @@ class SparseKLRPredictor(KLRPredictor):
         ]
         self.sparsity_validation = split.source
         self._keep(kept_from, models, chosen.gamma_scale, graph)
-        if refine_all:  # the moved supports learn from every activation
+        if self.config.refine_iter > 0:  # the moved supports learn from every activation
             self._refine(data, graph)
         log.info("%s", self.describe_path())
 
@@ -536,7 +535,7 @@ class SparseKLRPredictor(KLRPredictor):
             sample_weight,
             self.support.detach()[idx, :s].double(),
             mask[:, :s],
-            (self.gamma * self.feature_scale * torch.exp(self.log_feature_scale))[idx].double(),
+            self.feature_weights()[idx].double(),
             self.weight.detach()[idx, :s].double(),
             self.bias.detach()[idx].double(),
         )
