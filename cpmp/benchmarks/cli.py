@@ -17,6 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.config import TaskConfig
 from cpmp.errors import CpmpError
@@ -34,6 +36,49 @@ def _print_json(name: str, measure: Callable[[], Any]) -> int:
         print(f"{name}: error: {err}", file=sys.stderr)
         return 2
     print(json.dumps(result, indent=2))
+    return 0
+
+
+def given_options(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, Any]:
+    """The options among ``names`` given on the command line (lists as tuples)."""
+    return {
+        name: tuple(value) if isinstance(value, list) else value
+        for name in names
+        if (value := getattr(args, name)) is not None
+    }
+
+
+def run_settings_benchmark(
+    name: str,
+    args: argparse.Namespace,
+    settings_class: Any,
+    options: dict[str, Any],
+    run: Callable[[Any, Callable[[str], None]], dict[str, Any]],
+    markdown: Callable[[dict[str, Any]], str],
+) -> int:
+    """The command line's end of a benchmark with a settings class (``bench_clock``, ...).
+
+    On one thread: the settings from ``options`` (``settings_class.quick`` with ``--quick``),
+    ``run(settings, log)`` with progress lines to stderr, the result written as JSON to
+    ``args.out`` (atomically), its Markdown table and the file's path printed.
+
+    Returns:
+        0, or 2 after a :class:`~cpmp.errors.CpmpError` (a bad option), said on stderr as
+        ``<name>: error: ...``.
+    """
+    torch.set_num_threads(1)
+    started = time.perf_counter()
+    try:
+        settings = settings_class.quick(**options) if args.quick else settings_class(**options)
+        result = run(settings, lambda line: print(line, file=sys.stderr))
+    except CpmpError as err:
+        print(f"{name}: error: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
+    print(markdown(result), end="")
+    print(f"{out} ({time.perf_counter() - started:.0f} s)")
     return 0
 
 

@@ -27,22 +27,18 @@ from __future__ import annotations
 import argparse
 import copy
 import inspect
-import json
 import math
-import sys
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-import torch
 
+from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.config import TaskConfig
 from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import ConfigError, CpmpError
-from cpmp.io import atomic_write_text, to_builtin
+from cpmp.io import to_builtin
 from cpmp.records import Policy
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sim import correct_strategy, record_demonstrations, run_episodes
@@ -849,31 +845,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sim-demos", type=int, help="simulated demonstrations per fit (6)")
     parser.add_argument("--sim-boxes", type=int, help="held-out boxes per simulator seed (6)")
     args = parser.parse_args(argv)
-    options = {
-        name: tuple(value) if isinstance(value, list) else value
-        for name in (
-            "worlds",
-            "conditions",
-            "seeds",
-            "demos",
-            "episodes",
-            "sim_seeds",
-            "sim_demos",
-            "sim_boxes",
-        )
-        if (value := getattr(args, name)) is not None
-    }
-    torch.set_num_threads(1)
-    started = time.perf_counter()
-    try:
-        settings = ClockSettings.quick(**options) if args.quick else ClockSettings(**options)
-        result = run_clock_benchmark(settings, lambda line: print(line, file=sys.stderr))
-    except CpmpError as err:
-        print(f"bench_clock: error: {err}", file=sys.stderr)
-        return 2
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
-    print(markdown(result), end="")
-    print(f"{out} ({time.perf_counter() - started:.0f} s)")
-    return 0
+    names = ("worlds", "conditions", "seeds", "demos", "episodes", "sim_seeds", "sim_demos")
+    options = given_options(args, (*names, "sim_boxes"))
+    return run_settings_benchmark(
+        "bench_clock", args, ClockSettings, options, run_clock_benchmark, markdown
+    )

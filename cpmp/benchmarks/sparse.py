@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -36,10 +35,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.config import TaskConfig
 from cpmp.data.datafile import load_demonstrations, save_demonstrations
 from cpmp.data.demonstration import Demonstration
-from cpmp.errors import ConfigError, CpmpError
+from cpmp.errors import ConfigError
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.experiment.collection import SeedData
 from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
@@ -383,27 +383,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--level", type=float, help="klr_sparse's level (default: chosen)")
     parser.add_argument("--cache", help="directory caching the simulator's demonstrations")
     args = parser.parse_args(argv)
-    options: dict[str, Any] = {
-        name: tuple(value) if isinstance(value, list) else value
-        for name in ("worlds", "sizes", "seeds", "sim_seeds", "episodes", "sim_boxes")
-        if (value := getattr(args, name)) is not None
-    }
-    for name in ("repeats", "cache"):
-        if getattr(args, name) is not None:
-            options[name] = getattr(args, name)
+    names = ("worlds", "sizes", "seeds", "sim_seeds", "episodes", "sim_boxes", "repeats", "cache")
+    options = given_options(args, names)
     if args.level is not None:
         options["options"] = {"level": args.level}
-    torch.set_num_threads(1)
-    started = time.perf_counter()
-    try:
-        settings = SparseSettings.quick(**options) if args.quick else SparseSettings(**options)
-        result = run_sparse_benchmark(settings, lambda line: print(line, file=sys.stderr))
-    except CpmpError as err:
-        print(f"bench_sparse: error: {err}", file=sys.stderr)
-        return 2
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
-    print(markdown(result), end="")
-    print(f"{out} ({time.perf_counter() - started:.0f} s)")
-    return 0
+    return run_settings_benchmark(
+        "bench_sparse", args, SparseSettings, options, run_sparse_benchmark, markdown
+    )
