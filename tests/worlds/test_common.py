@@ -13,19 +13,6 @@ from cpmp.worlds.relay.world import STRATEGIES, VARIABLES, RelayTask
 torch.set_num_threads(1)
 
 
-class OneAtATime:
-    """A fitted sequencer without ``batched``: :func:`run_policies` runs it episode by episode."""
-
-    def __init__(self, seq: ConcurrentSequencer) -> None:
-        self.seq = seq
-
-    def reset(self, t, x):
-        return self.seq.reset(t, x)
-
-    def step(self, t, x):
-        return self.seq.step(t, x)
-
-
 @pytest.fixture(scope="module")
 def relay_seq() -> ConcurrentSequencer:
     # two demonstrations: a weak fit, so the episodes end in every way
@@ -54,10 +41,10 @@ def test_a_batch_runs_each_episode_as_run_policy_does(relay_seq):
     assert len({r.time for r in batched if r.reached_goal}) > 1
 
 
-def test_a_policy_without_batched_runs_one_episode_at_a_time(relay_seq):
+def test_a_policy_without_batched_runs_one_episode_at_a_time(relay_seq, one_at_a_time):
     task = RelayTask(max_time=4.0)
     episodes = seeded_episodes(task.sample_episode, STRATEGIES, 4, seed=4)
-    policy = OneAtATime(relay_seq)
+    policy = one_at_a_time(relay_seq)
     runs = run_policies(task, episodes, policy, task.features, VARIABLES)
     expected = run_policies(task, episodes, relay_seq, task.features, VARIABLES)
     assert [(r.sequences, r.time) for r in runs] == [(r.sequences, r.time) for r in expected]

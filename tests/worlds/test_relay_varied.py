@@ -110,25 +110,12 @@ def test_paced_world_face_scores_every_episode():
     assert scores[0].time > 0
 
 
-class OneAtATime:
-    """A fitted sequencer without ``batched``: the world runs it one episode at a time."""
-
-    def __init__(self, seq: ConcurrentSequencer) -> None:
-        self.seq = seq
-
-    def reset(self, t, x):
-        return self.seq.reset(t, x)
-
-    def step(self, t, x):
-        return self.seq.step(t, x)
-
-
-def test_a_fitted_sequencer_scores_as_it_does_one_episode_at_a_time():
+def test_a_fitted_sequencer_scores_as_it_does_one_episode_at_a_time(one_at_a_time):
     torch.set_num_threads(1)
     world = paced_relay(0, 2, relay=RelayTask(max_time=6.0))  # short: a few time out
     seq = ConcurrentSequencer.fit(world.demonstrations, seed=0, logger=None)
     batched = world.evaluate(seq, 6, 9)  # all six episodes at once (seq.batched)
-    assert batched == world.evaluate(OneAtATime(seq), 6, 9)
+    assert batched == world.evaluate(one_at_a_time(seq), 6, 9)
     assert {s.outcome for s in batched} == {"complete", "incomplete", "wrong_start"}
 
 
