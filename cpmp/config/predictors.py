@@ -173,8 +173,9 @@ class SparseKLRConfig(KLRConfig):
     :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any, ``holdout_fraction`` of
     each node's activations (seeded by the fit's seed) is held out to choose, and the chosen
     level and width are then selected again on every activation. The start heads keep the
-    fixed rule's supports: they are evaluated once per episode, and sparsified their one-class
-    fits chose the wrong initial node in 4-19 of 20 episodes (two_point, relay).
+    fixed rule's supports by default: they are evaluated once per episode, and sparsified their
+    one-class fits chose the wrong initial node in 4-19 of 20 episodes (two_point, relay).
+    ``start_share`` < 1 keeps only the points nearest the activations' starts instead.
 
     The kept supports are then *refined* (``refine_iter`` > 0, the default): their positions,
     one kernel-weight factor per node and feature, the weights and the bias are optimised
@@ -226,6 +227,15 @@ class SparseKLRConfig(KLRConfig):
             the closed loop needs φ high: on the simulator (6 demos, seed 0) 9 of 20 boxes
             complete free, 14 at 0.01, 15 kept in place (the default model: 15), while kept in
             place two_point's held-out MAE at 3 demos is 1.14x the default's (0.95x at 0.01).
+        start_share: the share of each start head's fixed-rule supports kept, those of
+            least path share along their activations (``floor(start_share * n)``, at least
+            one); 1 (default): all. At 0.25 the whole bank holds at most a quarter of the
+            default's supports, and on the synthetic worlds (D = 3 / 6 / 9, seeds 0-1) it
+            started wrongly no more often than the default model (relay: 0-1 wrong starts of
+            20 where the default had 1-10), but on the simulator its joint start was wrong
+            for 10 of 20 boxes against the default's 5 (3 demonstrations, seed 0; 9 at 0.5,
+            5 at 0.75) and 7.5-9 fewer boxes completed at D = 3 / 6 / 9 (seeds 0-1): there
+            the start decision rests on the heads' later points too.
         l2: as in :class:`KLRConfig`, and the same default: the start heads keep the fixed
             rule's supports, and their one-class fits choose the initial node only at
             ``klr``'s penalty (at 1e-6, relay with 6 demos started wrongly in 20 of 20
@@ -250,6 +260,7 @@ class SparseKLRConfig(KLRConfig):
     refine_iter: int = 60
     refine_samples: int = 128
     refine_anchor: float = 0.01
+    start_share: float = 1.0
     candidate_scale: float = 8.0
     min_candidates: int = 8
     l1: float = 1e-2
@@ -273,6 +284,7 @@ class SparseKLRConfig(KLRConfig):
         if self.level is not None:
             self.level = self._share("level", self.level)
         self.path_levels = self._shares("path_levels")
+        self.start_share = self._share("start_share", self.start_share)
         self.gamma_scales = self._shares("gamma_scales", upper=None)
         fraction = self._number("holdout_fraction")
         if not 0.0 < fraction < 1.0:

@@ -471,8 +471,8 @@ class SparseKLRPredictor(KLRPredictor):
 
         Only the graph nodes are sparsified: a start head is evaluated once per episode, at
         the start, where its choice among a variable's initial nodes rests on the fixed
-        rule's supports at the activations' starts, so it keeps them (and the default
-        kernel).
+        rule's supports, so it keeps them and the default kernel (``start_share`` < 1: only
+        the share of them nearest the activations' starts, :meth:`_start_supports`).
         """
         masks = self.support_mask
         candidates = [self.support[i, masks[i]].detach().clone() for i in range(self.n_nodes)]
@@ -507,6 +507,8 @@ class SparseKLRPredictor(KLRPredictor):
             models[i] = model
         for i in set(range(self.n_nodes)) - set(graph):
             kept_from[i] = candidates[i]
+            kept = self._start_supports(data[i])
+            models[i] = NodeModel(kept, torch.zeros(len(kept), dtype=torch.float64), 0.0)
         self.sparsity_path = [
             dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
         ]
@@ -515,6 +517,20 @@ class SparseKLRPredictor(KLRPredictor):
         if self.config.refine_iter > 0:  # the moved supports learn from every activation
             self._refine(data, graph)
         log.info("%s", self.describe_path())
+
+    def _start_supports(self, node: NodeData) -> torch.Tensor:
+        """Indices of the candidates a start head keeps: those nearest its activations' starts.
+
+        ``floor(start_share * n)`` of its ``n`` rule points (at least one), in order of their
+        share of their activation's path length (then of activation): the points of about
+        the first ``start_share`` of every activation, the activations' first points first.
+        """
+        rule = (*self._support_rule(), "none")
+        counts = [support_point_count(p, *rule) for p in node.paths]
+        share = np.concatenate([np.linspace(0.0, 1.0, m) if m > 1 else [0.0] for m in counts])
+        n_keep = max(1, math.floor(self.config.start_share * len(share) + 1e-9))
+        order = np.lexsort((np.arange(len(share)), share))  # by path share, then activation
+        return torch.as_tensor(np.sort(order[:n_keep]), dtype=torch.long)
 
     def _refine(self, data: list[NodeData], nodes: list[int]) -> None:
         """Move the kept supports of ``nodes`` and rescale their kernels on every sample.

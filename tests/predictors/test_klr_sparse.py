@@ -10,6 +10,7 @@ import torch
 from cpmp.config import predictor_config
 from cpmp.errors import ConfigError
 from cpmp.evaluation.offline import activation_progress, progress_errors
+from cpmp.progress import expected_progress
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 # Held-out MAE on this data (seed 0 train / seed 1 test) as measured: klr 0.028, klr_sparse
@@ -71,6 +72,33 @@ def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, klr_count
     assert summary["n_support_total"] == graph + sum(start.values()) < klr_count
     unvalidated = fit_on_train("klr_sparse")
     assert unvalidated.fit_summary["n_support_graph"] <= 0.25 * klr_graph
+
+
+def test_start_share_keeps_the_start_heads_first_points(train_demos, fit_on_train):
+    seq = ConcurrentSequencer.fit(train_demos, "klr_sparse", seed=0, logger=None, start_share=0.25)
+    full = fit_on_train("klr_sparse")
+    _, rule_start = _split_counts(full.fit_summary["support_counts"])
+    graph, start = _split_counts(seq.fit_summary["support_counts"])
+    assert start.keys() == rule_start.keys()
+    assert start == {k: max(1, int(0.25 * n)) for k, n in rule_start.items()}
+    assert graph == full.fit_summary["n_support_graph"]  # the graph nodes are untouched
+    # every kept point is one of the fixed rule's, from the first quarter of an activation's
+    # path (eq. 1 of its nearest demonstrated sample)
+    pred, ref = seq.predictor, full.predictor
+    for i, (v, mp) in enumerate(pred.node_keys):
+        if not mp.startswith("start:"):
+            continue
+        kept = pred.support[i, pred.support_mask[i]]
+        rule = ref.support[i, ref.support_mask[i]]
+        assert float(torch.cdist(kept, rule).min(1).values.max()) < 1e-12
+        acts = seq.graphs[v].activations[mp.removeprefix("start:")]
+        x = np.concatenate([pred.scaler.transform(a.features) for a in acts])
+        label = np.concatenate([expected_progress(pred.scaler.transform(a.features)) for a in acts])
+        nearest = torch.cdist(kept, torch.as_tensor(x)).argmin(1).numpy()
+        assert label[nearest].max() <= 0.3
+    # a share of 1 is the fixed rule's heads
+    with pytest.raises(ConfigError, match="start_share"):
+        predictor_config("klr_sparse", start_share=0.0)
 
 
 def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit_on_train):
