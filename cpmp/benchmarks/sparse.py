@@ -381,12 +381,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sim-boxes", type=int, help="simulator reproduction boxes (20)")
     parser.add_argument("--repeats", type=int, help="fits per predictor, fastest counts (2)")
     parser.add_argument("--level", type=float, help="klr_sparse's level (default: chosen)")
+    parser.add_argument(
+        "--start-share", type=float, help="klr_sparse's start_share (default: 1, all)"
+    )
     parser.add_argument("--cache", help="directory caching the simulator's demonstrations")
     args = parser.parse_args(argv)
     names = ("worlds", "sizes", "seeds", "sim_seeds", "episodes", "sim_boxes", "repeats", "cache")
     options = given_options(args, names)
-    if args.level is not None:
-        options["options"] = {"level": args.level}
+    extra = {"level": args.level, "start_share": args.start_share}
+    if any(v is not None for v in extra.values()):
+        options["options"] = {k: v for k, v in extra.items() if v is not None}
     return run_settings_benchmark(
         "bench_sparse", args, SparseSettings, options, run_sparse_benchmark, markdown
     )

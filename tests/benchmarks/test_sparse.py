@@ -59,9 +59,22 @@ def test_a_fixed_level_reaches_the_fits(tmp_path):
     assert row["sparse"]["supports"] < result["rows"][0]["default"]["supports"] * 0.2
 
 
+def test_start_share_reaches_the_fits(tmp_path):
+    out = tmp_path / "share.json"
+    assert main(["--quick", "--start-share", "0.25", "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["sparse"]["supports"] <= 0.25 * row["default"]["supports"]
+    assert row["sparse"]["supports_all"] <= 0.25 * row["default"]["supports_all"]
+
+
 @pytest.mark.parametrize(
     "argv",
-    [["--quick", "--episodes", "0"], ["--quick", "--sizes", "0"], ["--quick", "--level", "2"]],
+    [
+        ["--quick", "--episodes", "0"],
+        ["--quick", "--sizes", "0"],
+        ["--quick", "--level", "2"],
+        ["--quick", "--start-share", "0"],
+    ],
 )
 def test_bad_options_exit_2(tmp_path, capsys, argv):
     assert main([*argv, "--out", str(tmp_path / "x.json")]) == 2
