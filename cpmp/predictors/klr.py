@@ -499,16 +499,15 @@ class SparseKLRPredictor(KLRPredictor):
             problems = [_problem(kernels[i], data[i].target, None, None, True) for i in graph]
             fitted = self._path(problems, [chosen.level], chosen.gamma_scale)
             graph_models, kept_from = fitted[-1][1].models, list(candidates)
-        models = [
-            NodeModel(torch.arange(len(c)), torch.zeros(len(c), dtype=torch.float64), 0.0)
-            for c in candidates
-        ]
-        for i, model in zip(graph, graph_models, strict=True):
-            models[i] = model
-        for i in set(range(self.n_nodes)) - set(graph):
-            kept_from[i] = candidates[i]
-            kept = self._start_supports(data[i])
-            models[i] = NodeModel(kept, torch.zeros(len(kept), dtype=torch.float64), 0.0)
+        by_node = dict(zip(graph, graph_models, strict=True))
+        models = []
+        for i, node in enumerate(data):
+            if i in by_node:
+                models.append(by_node[i])
+                continue
+            kept_from[i] = candidates[i]  # a start head: from every activation's points
+            kept = self._start_supports(node)
+            models.append(NodeModel(kept, torch.zeros(len(kept), dtype=torch.float64), 0.0))
         self.sparsity_path = [
             dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
         ]
@@ -518,6 +517,11 @@ class SparseKLRPredictor(KLRPredictor):
             self._refine(data, graph)
         log.info("%s", self.describe_path())
 
+    def _rule_counts(self, node: NodeData) -> list[int]:
+        """The fixed rule's support count of each of ``node``'s activations (in order)."""
+        rule = (*self._support_rule(), "none")
+        return [support_point_count(p, *rule) for p in node.paths]
+
     def _start_supports(self, node: NodeData) -> torch.Tensor:
         """Indices of the candidates a start head keeps: those nearest its activations' starts.
 
@@ -525,8 +529,7 @@ class SparseKLRPredictor(KLRPredictor):
         share of their activation's path length (then of activation): the points of about
         the first ``start_share`` of every activation, the activations' first points first.
         """
-        rule = (*self._support_rule(), "none")
-        counts = [support_point_count(p, *rule) for p in node.paths]
+        counts = self._rule_counts(node)
         share = np.concatenate([np.linspace(0.0, 1.0, m) if m > 1 else [0.0] for m in counts])
         n_keep = max(1, math.floor(self.config.start_share * len(share) + 1e-9))
         order = np.lexsort((np.arange(len(share)), share))  # by path share, then activation
@@ -595,7 +598,6 @@ class SparseKLRPredictor(KLRPredictor):
         rng = np.random.default_rng(seed)
         held: dict[str, set[int]] = {}
         problems, kept = [], []
-        rule = (*self._support_rule(), "none")
         for i, (node, g) in enumerate(zip(data, graph, strict=True)):
             base = node.key[0] + "/" + node.key[1].removeprefix(START_PREFIX)
             n_act = len(node.activations)
@@ -604,8 +606,7 @@ class SparseKLRPredictor(KLRPredictor):
                 n_out = min(max(n_out, 1 if n_act >= 2 else 0), n_act - 1)
                 held[base] = set(rng.choice(n_act, size=n_out, replace=False).tolist())
             out = held[base]
-            counts = [support_point_count(p, *rule) for p in node.paths]
-            ends = np.cumsum([0, *counts])
+            ends = np.cumsum([0, *self._rule_counts(node)])
             keep = [j for j in range(n_act) if j not in out]
             cand = torch.cat([candidates[i][ends[j] : ends[j + 1]] for j in keep])
             kept.append(cand)
