@@ -172,10 +172,11 @@ class SparseKLRConfig(KLRConfig):
     demonstrations; the main job's test split, ``trainer.val_fraction``, or ``validation=`` of
     :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any, ``holdout_fraction`` of
     each node's activations (seeded by the fit's seed) is held out to choose, and the chosen
-    level and width are then selected again on every activation. The start heads keep the
-    fixed rule's supports by default: they are evaluated once per episode, and sparsified their
-    one-class fits chose the wrong initial node in 4-19 of 20 episodes (two_point, relay).
-    ``start_share`` < 1 keeps only the points nearest the activations' starts instead.
+    level and width are then selected again on every activation. The start heads are not on
+    the path: sparsified as one-class fits they chose the wrong initial node in 4-19 of 20
+    episodes (two_point, relay). They are fitted on the fixed rule's supports and then
+    *distilled* (``start_share``): a quarter of their supports, chosen to reproduce the fitted
+    head's logits where the start rule reads them.
 
     The kept supports are then *refined* (``refine_iter`` > 0, the default): their positions,
     one kernel-weight factor per node and feature, the weights and the bias are optimised
@@ -193,7 +194,7 @@ class SparseKLRConfig(KLRConfig):
     ``chosen``), ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``
     (``validation``, ``held-out activations`` or ``none``), ``n_support_rule`` (the graph
     nodes' fixed-rule count), ``refine`` (the loss before and after, the evaluations spent),
-    ``n_support_graph`` and ``n_support_start``.
+    ``start_distillation`` (``max_logit_error``), ``n_support_graph`` and ``n_support_start``.
 
     To fit at a given support count (an ablation axis), set ``level``: the graph nodes then
     have ``floor(level * n_support_rule)`` supports (at least one per node); the width is
@@ -227,17 +228,20 @@ class SparseKLRConfig(KLRConfig):
             the closed loop needs φ high: on the simulator (6 demos, seed 0) 9 of 20 boxes
             complete free, 14 at 0.01, 15 kept in place (the default model: 15), while kept in
             place two_point's held-out MAE at 3 demos is 1.14x the default's (0.95x at 0.01).
-        start_share: the share of each start head's fixed-rule supports kept, those of
-            least path share along their activations (``floor(start_share * n)``, at least
-            one); 1 (default): all. At 0.25 the whole bank holds at most a quarter of the
-            default's supports, and on the synthetic worlds (D = 3 / 6 / 9, seeds 0-1) it
-            started wrongly no more often than the default model (relay: 0-1 wrong starts of
-            20 where the default had 1-10), but on the simulator its joint start was wrong
-            for 10 of 20 boxes against the default's 5 (3 demonstrations, seed 0; 9 at 0.5,
-            5 at 0.75) and 7.5-9 fewer boxes completed at D = 3 / 6 / 9 (seeds 0-1): there
-            the start decision rests on the heads' later points too.
-        l2: as in :class:`KLRConfig`, and the same default: the start heads keep the fixed
-            rule's supports, and their one-class fits choose the initial node only at
+        start_share: the share of each start head's fixed-rule supports kept after its fit
+            (``floor(start_share * n)``, at least one; 1: all, no distillation). They are
+            chosen by orthogonal matching pursuit to reproduce the fitted head's logits on its
+            variable's start region (the training samples of all its start heads with
+            progress label <= 0.25), weights and bias least squares there; the fit summary
+            reports the largest logit error (``start_distillation``). Keeping instead the
+            points nearest the activations' starts (the first quarter of each path) started
+            as well as the default on the synthetic worlds but wrongly for 10 of 20 simulator
+            boxes against the default's 5 (3 demonstrations, seed 0), 7.5-9 boxes fewer
+            complete per D: there the start decision rests on the heads' later points too.
+            Distilled, the simulator's starts and completions are those of the full heads
+            (seeds 0-1, D = 3 / 6 / 9) and the bank holds 0.21-0.25x the default's supports.
+        l2: as in :class:`KLRConfig`, and the same default: the start heads are fitted on
+            the fixed rule's supports, and their one-class fits choose the initial node only at
             ``klr``'s penalty (at 1e-6, relay with 6 demos started wrongly in 20 of 20
             episodes).
         candidate_scale: ``l1``: candidates per unit path length (pruned after training).
@@ -260,7 +264,7 @@ class SparseKLRConfig(KLRConfig):
     refine_iter: int = 60
     refine_samples: int = 128
     refine_anchor: float = 0.01
-    start_share: float = 1.0
+    start_share: float = 0.25
     candidate_scale: float = 8.0
     min_candidates: int = 8
     l1: float = 1e-2

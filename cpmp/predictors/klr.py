@@ -34,10 +34,22 @@ from cpmp.predictors.base import (
 )
 from cpmp.predictors.inducing import RefineProblem, padded_samples, refine
 from cpmp.predictors.newton import NewtonInfo, newton_fit
-from cpmp.predictors.selection import NodeModel, NodeProblem, PathPoint, forward_selection_path
+from cpmp.predictors.selection import (
+    NodeModel,
+    NodeProblem,
+    PathPoint,
+    forward_selection_path,
+    matching_pursuit,
+)
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
 
 log = logging.getLogger(__name__)
+
+START_REGION = 0.25
+"""Progress label up to which a start head's training samples are its *start region*, where
+``klr_sparse`` distils it (``start_share``)."""
+START_SAMPLES = 512
+"""Start-region samples per variable, at most, on which a start head is distilled."""
 
 
 class KLRPredictor(ProgressPredictor):
@@ -411,6 +423,9 @@ class SparseKLRPredictor(KLRPredictor):
         or ``none``."""
         self.n_support_rule = 0
         """Supports the fixed rule places on the fit's data (the levels' reference)."""
+        self.start_distillation: dict[str, float] = {}
+        """The start heads' distillation: ``max_logit_error`` on their start regions (empty:
+        none)."""
         self.refine_summary: dict[str, float | int] = {}
         """The last refinement's loss before and after and its evaluations (empty: none)."""
         self._validation: list[NodeData] | None = None
@@ -471,8 +486,8 @@ class SparseKLRPredictor(KLRPredictor):
 
         Only the graph nodes are sparsified: a start head is evaluated once per episode, at
         the start, where its choice among a variable's initial nodes rests on the fixed
-        rule's supports, so it keeps them and the default kernel (``start_share`` < 1: only
-        the share of them nearest the activations' starts, :meth:`_start_supports`).
+        rule's supports and the default kernel here; after the trainer's solve,
+        :meth:`finalize` distils it to ``start_share`` of them.
         """
         masks = self.support_mask
         candidates = [self.support[i, masks[i]].detach().clone() for i in range(self.n_nodes)]
@@ -501,13 +516,14 @@ class SparseKLRPredictor(KLRPredictor):
             graph_models, kept_from = fitted[-1][1].models, list(candidates)
         by_node = dict(zip(graph, graph_models, strict=True))
         models = []
-        for i, node in enumerate(data):
+        for i, c in enumerate(candidates):
             if i in by_node:
                 models.append(by_node[i])
                 continue
-            kept_from[i] = candidates[i]  # a start head: from every activation's points
-            kept = self._start_supports(node)
-            models.append(NodeModel(kept, torch.zeros(len(kept), dtype=torch.float64), 0.0))
+            kept_from[i] = c  # a start head: every point, until finalize distils it
+            models.append(
+                NodeModel(torch.arange(len(c)), torch.zeros(len(c), dtype=torch.float64), 0.0)
+            )
         self.sparsity_path = [
             dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
         ]
@@ -516,24 +532,6 @@ class SparseKLRPredictor(KLRPredictor):
         if self.config.refine_iter > 0:  # the moved supports learn from every activation
             self._refine(data, graph)
         log.info("%s", self.describe_path())
-
-    def _rule_counts(self, node: NodeData) -> list[int]:
-        """The fixed rule's support count of each of ``node``'s activations (in order)."""
-        rule = (*self._support_rule(), "none")
-        return [support_point_count(p, *rule) for p in node.paths]
-
-    def _start_supports(self, node: NodeData) -> torch.Tensor:
-        """Indices of the candidates a start head keeps: those nearest its activations' starts.
-
-        ``floor(start_share * n)`` of its ``n`` rule points (at least one), in order of their
-        share of their activation's path length (then of activation): the points of about
-        the first ``start_share`` of every activation, the activations' first points first.
-        """
-        counts = self._rule_counts(node)
-        share = np.concatenate([np.linspace(0.0, 1.0, m) if m > 1 else [0.0] for m in counts])
-        n_keep = max(1, math.floor(self.config.start_share * len(share) + 1e-9))
-        order = np.lexsort((np.arange(len(share)), share))  # by path share, then activation
-        return torch.as_tensor(np.sort(order[:n_keep]), dtype=torch.long)
 
     def _refine(self, data: list[NodeData], nodes: list[int]) -> None:
         """Move the kept supports of ``nodes`` and rescale their kernels on every sample.
@@ -598,6 +596,7 @@ class SparseKLRPredictor(KLRPredictor):
         rng = np.random.default_rng(seed)
         held: dict[str, set[int]] = {}
         problems, kept = [], []
+        rule = (*self._support_rule(), "none")
         for i, (node, g) in enumerate(zip(data, graph, strict=True)):
             base = node.key[0] + "/" + node.key[1].removeprefix(START_PREFIX)
             n_act = len(node.activations)
@@ -606,7 +605,8 @@ class SparseKLRPredictor(KLRPredictor):
                 n_out = min(max(n_out, 1 if n_act >= 2 else 0), n_act - 1)
                 held[base] = set(rng.choice(n_act, size=n_out, replace=False).tolist())
             out = held[base]
-            ends = np.cumsum([0, *self._rule_counts(node)])
+            counts = [support_point_count(p, *rule) for p in node.paths]
+            ends = np.cumsum([0, *counts])
             keep = [j for j in range(n_act) if j not in out]
             cand = torch.cat([candidates[i][ends[j] : ends[j + 1]] for j in keep])
             kept.append(cand)
@@ -734,15 +734,19 @@ class SparseKLRPredictor(KLRPredictor):
         return self._penalised_loss(data, kernels, self.config.l1, rows)
 
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
-        """``l1``: prune near-zero supports, compact the arrays, optionally re-fit the weights.
+        """``forward``: distil the start heads; ``l1``: prune, compact, optionally re-fit.
 
-        ``forward`` has nothing left to do (its supports were chosen before the solve).
+        ``forward`` chose its graph nodes' supports before the solve; with ``start_share`` < 1
+        its start heads are distilled now (:meth:`_distil_start_heads`). ``l1`` prunes the
+        near-zero supports and re-fits the weights of the others (``refit``).
 
         Args:
             data: every node's training data.
-            solver: how the convex re-fit is solved (default: Newton).
+            solver: how ``l1``'s convex re-fit is solved (default: Newton).
         """
         if self.config.method == "forward":
+            if self.config.start_share < 1.0:
+                self._distil_start_heads(data)
             return
         with torch.no_grad():
             w = (self.weight * self.support_mask).abs()
@@ -751,6 +755,14 @@ class SparseKLRPredictor(KLRPredictor):
             empty = keep.sum(1) == 0
             if empty.any():
                 keep[empty] = self.support_mask[empty] & (w[empty] == w[empty].max(1, True).values)
+        self._compact(keep)
+        self.log_feature_scale.requires_grad_(False)
+        if self.config.refit:
+            self._refit(data, solver or SolverOptions())
+
+    def _compact(self, keep: torch.Tensor) -> None:
+        """Keep the supports ``keep (K, S)`` (with their weights), padded to the most per node."""
+        with torch.no_grad():
             s_max = int(keep.sum(1).max())
             on = {"device": self.weight.device}
             support = torch.zeros(self.n_nodes, s_max, self.n_features, dtype=self.dtype_, **on)
@@ -765,10 +777,48 @@ class SparseKLRPredictor(KLRPredictor):
         self.support.requires_grad_(False)
         self.support_mask = mask
         self.weight = nn.Parameter(weight)
-        self.log_feature_scale.requires_grad_(False)
         self._cache = None
-        if self.config.refit:
-            self._refit(data, solver or SolverOptions())
+
+    def _distil_start_heads(self, data: list[NodeData]) -> None:
+        """Replace each fitted start head by ``start_share`` of its supports.
+
+        A start head is read once per episode, at the start, where the start rule compares
+        the entry probabilities of a variable's initial nodes. Its distilled version keeps
+        ``floor(start_share * n)`` of its ``n`` supports (at least one), chosen by orthogonal
+        matching pursuit (:func:`~cpmp.predictors.selection.matching_pursuit`) to reproduce
+        the fitted head's logits on the variable's *start region*: the training samples of
+        all its start heads with progress label at most :data:`START_REGION`
+        (:data:`START_SAMPLES` of them at most, every k-th); weights and bias are least
+        squares there.
+        """
+        heads: dict[str, list[int]] = {}
+        for i, node in enumerate(data):
+            if node.key[1].startswith(START_PREFIX):
+                heads.setdefault(node.key[0], []).append(i)
+        keep = self.support_mask.clone()
+        weight = self.weight.detach().clone()
+        bias = self.bias.detach().clone()
+        errors = []
+        with torch.no_grad():
+            for members in heads.values():
+                region = torch.cat([data[i].x[data[i].target <= START_REGION] for i in members])
+                region = region[:: max(1, math.ceil(len(region) / START_SAMPLES))]
+                logits = self.head_logits(region.to(self.dtype_), self.n_nodes)
+                for i in members:
+                    real = torch.nonzero(self.support_mask[i]).squeeze(1)
+                    kern = self.node_kernel(i, region)[:, real]
+                    k = max(1, math.floor(self.config.start_share * len(real) + 1e-9))
+                    fit = matching_pursuit(kern, logits[:, i], k)
+                    keep[i] = False
+                    keep[i, real[fit.support]] = True
+                    weight[i] = 0.0
+                    weight[i, real[fit.support]] = fit.weight.to(self.dtype_)
+                    bias[i] = fit.bias
+                    errors.append(fit.max_error)
+            self.weight.copy_(weight)
+            self.bias.copy_(bias)
+        self._compact(keep)
+        self.start_distillation = {"max_logit_error": max(errors, default=0.0)}
 
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
         """Convex re-fit of weights and bias on the surviving (fixed) supports.
@@ -802,8 +852,9 @@ class SparseKLRPredictor(KLRPredictor):
         ``forward``: ``sparsity_path`` (one dict per :class:`SparsityLevel`),
         ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``,
         ``n_support_rule`` (the graph nodes') and, after a refinement, ``refine``
-        (``loss_start``, ``loss``, ``evaluations``); always ``n_support_graph`` (the supports a
-        control tick evaluates) and ``n_support_start`` (the start heads', at the fixed rule).
+        (``loss_start``, ``loss``, ``evaluations``), after a distillation of the start heads
+        ``start_distillation`` (``max_logit_error``); always ``n_support_graph`` (the supports
+        a control tick evaluates) and ``n_support_start`` (the start heads').
         """
         out = super().summary()
         out["sparsity_method"] = self.config.method
@@ -818,6 +869,8 @@ class SparseKLRPredictor(KLRPredictor):
             out["n_support_rule"] = self.n_support_rule
         if self.refine_summary:
             out["refine"] = dict(self.refine_summary)
+        if self.start_distillation:
+            out["start_distillation"] = dict(self.start_distillation)
         counts = out["support_counts"]
         start = [k for k in counts if k.split("/", 1)[1].startswith(START_PREFIX)]
         out["n_support_start"] = sum(counts[k] for k in start)

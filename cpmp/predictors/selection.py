@@ -315,3 +315,67 @@ def forward_selection_path(
         if total < target:
             break
     return out
+
+
+@dataclass(frozen=True)
+class Pursuit:
+    """A sparse least-squares fit of a function by a subset of kernel columns.
+
+    Attributes:
+        support: ``(k,)`` indices of the chosen columns, in the order they were chosen.
+        weight: ``(k,)`` their least-squares weights (float64).
+        bias: the least-squares intercept.
+        max_error: largest ``|fit - target|`` over the samples.
+    """
+
+    support: torch.Tensor
+    weight: torch.Tensor
+    bias: float
+    max_error: float
+
+
+def matching_pursuit(kernel: torch.Tensor, target: torch.Tensor, k: int) -> Pursuit:
+    """Orthogonal matching pursuit: ``k`` columns and an intercept that reproduce ``target``.
+
+    Each step adds the column most correlated with the residual (correlation over the column's
+    norm) and projects the residual off the span of the chosen columns and the constant
+    (Gram-Schmidt, twice for stability); the weights are solved once at the end, by
+    back-substitution in that orthonormal basis. A column already in that span (to 1e-10 of
+    its norm) is passed over.
+
+    Args:
+        kernel: ``(N, n)`` the candidate columns at ``N`` samples.
+        target: ``(N,)`` the values to reproduce.
+        k: columns to choose (at most ``n``; fewer when the others are in the span).
+
+    Returns:
+        The chosen columns, their weights, the intercept and the largest error.
+    """
+    a, f = kernel.double(), target.double()
+    n_samples, n = a.shape
+    basis = torch.full((n_samples, 1), n_samples**-0.5, dtype=torch.float64)
+    residual = f - basis[:, 0] * (basis[:, 0] @ f)
+    norms = a.norm(dim=0).clamp_min(1e-300)
+    open_ = torch.ones(n, dtype=torch.bool)
+    chosen: list[int] = []
+    while len(chosen) < min(k, n) and bool(open_.any()):
+        score = torch.where(open_, (a.T @ residual).abs() / norms, -1.0)
+        j = int(score.argmax())
+        open_[j] = False
+        v = a[:, j].clone()
+        for _ in range(2):
+            v -= basis @ (basis.T @ v)
+        length = float(v.norm())
+        if length <= 1e-10 * float(norms[j]):
+            continue
+        q = v / length
+        basis = torch.cat([basis, q[:, None]], 1)
+        residual = residual - q * (q @ residual)
+        chosen.append(j)
+    support = torch.tensor(chosen, dtype=torch.long)
+    design = torch.cat([torch.ones(n_samples, 1, dtype=torch.float64), a[:, support]], 1)
+    # design = basis @ r with r upper triangular: back-substitution, no LAPACK workspace
+    r = torch.triu(basis.T @ design)
+    coef = torch.linalg.solve_triangular(r, (basis.T @ f)[:, None], upper=True)[:, 0]
+    error = float((design @ coef - f).abs().max()) if n_samples else 0.0
+    return Pursuit(support, coef[1:].clone(), float(coef[0]), error)
