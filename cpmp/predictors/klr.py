@@ -795,6 +795,8 @@ class SparseKLRPredictor(KLRPredictor):
         for i, node in enumerate(data):
             if node.key[1].startswith(START_PREFIX):
                 heads.setdefault(node.key[0], []).append(i)
+        if not heads:  # start_kernel=shared: the graph nodes start the episode
+            return
         keep = self.support_mask.clone()
         weight = self.weight.detach().clone()
         bias = self.bias.detach().clone()
@@ -818,7 +820,7 @@ class SparseKLRPredictor(KLRPredictor):
             self.weight.copy_(weight)
             self.bias.copy_(bias)
         self._compact(keep)
-        self.start_distillation = {"max_logit_error": max(errors, default=0.0)}
+        self.start_distillation = {"max_logit_error": max(errors)}
 
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
         """Convex re-fit of weights and bias on the surviving (fixed) supports.

@@ -108,6 +108,11 @@ def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, f
         )
 
 
+def test_without_start_heads_nothing_is_distilled(fit_on_train):
+    summary = fit_on_train("klr_sparse", start_kernel="shared").fit_summary
+    assert summary["n_support_start"] == 0 and "start_distillation" not in summary
+
+
 def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit_on_train):
     summary = fit_on_train("klr_sparse").fit_summary
     assert summary["sparsity_validation"] == "held-out activations"
