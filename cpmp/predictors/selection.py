@@ -353,15 +353,18 @@ def matching_pursuit(kernel: torch.Tensor, target: torch.Tensor, k: int) -> Purs
     """
     a, f = kernel.double(), target.double()
     n_samples, n = a.shape
-    basis = torch.full((n_samples, 1), n_samples**-0.5, dtype=torch.float64)
-    residual = f - basis[:, 0] * (basis[:, 0] @ f)
+    k = min(k, n)
+    full = torch.zeros(n_samples, k + 1, dtype=torch.float64)  # the constant, then the columns
+    full[:, 0] = n_samples**-0.5
+    residual = f - full[:, 0] * (full[:, 0] @ f)
     norms = a.norm(dim=0).clamp_min(1e-300)
     open_ = torch.ones(n, dtype=torch.bool)
     chosen: list[int] = []
-    while len(chosen) < min(k, n) and bool(open_.any()):
+    while len(chosen) < k and bool(open_.any()):
         score = torch.where(open_, (a.T @ residual).abs() / norms, -1.0)
         j = int(score.argmax())
         open_[j] = False
+        basis = full[:, : len(chosen) + 1]
         v = a[:, j].clone()
         for _ in range(2):
             v -= basis @ (basis.T @ v)
@@ -369,9 +372,10 @@ def matching_pursuit(kernel: torch.Tensor, target: torch.Tensor, k: int) -> Purs
         if length <= 1e-10 * float(norms[j]):
             continue
         q = v / length
-        basis = torch.cat([basis, q[:, None]], 1)
+        full[:, len(chosen) + 1] = q
         residual = residual - q * (q @ residual)
         chosen.append(j)
+    basis = full[:, : len(chosen) + 1]
     support = torch.tensor(chosen, dtype=torch.long)
     design = torch.cat([torch.ones(n_samples, 1, dtype=torch.float64), a[:, support]], 1)
     # design = basis @ r with r upper triangular: back-substitution, no LAPACK workspace
