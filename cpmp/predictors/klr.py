@@ -714,6 +714,14 @@ class SparseKLRPredictor(KLRPredictor):
                 f"training loss {r['loss_start']:.5f} -> {r['loss']:.5f} in "
                 f"{r['evaluations']} evaluations"
             )
+        if self.start_distillation:
+            counts = self.support_counts()
+            start = sum(n for k, n in counts.items() if k.split("/", 1)[1].startswith(START_PREFIX))
+            lines.append(
+                f"start heads distilled to {start} supports (start_share "
+                f"{self.config.start_share:g}), largest logit error on their start regions "
+                f"{self.start_distillation['max_logit_error']:.4f}"
+            )
         return "\n".join(lines)
 
     # ------------------------------------------------------------------ training and l1
@@ -821,6 +829,7 @@ class SparseKLRPredictor(KLRPredictor):
             self.bias.copy_(bias)
         self._compact(keep)
         self.start_distillation = {"max_logit_error": max(errors)}
+        log.info("%s", self.describe_path().splitlines()[-1])
 
     def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
         """Convex re-fit of weights and bias on the surviving (fixed) supports.

@@ -85,6 +85,9 @@ def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, f
     assert "start_distillation" not in full.fit_summary
     error = distilled.fit_summary["start_distillation"]["max_logit_error"]
     assert 0.0 < error < math.inf  # measured: 0.78 (logits of magnitude up to about 8)
+    last = distilled.predictor.describe_path().splitlines()[-1]
+    assert last.startswith(f"start heads distilled to {sum(start.values())} supports")
+    assert f"{error:.4f}" in last
     one, two = distilled.predictor, full.predictor
     heads = [i for i, (_, mp) in enumerate(one.node_keys) if mp.startswith("start:")]
     graph = [i for i in range(one.n_nodes) if i not in heads]
@@ -158,8 +161,9 @@ def test_same_seed_same_model(fit_on_train, train_demos):
 def test_summary_describes_the_path(validated):
     text = validated.predictor.describe_path()
     assert "<- chosen" in text and "chosen on validation" in text
-    assert text.count("\n") == len(validated.fit_summary["sparsity_path"]) + 1
-    assert "then refined" in text
+    # a header, one line per point, the refinement, the start heads' distillation
+    assert text.count("\n") == len(validated.fit_summary["sparsity_path"]) + 2
+    assert "then refined" in text and "start heads distilled" in text
 
 
 @pytest.mark.parametrize(
