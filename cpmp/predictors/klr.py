@@ -715,8 +715,7 @@ class SparseKLRPredictor(KLRPredictor):
                 f"{r['evaluations']} evaluations"
             )
         if self.start_distillation:
-            counts = self.support_counts()
-            start = sum(n for k, n in counts.items() if k.split("/", 1)[1].startswith(START_PREFIX))
+            start = _start_supports(self.support_counts())
             lines.append(
                 f"start heads distilled to {start} supports (start_share "
                 f"{self.config.start_share:g}), largest logit error on their start regions "
@@ -883,10 +882,14 @@ class SparseKLRPredictor(KLRPredictor):
         if self.start_distillation:
             out["start_distillation"] = dict(self.start_distillation)
         counts = out["support_counts"]
-        start = [k for k in counts if k.split("/", 1)[1].startswith(START_PREFIX)]
-        out["n_support_start"] = sum(counts[k] for k in start)
+        out["n_support_start"] = _start_supports(counts)
         out["n_support_graph"] = out["n_support_total"] - out["n_support_start"]
         return out
+
+
+def _start_supports(counts: dict[str, int]) -> int:
+    """The start heads' supports in a :meth:`KLRPredictor.support_counts`."""
+    return sum(n for key, n in counts.items() if key.split("/", 1)[1].startswith(START_PREFIX))
 
 
 def _problem(
