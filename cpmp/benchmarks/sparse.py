@@ -14,12 +14,12 @@ Both predictors are fitted the same way, without validation demonstrations (as
 its training demonstrations, so the held-out demonstrations it is scored on played no part in
 its fit. Per world, D and seed: the fit time (the faster of ``repeats`` fits), supports
 (those a control tick evaluates, the graph nodes', and all of them with the start heads,
-which are evaluated once per episode and which ``klr_sparse`` leaves at the fixed rule),
-held-out MAE, the tick cost (the predictor's call on one feature vector for the graph
-nodes, as :meth:`ConcurrentSequencer.step` makes it, and on a batch of :data:`BATCH` vectors
-as batched rollouts make it, and a whole ``step()``, each the mean over one held-out
-demonstration replayed open loop) and C; then the ratios sparse / default (C: the
-difference). Written as JSON (atomically); nothing here asserts a number.
+which are evaluated once per episode and which ``klr_sparse`` distils to ``start_share`` of
+the fixed rule's), held-out MAE, the tick cost (the predictor's call on one feature vector for
+the graph nodes, as :meth:`ConcurrentSequencer.step` makes it, and on a batch of
+:data:`BATCH` vectors as batched rollouts make it, and a whole ``step()``, each the mean over
+one held-out demonstration replayed open loop) and C; then the ratios sparse / default (C:
+the difference). Written as JSON (atomically); nothing here asserts a number.
 """
 
 from __future__ import annotations
@@ -382,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, help="fits per predictor, fastest counts (2)")
     parser.add_argument("--level", type=float, help="klr_sparse's level (default: chosen)")
     parser.add_argument(
-        "--start-share", type=float, help="klr_sparse's start_share (default: 1, all)"
+        "--start-share", type=float, help="klr_sparse's start_share (default: 0.25; 1: all)"
     )
     parser.add_argument("--cache", help="directory caching the simulator's demonstrations")
     args = parser.parse_args(argv)
