@@ -24,7 +24,7 @@ from torch import nn
 
 from cpmp.config.predictors import KLRConfig, SparseKLRConfig
 from cpmp.config.trainer import SolverOptions
-from cpmp.errors import ConfigError
+from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.base import (
     START_PREFIX,
     NodeData,
@@ -214,9 +214,49 @@ class KLRPredictor(ProgressPredictor):
         self.support_mask = mask
         self.weight = nn.Parameter(torch.zeros(self.n_nodes, s_max, dtype=self.dtype_))
         self._cache = None
+        self._packed_cache = None
 
     def _assign_support(self, support: torch.Tensor) -> None:
         self.support = support
+
+    def keep_supports(self, keep: torch.Tensor) -> None:
+        """Keep only the supports ``keep (K, S)`` (bool, real slots), with their weights.
+
+        The bank is repacked to the most kept supports per node; biases, kernel weights and
+        the other slots' order are unchanged, so each node's logit loses exactly the terms of
+        the supports dropped. ``klr_sparse`` prunes and distils with it; a benchmark can
+        strip a bank to one support per node to time a tick's fixed cost.
+
+        Raises:
+            DataError: ``keep`` is not ``(K, S)``, keeps a padded slot or no slot of a node.
+        """
+        if tuple(keep.shape) != tuple(self.support_mask.shape):
+            raise DataError(
+                f"keep must have the support mask's shape {tuple(self.support_mask.shape)}, "
+                f"got {tuple(keep.shape)}"
+            )
+        keep = keep.to(torch.bool)
+        if bool((keep & ~self.support_mask.to(keep.device)).any()):
+            raise DataError("keep marks padded support slots; keep only real supports")
+        if bool((keep.sum(1) == 0).any()):
+            raise DataError("keep leaves a node without supports; keep one per node at least")
+        with torch.no_grad():
+            s_max = int(keep.sum(1).max())
+            on = {"device": self.weight.device}
+            support = torch.zeros(self.n_nodes, s_max, self.n_features, dtype=self.dtype_, **on)
+            weight = torch.zeros(self.n_nodes, s_max, dtype=self.dtype_, **on)
+            mask = torch.zeros(self.n_nodes, s_max, dtype=torch.bool, **on)
+            for i in range(self.n_nodes):
+                idx = torch.nonzero(keep[i]).squeeze(1)
+                support[i, : len(idx)] = self.support[i, idx]
+                weight[i, : len(idx)] = self.weight[i, idx]
+                mask[i, : len(idx)] = True
+        self._assign_support(support)
+        self.support.requires_grad_(False)
+        self.support_mask = mask
+        self.weight = nn.Parameter(weight)
+        self._cache = None
+        self._packed_cache = None  # new tensors: an old id may be reused
 
     def node_kernels(self, data: list[NodeData]) -> list[torch.Tensor]:
         """Kernel matrix ``(P_i, S)`` of each node's samples against its own supports.
@@ -762,29 +802,10 @@ class SparseKLRPredictor(KLRPredictor):
             empty = keep.sum(1) == 0
             if empty.any():
                 keep[empty] = self.support_mask[empty] & (w[empty] == w[empty].max(1, True).values)
-        self._compact(keep)
+        self.keep_supports(keep)
         self.log_feature_scale.requires_grad_(False)
         if self.config.refit:
             self._refit(data, solver or SolverOptions())
-
-    def _compact(self, keep: torch.Tensor) -> None:
-        """Keep the supports ``keep (K, S)`` (with their weights), padded to the most per node."""
-        with torch.no_grad():
-            s_max = int(keep.sum(1).max())
-            on = {"device": self.weight.device}
-            support = torch.zeros(self.n_nodes, s_max, self.n_features, dtype=self.dtype_, **on)
-            weight = torch.zeros(self.n_nodes, s_max, dtype=self.dtype_, **on)
-            mask = torch.zeros(self.n_nodes, s_max, dtype=torch.bool, **on)
-            for i in range(self.n_nodes):
-                idx = torch.nonzero(keep[i]).squeeze(1)
-                support[i, : len(idx)] = self.support[i, idx]
-                weight[i, : len(idx)] = self.weight[i, idx]
-                mask[i, : len(idx)] = True
-        self._assign_support(support)
-        self.support.requires_grad_(False)
-        self.support_mask = mask
-        self.weight = nn.Parameter(weight)
-        self._cache = None
 
     def _distil_start_heads(self, data: list[NodeData]) -> None:
         """Replace each fitted start head by ``start_share`` of its supports.
@@ -826,7 +847,7 @@ class SparseKLRPredictor(KLRPredictor):
                     errors.append(fit.max_error)
             self.weight.copy_(weight)
             self.bias.copy_(bias)
-        self._compact(keep)
+        self.keep_supports(keep)
         self.start_distillation = {"max_logit_error": max(errors)}
         log.info("%s", self.describe_path().splitlines()[-1])
 

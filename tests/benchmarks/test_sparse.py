@@ -11,7 +11,7 @@ import pytest
 from cpmp.benchmarks.sparse import TARGETS, SparseSettings, main, ratios, run_sparse_benchmark
 from cpmp.errors import ConfigError
 
-TIMES = ("fit_s", "predictor_ms", "step_ms", "batch_ms")
+TIMES = ("fit_s", "predictor_ms", "floor_ms", "step_ms", "batch_ms")
 
 
 def _untimed(result):
@@ -34,7 +34,7 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     assert (row["world"], row["D"], row["seed"]) == ("two_point", 3, 0)
     for kind in ("default", "sparse"):
         assert set(row[kind]) >= {"fit_s", "supports", "supports_all", "mae", "complete"}
-        assert set(row[kind]) >= {"predictor_ms", "batch_ms", "step_ms"}
+        assert set(row[kind]) >= {"predictor_ms", "floor_ms", "batch_ms", "step_ms"}
         # the graph nodes' supports (a tick's) and all of them, with the start heads'
         assert row[kind]["supports"] < row[kind]["supports_all"]
         assert 0 <= row[kind]["complete"] <= 4 and 0 < row[kind]["mae"] < 1
@@ -43,6 +43,8 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     assert row["sparse"]["validation"] == "held-out activations"
     assert row["ratios"] == ratios(row["default"], row["sparse"])
     assert row["ratios"]["supports"] == row["sparse"]["supports"] / row["default"]["supports"]
+    floor = row["default"]["floor_ms"] / row["default"]["predictor_ms"]
+    assert row["ratios"]["tick_floor"] == floor
     assert result["summary"]["two_point"]["3"]["ratios"]["met"]["supports"] is True
     table = capsys.readouterr().out
     assert "| two_point | 3 |" in table and str(out) in table

@@ -92,6 +92,31 @@ def test_packed_cache_follows_parameter_changes(fit_on_train, test_demos):
         np.testing.assert_allclose(clone.logits(z), model.logits(z), atol=1e-12)
 
 
+def test_keep_supports_drops_exactly_the_other_terms(fit_on_train, test_demos):
+    model = fit_on_train("klr").predictor
+    z = torch.as_tensor(test_demos[0].features[:9])
+    with torch.no_grad():
+        kernel, weight, bias = model.kernel(z), model.weight.clone(), model.bias.clone()
+        model(z)  # the packed cache is built, and must not outlive the repacking
+        mask = model.support_mask
+        keep = mask & (torch.arange(mask.shape[1]) % 3 == 1)  # every third slot ...
+        keep |= mask & (torch.cumsum(mask.long(), 1) == 1)  # ... and each node's first
+        expected = torch.einsum("bks,ks->bk", kernel * keep, weight) + bias
+        model.keep_supports(keep)
+        assert model.support_mask.sum(1).tolist() == keep.sum(1).tolist()
+        np.testing.assert_allclose(model.logits(z), expected, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(_padded_logits(model, z), expected, rtol=0, atol=1e-10)
+    mask = model.support_mask
+    assert not bool(mask.all())  # the nodes keep different counts: there is padding
+    for bad, match in [
+        (mask[:, :-1], "shape"),
+        (torch.ones_like(mask), "padded"),
+        (mask & (torch.arange(len(mask))[:, None] > 0), "without supports"),
+    ]:
+        with pytest.raises(DataError, match=match):
+            model.keep_supports(bad)
+
+
 @pytest.mark.parametrize("kind", ["klr", "klr_sparse", "mlp"])
 def test_first_heads_equal_the_full_bank_columns(fitted, test_demos, kind):
     model = fitted[kind].predictor
