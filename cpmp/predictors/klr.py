@@ -149,6 +149,16 @@ class KLRPredictor(ProgressPredictor):
             per_heads[heads] = self._first_heads(full, heads)
         return per_heads[heads]
 
+    def clear_cache(self) -> None:
+        """Drop the cached training kernels and packed supports; the next call rebuilds them.
+
+        Changes made with torch operations are seen without it (the cache is keyed on the
+        tensors' version counters); changes through ``.data`` (``p.data[i] = 0``,
+        ``p.data = t``) bypass the version counters: call this after them.
+        """
+        self._cache = None
+        self._packed_cache = None
+
     @staticmethod
     def _first_heads(full: tuple[Any, ...], heads: int) -> tuple[torch.Tensor, ...]:
         a, node, weighted, s_term, w, ends = full
@@ -213,8 +223,7 @@ class KLRPredictor(ProgressPredictor):
         self._assign_support(support)
         self.support_mask = mask
         self.weight = nn.Parameter(torch.zeros(self.n_nodes, s_max, dtype=self.dtype_))
-        self._cache = None
-        self._packed_cache = None
+        self.clear_cache()
 
     def _assign_support(self, support: torch.Tensor) -> None:
         self.support = support
@@ -255,8 +264,7 @@ class KLRPredictor(ProgressPredictor):
         self.support.requires_grad_(False)
         self.support_mask = mask
         self.weight = nn.Parameter(weight)
-        self._cache = None
-        self._packed_cache = None  # new tensors: an old id may be reused
+        self.clear_cache()  # new tensors: an old id may be reused
 
     def node_kernels(self, data: list[NodeData]) -> list[torch.Tensor]:
         """Kernel matrix ``(P_i, S)`` of each node's samples against its own supports.

@@ -86,6 +86,13 @@ def test_packed_cache_follows_parameter_changes(fit_on_train, test_demos):
         model.log_feature_scale.add_(0.3)
         np.testing.assert_allclose(model.logits(z), _padded_logits(model, z), atol=1e-10)
     assert not np.allclose(seq.progress(z.numpy()), before)
+    with torch.no_grad():  # edits through .data bypass the version counter: clear_cache
+        cached = model.logits(z)
+        model.weight.data[:, 0] = 0.0
+        model.support.data = model.support.data + 0.1
+        model.clear_cache()
+        np.testing.assert_allclose(model.logits(z), _padded_logits(model, z), atol=1e-10)
+        assert not np.allclose(model.logits(z), cached)
     clone = predictor_from_spec(model.spec())
     clone.load_state_dict(model.state_dict())
     with torch.no_grad():
