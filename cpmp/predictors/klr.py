@@ -231,10 +231,10 @@ class KLRPredictor(ProgressPredictor):
     def keep_supports(self, keep: torch.Tensor) -> None:
         """Keep only the supports ``keep (K, S)`` (bool, real slots), with their weights.
 
-        The bank is repacked to the most kept supports per node; biases, kernel weights and
-        the other slots' order are unchanged, so each node's logit loses exactly the terms of
-        the supports dropped. ``klr_sparse`` prunes and distils with it; a benchmark can
-        strip a bank to one support per node to time a tick's fixed cost.
+        The bank is repacked to the most kept supports per node; the biases, the kernel
+        weights and the kept supports' order are unchanged, so each node's logit loses exactly
+        the terms of the supports dropped. ``klr_sparse`` prunes and distils with it; a
+        benchmark can strip a bank to one support per node to time a tick's fixed cost.
 
         Raises:
             DataError: ``keep`` is not ``(K, S)``, keeps a padded slot or no slot of a node.
