@@ -187,6 +187,8 @@ def test_summary_describes_the_path(validated):
         ("refine_samples", 0),
         ("refine_anchor", -0.1),
         ("refine_anchor", float("nan")),
+        ("start_share", 0.0),
+        ("start_share", 1.5),
     ],
 )
 def test_bad_options_are_config_errors_naming_the_option(option, value):
