@@ -150,10 +150,19 @@ class PacedRelayTask:
             "receiver": float(np.linalg.norm(gr - s.receiver)),
         }
 
-    def advance(self, state: PacedState, episode: PacedEpisode, active: dict[str, str]) -> None:
-        """One step of ``dt`` with each variable's gain times its pace (0 while it holds)."""
+    def advance(
+        self,
+        state: PacedState,
+        episode: PacedEpisode,
+        active: dict[str, str],
+        dt: float | None = None,
+    ) -> None:
+        """One step (of ``dt`` [s], default the task's) with each variable's gain times its pace.
+
+        A pace is 0 while its variable holds; the pacer counts one tick per step.
+        """
         speed = state.pacer.speeds(active, self.distances(state, episode, active))
-        self.relay.advance(state.relay, episode.relay, active, speed=speed)
+        self.relay.advance(state.relay, episode.relay, active, speed=speed, dt=dt)
 
     def at_goal(self, state: PacedState, episode: PacedEpisode) -> bool:
         """The relay's goal state."""

@@ -269,8 +269,23 @@ class RelayTask:
         return np.array([*state.carrier, *state.receiver, state.force, context])
 
     # ----------------------------------------------------------------------------- dynamics
+    def check_step(self, dt: float) -> float:
+        """``dt`` [s] as a float if it is a stable Euler step of this task.
+
+        Raises:
+            ConfigError: ``dt`` is not a positive number with ``dt * gain < 1`` for every gain.
+        """
+        h = finite_number(dt, "RelayTask step dt")
+        gain = max(self.gain_carrier, self.gain_receiver, self.gain_gripper)
+        if h <= 0 or h * gain >= 1.0:
+            raise ConfigError(
+                f"RelayTask: a step dt must be > 0 with dt * gain < 1 for stable Euler steps, "
+                f"got dt={h} with the largest gain {gain}"
+            )
+        return h
+
     def goals(
-        self, state: RelayState, episode: RelayEpisode, active: dict[str, str]
+        self, state: RelayState, episode: RelayEpisode, active: Mapping[str, str]
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """Attractor goals of the active MPs: carrier (2,), receiver (2,), aperture."""
         for v in VARIABLES:
@@ -299,10 +314,11 @@ class RelayTask:
         self,
         state: RelayState,
         episode: RelayEpisode,
-        active: dict[str, str],
+        active: Mapping[str, str],
         speed: Mapping[str, float] | None = None,
+        dt: float | None = None,
     ) -> None:
-        """One Euler step of ``dt`` under the ``active`` MPs (modifies ``state``).
+        """One Euler step under the ``active`` MPs (modifies ``state``).
 
         Args:
             state: the state, advanced in place.
@@ -310,7 +326,12 @@ class RelayTask:
             active: variable -> active MP.
             speed: variable -> factor on its attractor gain this step (0: it holds; a variable
                 not named, or ``None``: 1); see :mod:`cpmp.worlds.relay.varied`.
+            dt: the step [s]; default the task's ``dt`` (another must keep ``dt * gain < 1``).
+
+        Raises:
+            ConfigError: a step that is not a stable Euler step of this task.
         """
+        h = self.dt if dt is None else self.check_step(dt)
         gc, gr, ga = self.goals(state, episode, active)
         k_carrier, k_receiver, k_gripper = self.gain_carrier, self.gain_receiver, self.gain_gripper
         if speed is not None:
@@ -318,9 +339,9 @@ class RelayTask:
             k_receiver *= speed.get("receiver", 1.0)
             k_gripper *= speed.get("gripper", 1.0)
         before = {"carrier": state.carrier.copy(), "receiver": state.receiver.copy()}
-        state.carrier = state.carrier + self.dt * k_carrier * (gc - state.carrier)
-        state.receiver = state.receiver + self.dt * k_receiver * (gr - state.receiver)
-        state.aperture += self.dt * k_gripper * (ga - state.aperture)
+        state.carrier = state.carrier + h * k_carrier * (gc - state.carrier)
+        state.receiver = state.receiver + h * k_receiver * (gr - state.receiver)
+        state.aperture += h * k_gripper * (ga - state.aperture)
         if state.holder in before:
             now = state.carrier if state.holder == "carrier" else state.receiver
             state.obj = state.obj + (now - before[state.holder])

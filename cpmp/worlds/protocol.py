@@ -1,0 +1,335 @@
+"""The one interface every synthetic world implements, and the closed loop that drives it.
+
+A *world* (:class:`World`) is a concurrent task without MuJoCo: it draws *contexts* (the random
+parameters of one episode: goals, sizes, hidden events), records the scripted demonstrator's
+labelled demonstration of a context, starts a *run* of a context (:class:`WorldRun`: features
+now, advance under the active MPs for any time step, done and complete), names the strategy of
+a context, and offers a scripted policy that reads only the features (the proof that the world
+is fair: its switches can be decided from what a learned sequencer sees).
+
+Every consumer (the benchmarks, the comparison, the tests) drives a world through
+:func:`run_episodes` / :func:`evaluate` and finds it by name in :mod:`cpmp.worlds.registry`;
+nothing outside a world's own module knows its state.
+
+Scoring (:meth:`World.score`): ``wrong_start`` when the policy's initial MPs differ from the
+demonstrator's for the context, else ``complete`` when the world says so (:meth:`WorldRun.
+complete`, and for worlds that ask for it the demonstrator's MP sequence run exactly), else
+``incomplete``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from cpmp.data import Demonstration
+from cpmp.errors import ConfigError
+from cpmp.records import Policy
+from cpmp.worlds.common import note_switches, positive_count
+from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
+
+_EPS_T = 1e-9
+"""Slack [s] when comparing times (ticks are rounded sums of periods)."""
+
+
+@runtime_checkable
+class WorldRun(Protocol):
+    """One episode of a world in progress: its state behind features, advance and checks."""
+
+    def features(self) -> np.ndarray:
+        """The true features ``(d,)`` now, in the world's ``feature_names`` order."""
+        ...
+
+    def advance(self, active: Mapping[str, str], h: float) -> None:
+        """Run the ``active`` MPs for ``h`` [s] (in sub-steps of at most the world's ``dt``)."""
+        ...
+
+    def done(self, active: Mapping[str, str]) -> bool:
+        """Whether the episode is over: the goal reached, or a failure nothing can undo."""
+        ...
+
+    def complete(self, active: Mapping[str, str]) -> bool:
+        """Whether the goal state is reached (with the MPs ``active`` now)."""
+        ...
+
+
+@runtime_checkable
+class World(Protocol):
+    """A synthetic concurrent task (see the module doc).
+
+    Attributes:
+        name: its registry name.
+        variables: the control variables, in the labels' order.
+        feature_names: the ``d`` features.
+        strategies: the strategies its contexts cycle through (for tables).
+        dt: its own step and the demonstrations' sample period [s].
+        max_time: an episode's time limit [s].
+    """
+
+    name: str
+    variables: tuple[str, ...]
+    feature_names: tuple[str, ...]
+    strategies: tuple[str, ...]
+    dt: float
+    max_time: float
+
+    def demonstrations(self, n: int, seed: int) -> list[Demonstration]:
+        """``n`` training demonstrations, reproducible from ``seed``, named ``demo_<i>``."""
+        ...
+
+    def contexts(self, n: int, seed: int) -> list[Any]:
+        """``n`` closed-loop contexts drawn from ``seed`` (use another seed than the demos')."""
+        ...
+
+    def demonstrate(self, context: Any, name: str | None = None) -> Demonstration:
+        """The scripted demonstrator's labelled demonstration of ``context``."""
+        ...
+
+    def start(self, context: Any) -> WorldRun:
+        """A run of ``context`` at ``t = 0``."""
+        ...
+
+    def strategy(self, context: Any) -> str:
+        """The strategy of ``context`` (one of :attr:`strategies`)."""
+        ...
+
+    def initial_mps(self, context: Any) -> dict[str, str]:
+        """The demonstrator's initial MP per variable for ``context``."""
+        ...
+
+    def scripted_policy(self) -> Policy:
+        """A fresh policy that reads only the features and completes the task."""
+        ...
+
+    def score(
+        self,
+        context: Any,
+        initial: Mapping[str, str],
+        sequences: Mapping[str, Sequence[str]],
+        completed: bool,
+    ) -> Outcome:
+        """The outcome of a run of ``context`` (see the module doc)."""
+        ...
+
+
+@dataclass
+class EpisodeRun:
+    """One closed-loop episode of a world (:func:`run_episodes`).
+
+    Attributes:
+        outcome: ``complete``, ``wrong_start`` or ``incomplete`` (:meth:`World.score`).
+        strategy: the context's strategy.
+        initial: the policy's initial MPs.
+        sequences: variable -> the MPs it ran, in order.
+        time: when the episode ended [s] (done, or the time limit).
+        completed: whether the goal state was reached (also after a wrong start).
+    """
+
+    outcome: Outcome
+    strategy: str
+    initial: dict[str, str]
+    sequences: dict[str, list[str]]
+    time: float
+    completed: bool
+
+
+@dataclass
+class Evaluation:
+    """A policy's closed-loop episodes on one world (:func:`evaluate`).
+
+    Attributes:
+        world: the world's name.
+        episodes: one run per context, in order.
+        counts: outcome -> episodes (every outcome present).
+    """
+
+    world: str
+    episodes: list[EpisodeRun]
+    counts: dict[Outcome, int] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.counts = count_outcomes(e.outcome for e in self.episodes)
+
+    @property
+    def complete(self) -> int:
+        """Complete episodes."""
+        return self.counts["complete"]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the counts, ``n_episodes`` and ``per_episode`` rows."""
+        return {
+            **self.counts,
+            "n_episodes": len(self.episodes),
+            "per_episode": [
+                {
+                    "strategy": e.strategy,
+                    "outcome": e.outcome,
+                    "time": e.time,
+                    "sequences": e.sequences,
+                }
+                for e in self.episodes
+            ],
+        }
+
+
+def default_score(
+    world: World,
+    context: Any,
+    initial: Mapping[str, str],
+    sequences: Mapping[str, Sequence[str]],
+    completed: bool,
+) -> Outcome:
+    """``wrong_start`` / ``complete`` / ``incomplete`` from the start and the goal alone."""
+    return episode_outcome(dict(initial) == world.initial_mps(context), completed)
+
+
+def sequence_score(
+    world: World,
+    context: Any,
+    initial: Mapping[str, str],
+    sequences: Mapping[str, Sequence[str]],
+    completed: bool,
+) -> Outcome:
+    """As :func:`default_score`, but ``complete`` also needs the demonstrator's MP sequences.
+
+    The demonstrator's sequences are those of its demonstration of the same context (hidden
+    events included), so a run that reached the goal by another route is ``incomplete``.
+    """
+    from cpmp.data.demonstration import mp_sequences  # the demonstration only when scoring
+
+    started = dict(initial) == world.initial_mps(context)
+    if not (started and completed):
+        return episode_outcome(started, completed)
+    want = mp_sequences(world.demonstrate(context))
+    same = all(list(sequences[v]) == want[v] for v in world.variables)
+    return episode_outcome(True, same)
+
+
+def run_episodes(
+    world: World,
+    policy: Policy,
+    contexts: Sequence[Any],
+    observe: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[EpisodeRun]:
+    """Run ``policy`` closed-loop on every context, one tick every ``world.dt``.
+
+    Each episode: ``reset`` at ``t = 0`` on the run's features, then per tick ``advance`` by
+    ``dt`` under the active MPs, ``step`` on the new features, until the run is done or
+    ``max_time``. A policy with ``batched(n)`` (a fitted
+    :class:`~cpmp.sequencer.ConcurrentSequencer`) runs every episode at once, one ``step`` per
+    tick over the episodes still running, with the results it gives one episode at a time.
+
+    Args:
+        world: the world.
+        policy: the policy (a fresh ``reset`` per episode, or one batch of them).
+        contexts: the contexts (:meth:`World.contexts`).
+        observe: maps the true features ``(d,)`` to what the policy sees (noise, say); the
+            episodes then run one at a time, in order. Default: the true features.
+
+    Returns:
+        One run per context, in order.
+    """
+    make_batch = getattr(policy, "batched", None)
+    if make_batch is None or observe is not None or not contexts:
+        return [_run_one(world, policy, c, observe or (lambda x: x)) for c in contexts]
+    n = len(contexts)
+    batch = make_batch(n)
+    runs = [world.start(c) for c in contexts]
+    x = np.stack([r.features() for r in runs])
+    active = [dict(a) for a in batch.reset(0.0, x)]
+    initial = [dict(a) for a in active]
+    seqs = [{v: [a[v]] for v in world.variables} for a in active]
+    over = np.array([r.done(a) for r, a in zip(runs, active, strict=True)])
+    times = [0.0] * n
+    t = 0.0
+    while not over.all() and t < world.max_time - _EPS_T:
+        live = ~over
+        rows = np.flatnonzero(live).tolist()
+        for i in rows:
+            runs[i].advance(active[i], world.dt)
+            x[i] = runs[i].features()
+        t = round(t + world.dt, 10)
+        stepped = batch.step(t, x, live=live)
+        for i in rows:
+            active[i] = dict(stepped[i])
+            note_switches(seqs[i], active[i])
+            over[i] = runs[i].done(active[i])
+            times[i] = t
+    return [
+        _episode(world, contexts[i], initial[i], seqs[i], times[i], runs[i].complete(active[i]))
+        for i in range(n)
+    ]
+
+
+def _run_one(
+    world: World, policy: Policy, context: Any, see: Callable[[np.ndarray], np.ndarray]
+) -> EpisodeRun:
+    """One episode of :func:`run_episodes`, one policy call per tick."""
+    run = world.start(context)
+    active = dict(policy.reset(0.0, see(run.features())))
+    initial = dict(active)
+    seqs = {v: [active[v]] for v in world.variables}
+    t = 0.0
+    over = run.done(active)
+    while not over and t < world.max_time - _EPS_T:
+        run.advance(active, world.dt)
+        t = round(t + world.dt, 10)
+        active = dict(policy.step(t, see(run.features())))
+        note_switches(seqs, active)
+        over = run.done(active)
+    return _episode(world, context, initial, seqs, t, run.complete(active))
+
+
+def _episode(
+    world: World,
+    context: Any,
+    initial: dict[str, str],
+    sequences: dict[str, list[str]],
+    time: float,
+    completed: bool,
+) -> EpisodeRun:
+    """The scored :class:`EpisodeRun`."""
+    outcome = world.score(context, initial, sequences, completed)
+    return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed)
+
+
+def evaluate(
+    world: World,
+    policy: Policy,
+    n_episodes: int = 20,
+    seed: int = 0,
+    observe: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Evaluation:
+    """``policy`` on ``n_episodes`` contexts of ``world`` drawn from ``seed``.
+
+    Args:
+        world: the world.
+        policy: the policy (a fitted sequencer, a baseline, the world's scripted policy).
+        n_episodes: the number of episodes.
+        seed: seeds the contexts (another than the demonstrations' for held-out ones).
+        observe: as in :func:`run_episodes`.
+
+    Returns:
+        The episodes and their counts.
+
+    Raises:
+        ConfigError: ``n_episodes`` is not a positive integer.
+    """
+    positive_count(n_episodes, "n_episodes")
+    contexts = world.contexts(n_episodes, seed)
+    return Evaluation(world.name, run_episodes(world, policy, contexts, observe))
+
+
+def substeps(h: float, dt: float) -> tuple[int, float]:
+    """``h`` [s] as ``n`` equal steps no longer than ``dt`` (one step of ``dt`` if ``h == dt``).
+
+    Raises:
+        ConfigError: ``h`` is not a positive finite time.
+    """
+    if not np.isfinite(h) or h <= 0:
+        raise ConfigError(f"a world advances by a positive time step, got {h!r} s")
+    n = max(1, int(np.ceil(h / dt - 1e-9)))
+    return n, h / n

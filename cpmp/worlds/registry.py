@@ -1,0 +1,111 @@
+"""Every synthetic world by name: the one table the benchmarks, the comparison and the tests read.
+
+Adding a world is one module implementing :class:`~cpmp.worlds.protocol.World` plus one line in
+:data:`WORLDS`; every benchmark then runs it. A *family* (the procedural world) is a generator
+of tasks: ``make(task=i)`` is its ``i``-th member, and its results are summarised over members.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from cpmp.errors import ConfigError
+from cpmp.worlds.protocol import World
+
+
+@dataclass(frozen=True)
+class WorldEntry:
+    """One registered world.
+
+    Attributes:
+        make: ``make(**options) -> World``: the world with its task options (a bad option
+            raises :class:`~cpmp.errors.ConfigError`).
+        summary: one line on what the world measures.
+        family: a generator of tasks (``make(task=i)`` is member ``i``); its results are
+            summarised over members.
+        reactive: its switches are decided by events during execution (retry loops).
+    """
+
+    make: Callable[..., World]
+    summary: str
+    family: bool = False
+    reactive: bool = False
+
+
+def _lazy(module: str, name: str) -> Callable[..., World]:
+    """``module.name(**options)``, imported when first called (keeps this table cheap)."""
+
+    def make(**options: Any) -> World:
+        import importlib
+
+        cls = getattr(importlib.import_module(module), name)
+        try:
+            return cls(**options)
+        except TypeError as err:
+            raise ConfigError(
+                f"bad option for the world {name} ({err}); its options are the fields of "
+                f"{module}.{name}"
+            ) from err
+
+    return make
+
+
+WORLDS: dict[str, WorldEntry] = {
+    "two_point": WorldEntry(
+        _lazy("cpmp.worlds.two_point", "TwoPointWorld"),
+        "two points on a line; a context feature picks sequential or parallel",
+    ),
+    "relay": WorldEntry(
+        _lazy("cpmp.worlds.relay.registered", "RelayWorld"),
+        "a hand-over in the plane: a cross-variable wait on a grip force",
+    ),
+    "paced_relay": WorldEntry(
+        _lazy("cpmp.worlds.relay.registered", "PacedRelayWorld"),
+        "the relay with MPs at varied speeds and holds mid-MP",
+    ),
+    "repetition": WorldEntry(
+        _lazy("cpmp.worlds.repetition.registered", "RepetitionWorld"),
+        "a scoop-pour cycle repeated as the soup left says; a helper holds across it",
+    ),
+}
+"""The registered worlds, by name."""
+
+
+def world_names(*, family: bool | None = None) -> tuple[str, ...]:
+    """The registered names (``family``: only families, or only single worlds)."""
+    return tuple(n for n, e in WORLDS.items() if family is None or e.family == family)
+
+
+def entry(name: str) -> WorldEntry:
+    """The entry of ``name``.
+
+    Raises:
+        ConfigError: an unknown world (the message lists the known ones).
+    """
+    found = WORLDS.get(name)
+    if found is None:
+        raise ConfigError(f"unknown world {name!r}; registered: {', '.join(WORLDS)}")
+    return found
+
+
+def make_world(name: str, options: Mapping[str, Any] | None = None) -> World:
+    """The world ``name`` built with ``options`` (its task's fields).
+
+    Raises:
+        ConfigError: an unknown world or a bad option.
+    """
+    return entry(name).make(**dict(options or {}))
+
+
+def members(name: str, n_tasks: int, options: Mapping[str, Any] | None = None) -> list[World]:
+    """The worlds a benchmark runs for ``name``: itself, or a family's first ``n_tasks`` members.
+
+    Raises:
+        ConfigError: an unknown world or a bad option.
+    """
+    e = entry(name)
+    if not e.family:
+        return [e.make(**dict(options or {}))]
+    return [e.make(**{**dict(options or {}), "task": i}) for i in range(n_tasks)]
