@@ -1,10 +1,12 @@
-"""Closed-loop outcomes on the two synthetic tasks (no simulator): cpmp's defaults, the paper's
-method and single options switched off, over training sizes and seeds. Prints JSON.
+"""The worlds table: every registered synthetic world x the scripted policy, the paper's method,
+the BC switcher, goal_nearest, cpmp's defaults and klr_sparse, at D = 3 / 6 / 9 (no simulator).
+Writes JSON, prints a Markdown table.
 
-python scripts/bench_synthetic.py [--seeds 0 1 2] [--sizes 3 6 9] [--episodes 20] [--out FILE]
+python scripts/bench_synthetic.py [--quick] [--worlds ...] [--policies ...] [--sizes 3 6 9]
+    [--seeds 0 1 2] [--episodes 20] [--tasks 100] [--out logs/bench_synthetic.json]
 """
 
-from cpmp.benchmarks.cli import bench_synthetic_main
+from cpmp.benchmarks.synthetic import main
 
 if __name__ == "__main__":
-    raise SystemExit(bench_synthetic_main())
+    raise SystemExit(main())

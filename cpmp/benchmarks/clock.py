@@ -1,11 +1,11 @@
 """The clock benchmark (``scripts/bench_clock.py``): the closed loop under a robot's clocks.
 
 Completion and switch-time error of the default sequencer (``ConcurrentSequencer.fit(demos,
-seed=s)``) on every synthetic world (``two_point``, ``relay``, ``repetition``) and on the
-simulator (``sim``), under the conditions of :data:`CONDITIONS`: control rates of 30 to
-1000 Hz, ±30 % jitter of the tick period, 10 % dropped ticks, sensors at 10 / 16.7 / 25 Hz, a
-1 s forward step of the clock and NaN bursts. Written as JSON (atomically); same settings, same
-JSON. Nothing here asserts a number.
+seed=s)``) on every registered synthetic world (:mod:`cpmp.worlds.registry`; a family's first
+``tasks`` members) and on the simulator (``sim``), under the conditions of
+:data:`CONDITIONS`: control rates of 30 to 1000 Hz, ±30 % jitter of the tick period, 10 %
+dropped ticks, sensors at 10 / 16.7 / 25 Hz, a 1 s forward step of the clock and NaN bursts.
+Written as JSON (atomically); same settings, same JSON. Nothing here asserts a number.
 
 :class:`ClockedPolicy` is the reusable part: a :class:`~cpmp.records.Policy` around a policy
 that decides when the inner policy is called and with which time and features
@@ -25,12 +25,11 @@ seconds of true time, over complete episodes.
 from __future__ import annotations
 
 import argparse
-import copy
 import inspect
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -43,10 +42,12 @@ from cpmp.records import Policy
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sim import correct_strategy, record_demonstrations, run_episodes
 from cpmp.sim.collect import sample_boxes
-from cpmp.worlds import relay, repetition, two_point
 from cpmp.worlds.outcomes import OUTCOMES
+from cpmp.worlds.protocol import World
+from cpmp.worlds.registry import members, world_names
 
-SYNTHETIC_WORLDS = ("two_point", "relay", "repetition")
+SYNTHETIC_WORLDS = world_names()
+"""Every registered synthetic world (:mod:`cpmp.worlds.registry`)."""
 WORLDS = (*SYNTHETIC_WORLDS, "sim")
 REFERENCE = "rate_100hz"
 """The condition every other one is compared with: the worlds' own 100 Hz loop."""
@@ -232,172 +233,6 @@ class ClockedPolicy:
                 self._next_sample = round(self._next_sample + period, 10)
 
 
-# --------------------------------------------------------------------------------- worlds
-class WorldRun(Protocol):
-    """One episode of a synthetic world in the benchmark's loop."""
-
-    def features(self) -> np.ndarray:
-        """The true features (d,) now."""
-
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        """Run the ``active`` MPs for ``h`` seconds."""
-
-    def at_goal(self, active: Mapping[str, str]) -> bool:
-        """Whether the goal state is reached (with the MPs ``active`` now)."""
-
-
-def _substeps(h: float, dt: float) -> tuple[int, float]:
-    """``h`` [s] as ``n`` equal steps no longer than ``dt`` (one step of ``dt`` if ``h == dt``)."""
-    n = max(1, math.ceil(h / dt - 1e-9))
-    return n, h / n
-
-
-class _TwoPointRun:
-    def __init__(self, task: two_point.SyntheticTask, episode: two_point.TwoPointEpisode) -> None:
-        self.task, self.episode = task, episode
-        self.p = np.array(episode.start, dtype=float)
-        self.gain = np.asarray(task.gain)
-
-    def features(self) -> np.ndarray:
-        return np.array([self.p[0], self.p[1], self.episode.context])
-
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        # the two-point world's Euler step (SyntheticTask.rollout), in sub-steps of at most dt
-        n, hs = _substeps(h, self.task.dt)
-        for _ in range(n):
-            goals = self.task.goals(self.episode, dict(active))
-            self.p = self.p + hs * self.gain * (goals - self.p)
-
-    def at_goal(self, active: Mapping[str, str]) -> bool:
-        back = active["a"] == "a_back" and active["b"] == "b_back"
-        return bool(back and np.all(np.abs(self.p) < 0.01))
-
-
-class _RelayRun:
-    def __init__(self, task: relay.RelayTask, episode: relay.RelayEpisode) -> None:
-        self.task, self.episode = task, episode
-        self.state = task.initial_state(episode)
-        # a private copy whose dt is each sub-step (RelayTask.advance steps by its own dt)
-        self.stepper = copy.copy(task)
-
-    def features(self) -> np.ndarray:
-        return self.task.features(self.state, self.episode)
-
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        n, hs = _substeps(h, self.task.dt)
-        self.stepper.dt = hs
-        for _ in range(n):
-            self.stepper.advance(self.state, self.episode, dict(active))
-
-    def at_goal(self, active: Mapping[str, str]) -> bool:
-        return self.task.at_goal(self.state, self.episode)
-
-
-class _RepetitionRun:
-    def __init__(
-        self, task: repetition.RepetitionTask, episode: repetition.RepetitionEpisode
-    ) -> None:
-        self.task, self.episode = task, episode
-        self.state = task.initial_state(episode)
-
-    def features(self) -> np.ndarray:
-        return self.task.features(self.state)
-
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        n, hs = _substeps(h, self.task.dt)
-        for _ in range(n):
-            self.task.advance(self.state, self.episode, dict(active), dt=hs)
-
-    def at_goal(self, active: Mapping[str, str]) -> bool:
-        return self.task.at_goal(self.state, self.episode)
-
-
-@dataclass(frozen=True)
-class SyntheticWorld:
-    """What the benchmark needs of a synthetic world.
-
-    Attributes:
-        name: ``two_point``, ``relay`` or ``repetition``.
-        demonstrations: ``(n, seed)`` -> the world's ``make_demonstrations(n, seed)``.
-        episodes: ``(n, seed)`` -> ``n`` episodes drawn as the world's ``evaluate`` draws them.
-        reference: episode -> the demonstrator's demonstration of it (its own ``dt``).
-        start: episode -> a :class:`WorldRun` at the episode's start.
-        strategy: episode -> its strategy's name.
-        max_time: episode time limit [s].
-        dt: the world's own step [s] (the longest sub-step of the loop).
-    """
-
-    name: str
-    demonstrations: Callable[[int, int], list[Demonstration]]
-    episodes: Callable[[int, int], list[Any]]
-    reference: Callable[[Any], Demonstration]
-    start: Callable[[Any], WorldRun]
-    strategy: Callable[[Any], str]
-    max_time: float
-    dt: float
-
-
-def synthetic_world(name: str) -> SyntheticWorld:
-    """The benchmark's view of the synthetic world ``name`` with its default options.
-
-    Raises:
-        ConfigError: an unknown world.
-    """
-    if name == "two_point":
-        tp = two_point.SyntheticTask()
-
-        def tp_episodes(n: int, seed: int) -> list[two_point.TwoPointEpisode]:
-            rng = np.random.default_rng(seed)
-            return [tp.sample_episode(rng) for _ in range(n)]
-
-        return SyntheticWorld(
-            name,
-            lambda n, seed: two_point.make_demonstrations(n, seed=seed, task=tp),
-            tp_episodes,
-            tp.demonstrate,
-            lambda e: _TwoPointRun(tp, e),
-            lambda e: "parallel" if e.parallel else "sequential",
-            tp.max_time,
-            tp.dt,
-        )
-    if name == "relay":
-        rt = relay.RelayTask()
-
-        def relay_episodes(n: int, seed: int) -> list[relay.RelayEpisode]:
-            rng = np.random.default_rng(seed)
-            return [rt.sample_episode(rng, relay.STRATEGIES[i % 2]) for i in range(n)]
-
-        return SyntheticWorld(
-            name,
-            lambda n, seed: relay.make_demonstrations(n, seed=seed, task=rt),
-            relay_episodes,
-            lambda e: relay.demonstrate(rt, e),
-            lambda e: _RelayRun(rt, e),
-            lambda e: e.strategy,
-            rt.max_time,
-            rt.dt,
-        )
-    if name == "repetition":
-        pt = repetition.RepetitionTask()
-        strategies = repetition.STRATEGIES
-
-        def rep_episodes(n: int, seed: int) -> list[repetition.RepetitionEpisode]:
-            rng = np.random.default_rng(seed)
-            return [pt.sample_episode(rng, strategies[i % len(strategies)]) for i in range(n)]
-
-        return SyntheticWorld(
-            name,
-            lambda n, seed: repetition.make_demonstrations(n, seed=seed, task=pt),
-            rep_episodes,
-            lambda e: repetition.demonstrate(pt, e),
-            lambda e: _RepetitionRun(pt, e),
-            lambda e: e.strategy,
-            pt.max_time,
-            pt.dt,
-        )
-    raise ConfigError(f"unknown synthetic world {name!r}; known: {', '.join(SYNTHETIC_WORLDS)}")
-
-
 # --------------------------------------------------------------------------------- episodes
 @dataclass
 class EpisodeRecord:
@@ -468,17 +303,18 @@ def _finish(
 
 
 def run_synthetic_episode(
-    world: SyntheticWorld, episode: Any, policy: ClockedPolicy, reference: Demonstration
+    world: World, episode: Any, policy: ClockedPolicy, reference: Demonstration
 ) -> EpisodeRecord:
     """One episode of a synthetic world with ``policy`` in the loop.
 
     Every tick lasts ``policy.next_period(t)``; the world integrates it in sub-steps of at most
-    its own ``dt``. The episode ends at the goal state, at ``max_time``, at the first switch
-    that leaves the demonstrator's sequence, or when the inner policy raised.
+    its own ``dt``. The episode ends when the run is done (the goal state, or a failure), at
+    ``max_time``, at the first switch that leaves the demonstrator's sequence, or when the
+    inner policy raised.
 
     Args:
-        world: the world.
-        episode: one of ``world.episodes``.
+        world: the world (:class:`~cpmp.worlds.protocol.World`).
+        episode: one of ``world.contexts``.
         policy: the clocked policy (reset here).
         reference: the demonstrator's demonstration of ``episode``.
 
@@ -492,8 +328,8 @@ def run_synthetic_episode(
     times: dict[str, list[float]] = {v: [] for v in want}
     t = 0.0
     on_track = all(seqs[v][0] == want[v][0] for v in want)
-    reached = run.at_goal(active)
-    while on_track and not reached and policy.error is None and t < world.max_time - 1e-9:
+    over = run.done(active)
+    while on_track and not over and policy.error is None and t < world.max_time - 1e-9:
         h = policy.next_period(t)
         run.advance(active, h)
         t = round(t + h, 10)
@@ -504,7 +340,8 @@ def run_synthetic_episode(
                 times[v].append(t)
                 on_track = on_track and seqs[v] == want[v][: len(seqs[v])]
         active = new
-        reached = run.at_goal(active)
+        over = run.done(active)
+    reached = run.complete(active)
     if any(seqs[v][0] != want[v][0] for v in want):
         outcome = "wrong_start"
     else:
@@ -519,7 +356,7 @@ def _rng(seed: int, condition: str, episode: int) -> np.random.Generator:
 
 
 def synthetic_condition(
-    world: SyntheticWorld,
+    world: World,
     seq: ConcurrentSequencer,
     episodes: Sequence[Any],
     references: Sequence[Demonstration],
@@ -663,6 +500,7 @@ class ClockSettings:
         sim_seeds: seeds of the simulator.
         sim_demos: simulated demonstrations per fit.
         sim_boxes: held-out boxes per simulator seed.
+        tasks: members run of a family world (the procedural one), pooled with the seeds.
     """
 
     worlds: tuple[str, ...] = WORLDS
@@ -673,6 +511,7 @@ class ClockSettings:
     sim_seeds: tuple[int, ...] = (0,)
     sim_demos: int = 6
     sim_boxes: int = 6
+    tasks: int = 10
 
     def __post_init__(self) -> None:
         unknown = [w for w in self.worlds if w not in WORLDS]
@@ -682,15 +521,16 @@ class ClockSettings:
                 f"unknown worlds or conditions {unknown}; worlds: {', '.join(WORLDS)}; "
                 f"conditions: {', '.join(CONDITION_NAMES)}"
             )
-        for name in ("demos", "episodes", "sim_demos", "sim_boxes"):
+        for name in ("demos", "episodes", "sim_demos", "sim_boxes", "tasks"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
 
     @classmethod
     def quick(cls, **options: Any) -> ClockSettings:
-        """Small sizes for a test: the synthetic worlds, seed 0, 2 episodes each."""
-        return cls(**{"worlds": SYNTHETIC_WORLDS, "seeds": (0,), "episodes": 2, **options})
+        """Small sizes for a test: the synthetic worlds, seed 0, 2 episodes, one family member."""
+        quick = {"worlds": SYNTHETIC_WORLDS, "seeds": (0,), "episodes": 2, "tasks": 1}
+        return cls(**{**quick, **options})
 
 
 def _conditions(settings: ClockSettings) -> list[ClockCondition]:
@@ -708,25 +548,30 @@ def bench_synthetic_world(
 ) -> dict[str, Any]:
     """Every condition of ``settings`` on the synthetic world ``name``, pooled over seeds.
 
+    A family world (the procedural one) pools its first ``settings.tasks`` members too.
+
     Returns:
         ``{"conditions": {condition: summary}, "per_seed": {seed: {condition: summary}},
         "per_episode": {condition: [row, ...]}}`` (summaries: :func:`summarise`).
     """
-    world = synthetic_world(name)
     pooled: dict[str, list[EpisodeRecord]] = {}
     per_seed: dict[str, dict[str, Any]] = {}
     for seed in settings.seeds:
-        seq = _fit(world.demonstrations(settings.demos, seed), seed)
-        episodes = world.episodes(settings.episodes, HELD_OUT_SEED + seed)
-        references = [world.reference(e) for e in episodes]
+        by_condition: dict[str, list[EpisodeRecord]] = {}
+        for world in members(name, settings.tasks):
+            seq = _fit(world.demonstrations(settings.demos, seed), seed)
+            episodes = world.contexts(settings.episodes, HELD_OUT_SEED + seed)
+            references = [world.demonstrate(e) for e in episodes]
+            for condition in _conditions(settings):
+                records = synthetic_condition(world, seq, episodes, references, condition, seed)
+                by_condition.setdefault(condition.name, []).extend(records)
         per_seed[str(seed)] = {}
-        for condition in _conditions(settings):
-            records = synthetic_condition(world, seq, episodes, references, condition, seed)
-            pooled.setdefault(condition.name, []).extend(records)
+        for condition, records in by_condition.items():
+            pooled.setdefault(condition, []).extend(records)
             summary = summarise(records)
-            per_seed[str(seed)][condition.name] = summary
+            per_seed[str(seed)][condition] = summary
             if log is not None:
-                log(f"{name} seed {seed} {condition.name}: {summary['complete']}/{len(records)}")
+                log(f"{name} seed {seed} {condition}: {summary['complete']}/{len(records)}")
     return _world_result(pooled, per_seed)
 
 
@@ -844,9 +689,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sim-seeds", type=int, nargs="+", help="simulator seeds (0)")
     parser.add_argument("--sim-demos", type=int, help="simulated demonstrations per fit (6)")
     parser.add_argument("--sim-boxes", type=int, help="held-out boxes per simulator seed (6)")
+    parser.add_argument("--tasks", type=int, help="members of a family world (10)")
     args = parser.parse_args(argv)
     names = ("worlds", "conditions", "seeds", "demos", "episodes", "sim_seeds", "sim_demos")
-    options = given_options(args, (*names, "sim_boxes"))
+    options = given_options(args, (*names, "sim_boxes", "tasks"))
     return run_settings_benchmark(
         "bench_clock", args, ClockSettings, options, run_clock_benchmark, markdown
     )

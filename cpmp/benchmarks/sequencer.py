@@ -2,26 +2,22 @@
 
 Each predictor fitted and stepped (:func:`bench_sequencer`, ``scripts/bench_sequencer.py``), one
 episode at a time against batched episodes (:func:`bench_ticks`, the ``sequencer`` section of
-``scripts/bench.py``), the Adam-trained predictors (:func:`bench_gradient`, the ``gradient``
-section), and the closed-loop outcomes on the synthetic tasks (:func:`synthetic_outcomes`,
-``scripts/bench_synthetic.py``). Every function returns a JSON-ready dict; nothing here asserts a
-speed.
+``scripts/bench.py``) and the Adam-trained predictors (:func:`bench_gradient`, the ``gradient``
+section); the closed-loop outcomes on the synthetic worlds are :mod:`cpmp.benchmarks.synthetic`.
+Every function returns a JSON-ready dict; nothing here asserts a speed.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import torch
 
 from cpmp.benchmarks.settings import BenchSettings, check_count
-from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
-from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demos
-from cpmp.worlds.relay.evaluation import evaluate as evaluate_relay
-from cpmp.worlds.two_point import evaluate as evaluate_two_point
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.two_point import make_demonstrations as two_point_demos
 
 TICK_TARGET_MS = 0.1
@@ -149,61 +145,3 @@ def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
     return bench_sequencer(
         demos, settings.gradient_predictors, settings.ticks, settings.seed, options
     )
-
-
-# ------------------------------------------------------------------- synthetic closed loop
-def synthetic_configs() -> dict[str, dict[str, Any]]:
-    """The sequencer options :func:`synthetic_outcomes` compares, by name.
-
-    Cpmp's defaults, single options switched off, and the paper's method (as
-    :meth:`ConcurrentSequencer.fit` options).
-    """
-    return {
-        "defaults": {},
-        "coupling=none": {"coupling": "none"},
-        "switch_rule=plateau": {"switch_rule": "plateau"},
-        "recovery=false": {"recovery": False},
-        "paper": dict(PAPER_OPTIONS),
-    }
-
-
-def synthetic_outcomes(
-    seeds: Sequence[int],
-    sizes: Sequence[int],
-    episodes: int,
-    configs: Sequence[str],
-    on_row: Callable[[dict[str, Any]], None] | None = None,
-) -> dict[str, Any]:
-    """Closed-loop outcomes on the two synthetic tasks (no simulator).
-
-    For each task
-    (``two_point``, ``relay``), training size D in ``sizes``, seed and named config of
-    :func:`synthetic_configs`, ``klr`` fitted on D demonstrations and run on ``episodes``
-    episodes (seeded ``1000 + seed``).
-
-    Returns ``{"episodes": episodes, "rows": [...]}``, each row ``task``, ``D``, ``seed``,
-    ``config`` and the counts ``complete``, ``wrong_start``, ``incomplete``; ``on_row`` is
-    called with each row as it is done.
-    """
-    options = synthetic_configs()
-    tasks = {
-        "two_point": (two_point_demos, evaluate_two_point),
-        "relay": (relay_demos, evaluate_relay),
-    }
-    rows = []
-    for task, (make, evaluate) in tasks.items():
-        for d in sizes:
-            for seed in seeds:
-                demos = make(d, seed)
-                for name in configs:
-                    seq = ConcurrentSequencer.fit(
-                        demos, "klr", seed=seed, logger=None, **options[name]
-                    )
-                    counts = evaluate(seq, None, episodes, 1000 + seed)
-                    row = {"task": task, "D": d, "seed": seed, "config": name}
-                    rows.append(
-                        {**row, **{k: counts[k] for k in ("complete", "wrong_start", "incomplete")}}
-                    )
-                    if on_row is not None:
-                        on_row(rows[-1])
-    return {"episodes": episodes, "rows": rows}

@@ -4,8 +4,9 @@ Issue #23's targets for ``klr_sparse``'s defaults against the default predictor 
 cpmp's defaults, as ``ConcurrentSequencer.fit`` uses it): held-out progress MAE within 1.1x,
 at most 0.25x the support points, tick cost at most 0.5x, fit at most 2x, closed-loop
 completions (C) no more than 1 below, at every training size D. Measured on the synthetic
-worlds (``two_point``, ``relay``, ``repetition``: D training demonstrations of seed ``s``,
-held-out demonstrations of seed ``HELD_OUT_SEED + s``, ``episodes`` closed-loop episodes)
+worlds (every registered one, :mod:`cpmp.worlds.registry`, a family's first ``tasks``
+members: D training demonstrations of seed ``s``, held-out demonstrations of seed
+``HELD_OUT_SEED + s``, ``episodes`` closed-loop episodes)
 and on the simulator (``sim``: the main job's full-run demonstrations of seed ``s``, 9 train /
 6 test, the balanced D of them, ``sim_boxes`` reproduction boxes, as ``experiment=full``).
 
@@ -52,9 +53,12 @@ from cpmp.io import atomic_write_text, to_builtin
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, record_demonstrations, sample_box
 from cpmp.sim.collect import sample_boxes
-from cpmp.worlds import relay, repetition, two_point
+from cpmp.worlds.protocol import World
+from cpmp.worlds.protocol import evaluate as evaluate_world
+from cpmp.worlds.registry import members, world_names
 
-SYNTHETIC_WORLDS = ("two_point", "relay", "repetition")
+SYNTHETIC_WORLDS = world_names()
+"""Every registered synthetic world (:mod:`cpmp.worlds.registry`)."""
 WORLDS = (*SYNTHETIC_WORLDS, "sim")
 PREDICTORS = ("klr", "klr_sparse")
 """The default predictor (``ConcurrentSequencer.fit``'s) and the sparse one."""
@@ -82,6 +86,7 @@ class SparseSettings:
         sim_boxes: reproduction boxes per simulator seed (the main job's full run: 20).
         repeats: fits per predictor; the fastest counts.
         options: extra ``klr_sparse`` options (e.g. ``{"level": 0.1}``).
+        tasks: members run of a family world (the procedural one); pooled like seeds.
         cache: a directory for the simulator's demonstrations and reproduction runs
             (reused when present), or ``None``.
     """
@@ -95,13 +100,14 @@ class SparseSettings:
     sim_boxes: int = 20
     repeats: int = 2
     options: dict[str, Any] = field(default_factory=dict)
+    tasks: int = 10
     cache: str | None = None
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.worlds) - set(WORLDS))
         if unknown:
             raise ConfigError(f"unknown world(s) {unknown}; known: {', '.join(WORLDS)}")
-        counts = {"held_out": self.held_out, "episodes": self.episodes}
+        counts = {"held_out": self.held_out, "episodes": self.episodes, "tasks": self.tasks}
         counts |= {"sim_boxes": self.sim_boxes, "repeats": self.repeats}
         for name, value in counts.items():
             if int(value) < 1:
@@ -127,16 +133,14 @@ class _World:
     subset: Callable[[int], list[Demonstration]]
 
 
-def _synthetic(name: str, seed: int, settings: SparseSettings) -> _World:
+def _synthetic(world: World, seed: int, settings: SparseSettings) -> _World:
     """A synthetic world's demonstrations of ``seed`` and its closed-loop completions."""
-    module = {"two_point": two_point, "relay": relay, "repetition": repetition}[name]
-    held_out = module.make_demonstrations(settings.held_out, seed=HELD_OUT_SEED + seed)
+    held_out = world.demonstrations(settings.held_out, HELD_OUT_SEED + seed)
 
     def complete(seq: ConcurrentSequencer) -> int:
-        counts = module.evaluate(seq, None, settings.episodes, HELD_OUT_SEED + seed)
-        return int(counts["complete"])
+        return evaluate_world(world, seq, settings.episodes, HELD_OUT_SEED + seed).complete
 
-    return _World([], held_out, complete, lambda d: module.make_demonstrations(d, seed=seed))
+    return _World([], held_out, complete, lambda d: world.demonstrations(d, seed))
 
 
 def _sim_data(seed: int, settings: SparseSettings) -> SeedData:
@@ -294,16 +298,21 @@ def run_sparse_benchmark(
     for name in settings.worlds:
         seeds = settings.sim_seeds if name == "sim" else settings.seeds
         for seed in seeds:
-            world = _sim(seed, settings) if name == "sim" else _synthetic(name, seed, settings)
-            for d in settings.sizes:
-                demos = world.subset(d)
-                default = measure("klr", demos, world, seed, settings)
-                sparse = measure("klr_sparse", demos, world, seed, settings)
-                row = {"world": name, "D": d, "seed": seed, "default": default, "sparse": sparse}
-                row["ratios"] = ratios(default, sparse)
-                rows.append(row)
-                if log is not None:
-                    log(_line(row))
+            if name == "sim":
+                worlds = [_sim(seed, settings)]
+            else:
+                worlds = [_synthetic(w, seed, settings) for w in members(name, settings.tasks)]
+            for task, world in enumerate(worlds):
+                for d in settings.sizes:
+                    demos = world.subset(d)
+                    default = measure("klr", demos, world, seed, settings)
+                    sparse = measure("klr_sparse", demos, world, seed, settings)
+                    row = {"world": name, "task": task, "D": d, "seed": seed}
+                    row |= {"default": default, "sparse": sparse}
+                    row["ratios"] = ratios(default, sparse)
+                    rows.append(row)
+                    if log is not None:
+                        log(_line(row))
     return to_builtin(
         {
             "settings": asdict(settings),
@@ -404,8 +413,10 @@ def main(argv: list[str] | None = None) -> int:
         "--start-share", type=float, help="klr_sparse's start_share (default: 0.25; 1: all)"
     )
     parser.add_argument("--cache", help="directory caching the simulator's demonstrations")
+    parser.add_argument("--tasks", type=int, help="members of a family world (10)")
     args = parser.parse_args(argv)
     names = ("worlds", "sizes", "seeds", "sim_seeds", "episodes", "sim_boxes", "repeats", "cache")
+    names += ("tasks",)
     options = given_options(args, names)
     extra = {"level": args.level, "start_share": args.start_share}
     if any(v is not None for v in extra.values()):

@@ -7,13 +7,12 @@ WorldSettings`), resolved into a :class:`World`:
   job's ``task`` group (``settle_time: 0``, a pacing of the demonstrator, ...) and its
   ``feature_noise`` on the training demonstrations; its seeds are collected and reproduced by
   the main job's stages (:mod:`cpmp.compare.runs`), ``episodes`` random boxes per D and seed;
-* ``kind: synthetic``: a world of :mod:`cpmp.worlds` registered in :data:`SYNTHETIC_WORLDS`,
+* ``kind: synthetic``: a world of :mod:`cpmp.worlds.registry` (:data:`SYNTHETIC_WORLDS`),
   built from the entry's ``task`` options. Per seed it gives the training demonstrations, the
   held-out ones (for the progress MAE) and ``episodes`` closed-loop episodes, each scored.
 
-Adding a synthetic world is one entry of :data:`SYNTHETIC_WORLDS`: a function ``(options,
-seed, n_demos) -> SyntheticRun`` (its demonstrations and its closed loop); a simulator variant
-needs no code, only a ``compare.worlds`` entry with its ``task`` options.
+A registered world needs no code here; a simulator variant needs none either, only a
+``compare.worlds`` entry with its ``task`` options.
 
 Importing this module costs NumPy and the synthetic worlds only (the command line checks the
 ``compare`` node with it before torch or MuJoCo are loaded).
@@ -25,15 +24,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
-import numpy as np
-
-from cpmp.config.task import Pacing
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
-from cpmp.worlds import relay, two_point
 from cpmp.worlds.outcomes import Outcome
-from cpmp.worlds.relay.varied import DEMO_PACING, ROBOT_PACING, paced_relay
+from cpmp.worlds.protocol import evaluate as evaluate_world
+from cpmp.worlds.registry import make_world, world_names
 
 WorldKind = Literal["sim", "synthetic"]
 """A compared world's kind: the MuJoCo simulator (a variant of the job's ``task``) or a
@@ -80,109 +76,36 @@ class SyntheticRun:
     evaluate: Evaluate
 
 
-MakeRun = Callable[[Mapping[str, Any], int, int], SyntheticRun]
-"""``make(options, seed, n_demos)``: a synthetic world built from its ``task`` options, its
-``n_demos`` demonstrations drawn from ``seed``. Raises :class:`~cpmp.errors.ConfigError` for a
-bad option."""
-
-
 # --------------------------------------------------------------------------- the registry
-def _task(cls: type, options: Mapping[str, Any], world: str) -> Any:
-    """``cls(**options)``, an unknown option or bad value a :class:`ConfigError` naming it."""
-    try:
-        return cls(**dict(options))
-    except TypeError as err:
-        raise ConfigError(
-            f"compare.worlds: bad task option for the {world} world ({err}); its options are "
-            f"the fields of {cls.__module__}.{cls.__qualname__}"
-        ) from err
-
-
-def _two_point(options: Mapping[str, Any], seed: int, n_demos: int) -> SyntheticRun:
-    """The two-point world (:mod:`cpmp.worlds.two_point`) with ``options`` of its task."""
-    task = _task(two_point.SyntheticTask, options, "two_point")
-
-    def evaluate(policy: Policy, n: int, episode_seed: int) -> list[EpisodeResult]:
-        # two_point.evaluate returns counts only: the same draw and scoring, one per episode
-        rng = np.random.default_rng(episode_seed)
-        episodes = [task.sample_episode(rng) for _ in range(n)]
-        return [
-            EpisodeResult(task.outcome(e, run), "parallel" if e.parallel else "sequential")
-            for e, run in zip(episodes, task.rollouts(episodes, policy), strict=True)
-        ]
-
-    return SyntheticRun(two_point.make_demonstrations(n_demos, seed=seed, task=task), evaluate)
-
-
-def _relay(options: Mapping[str, Any], seed: int, n_demos: int) -> SyntheticRun:
-    """The relay world (:mod:`cpmp.worlds.relay`) with ``options`` of its task."""
-    task = _task(relay.RelayTask, options, "relay")
-
-    def evaluate(policy: Policy, n: int, episode_seed: int) -> list[EpisodeResult]:
-        result = relay.evaluate(policy, task, n_episodes=n, seed=episode_seed)
-        return [EpisodeResult(e["outcome"], e["strategy"]) for e in result["per_episode"]]
-
-    return SyntheticRun(relay.make_demonstrations(n_demos, seed=seed, task=task), evaluate)
-
-
-def _pacing(options: Mapping[str, Any], key: str, default: Pacing, world: str) -> Pacing:
-    """The :class:`Pacing` of option ``key`` (a mapping of its fields; absent: ``default``)."""
-    value = options.get(key)
-    if value is None:
-        return default
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"compare.worlds: the {world} world's {key} must be a mapping")
-    fields = {k: tuple(v) if isinstance(v, (list, tuple)) else v for k, v in value.items()}
-    return _task(Pacing, fields, f"{world} ({key})")
-
-
-def _paced_relay(options: Mapping[str, Any], seed: int, n_demos: int) -> SyntheticRun:
-    """The paced relay world (:mod:`cpmp.worlds.relay.varied`).
-
-    Options ``demo`` and ``robot`` (each a :class:`~cpmp.config.task.Pacing`'s fields) and
-    ``relay`` (the relay task's).
-    """
-    unknown = sorted(set(options) - {"demo", "robot", "relay"})
-    if unknown:
-        raise ConfigError(
-            f"compare.worlds: unknown option(s) {', '.join(unknown)} of the paced_relay world; "
-            "valid: demo, robot, relay"
-        )
-    demo = _pacing(options, "demo", DEMO_PACING, "paced_relay")
-    robot = _pacing(options, "robot", ROBOT_PACING, "paced_relay")
-    task = None
-    if options.get("relay"):
-        task = _task(relay.RelayTask, options["relay"], "paced_relay (relay)")
-    world = paced_relay(seed, n_demos, demo=demo, robot=robot, relay=task)
-
-    def evaluate(policy: Policy, n: int, episode_seed: int) -> list[EpisodeResult]:
-        scores = world.evaluate(policy, n, episode_seed)
-        return [EpisodeResult(s.outcome, s.strategy) for s in scores]
-
-    return SyntheticRun(world.demonstrations, evaluate)
-
-
-SYNTHETIC_WORLDS: dict[str, MakeRun] = {
-    "two_point": _two_point,
-    "relay": _relay,
-    "paced_relay": _paced_relay,
-}
-"""The synthetic worlds a ``compare.worlds`` entry of ``kind: synthetic`` may name."""
+SYNTHETIC_WORLDS: tuple[str, ...] = world_names()
+"""The synthetic worlds a ``compare.worlds`` entry of ``kind: synthetic`` may name: every
+world of :mod:`cpmp.worlds.registry`."""
 
 
 def synthetic_run(name: str, options: Mapping[str, Any], seed: int, n_demos: int) -> SyntheticRun:
     """The synthetic world ``name`` at ``seed`` with ``n_demos`` demonstrations.
 
+    Its closed loop is :func:`cpmp.worlds.protocol.evaluate` (batched where the policy
+    batches); a family world's ``task`` option picks the member.
+
     Raises:
         ConfigError: an unknown world or a bad option.
     """
-    make = SYNTHETIC_WORLDS.get(name)
-    if make is None:
+    if name not in SYNTHETIC_WORLDS:
         raise ConfigError(
             f"compare.worlds: unknown synthetic world {name!r}; known: "
             f"{', '.join(SYNTHETIC_WORLDS)}"
         )
-    return make(options, seed, n_demos)
+    try:
+        world = make_world(name, options)
+    except ConfigError as err:
+        raise ConfigError(f"compare.worlds: {err}") from err
+
+    def evaluate(policy: Policy, n: int, episode_seed: int) -> list[EpisodeResult]:
+        runs = evaluate_world(world, policy, n, episode_seed).episodes
+        return [EpisodeResult(e.outcome, e.strategy) for e in runs]
+
+    return SyntheticRun(world.demonstrations(n_demos, seed), evaluate)
 
 
 # ------------------------------------------------------------------------- resolved worlds

@@ -40,15 +40,9 @@ def _lazy(module: str, name: str) -> Callable[..., World]:
     def make(**options: Any) -> World:
         import importlib
 
-        cls = getattr(importlib.import_module(module), name)
-        try:
-            return cls(**options)
-        except TypeError as err:
-            raise ConfigError(
-                f"bad option for the world {name} ({err}); its options are the fields of "
-                f"{module}.{name}"
-            ) from err
+        return getattr(importlib.import_module(module), name)(**options)
 
+    make.__qualname__ = f"{module}.{name}"
     return make
 
 
@@ -96,7 +90,18 @@ def make_world(name: str, options: Mapping[str, Any] | None = None) -> World:
     Raises:
         ConfigError: an unknown world or a bad option.
     """
-    return entry(name).make(**dict(options or {}))
+    return _make(name, entry(name), dict(options or {}))
+
+
+def _make(name: str, found: WorldEntry, options: dict[str, Any]) -> World:
+    """``found.make(**options)``, an unknown option a :class:`ConfigError` naming the world."""
+    try:
+        return found.make(**options)
+    except TypeError as err:
+        raise ConfigError(
+            f"bad task option for the {name} world ({err}); its options are the parameters of "
+            f"{found.make.__qualname__}"
+        ) from err
 
 
 def members(name: str, n_tasks: int, options: Mapping[str, Any] | None = None) -> list[World]:
@@ -105,7 +110,7 @@ def members(name: str, n_tasks: int, options: Mapping[str, Any] | None = None) -
     Raises:
         ConfigError: an unknown world or a bad option.
     """
-    e = entry(name)
-    if not e.family:
-        return [e.make(**dict(options or {}))]
-    return [e.make(**{**dict(options or {}), "task": i}) for i in range(n_tasks)]
+    found = entry(name)
+    if not found.family:
+        return [_make(name, found, dict(options or {}))]
+    return [_make(name, found, {**dict(options or {}), "task": i}) for i in range(n_tasks)]

@@ -20,10 +20,10 @@ from cpmp.benchmarks.clock import (
     run_clock_benchmark,
     run_synthetic_episode,
     sim_task,
-    synthetic_world,
 )
 from cpmp.data import mp_sequences
 from cpmp.errors import ConfigError, DataError
+from cpmp.worlds.registry import make_world, world_names
 from cpmp.worlds.two_point import SyntheticTask, evaluate
 
 BY_NAME = {c.name: c for c in CONDITIONS}
@@ -54,9 +54,9 @@ class Recorder:
 
 def run_recorder(condition: str, strict: bool = False, seed: int = 0):
     """One parallel two-point episode (no switch, so it runs to max_time) under ``condition``."""
-    world = synthetic_world("two_point")
+    world = make_world("two_point")
     episode = SyntheticTask().sample_episode(np.random.default_rng(3), context=0.9)
-    reference = world.reference(episode)
+    reference = world.demonstrate(episode)
     inner = Recorder(strict)
     policy = ClockedPolicy(inner, BY_NAME[condition], np.random.default_rng(seed), 3.0)
     record = run_synthetic_episode(world, episode, policy, reference)
@@ -66,12 +66,12 @@ def run_recorder(condition: str, strict: bool = False, seed: int = 0):
 def test_reference_condition_is_the_worlds_own_loop(fitted_klr):
     """At 100 Hz the clocked two-point loop gives the sequencer exactly what
     SyntheticTask.rollout gives it: the same outcomes, sequences and switch times."""
-    world = synthetic_world("two_point")
+    world = make_world("two_point")
     task = SyntheticTask()
-    episodes = world.episodes(10, 1000)
+    episodes = world.contexts(10, 1000)
     completed = 0
     for i, episode in enumerate(episodes):
-        reference = world.reference(episode)
+        reference = world.demonstrate(episode)
         sequences, done = task.rollout(episode, fitted_klr)
         times = {v: [e.t for e in fitted_klr.events if e.variable == v] for v in sequences}
         policy = ClockedPolicy(fitted_klr, BY_NAME[REFERENCE], np.random.default_rng(i), 3.0)
@@ -162,7 +162,7 @@ def test_quick_run_writes_reproducible_json(run_script, tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert "| two_point |" in done.stdout
     result = json.loads(out.read_text())
-    assert set(result["worlds"]) == {"two_point", "relay", "repetition"}
+    assert set(result["worlds"]) == set(world_names())  # every registered world, no list here
     assert list(result["conditions"]) == list(CONDITION_NAMES)
     for world in result["worlds"].values():
         assert set(world["conditions"]) == set(CONDITION_NAMES)

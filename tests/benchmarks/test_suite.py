@@ -10,7 +10,6 @@ from cpmp.benchmarks.cli import (
     bench_main,
     bench_sequencer_main,
     bench_sim_main,
-    bench_synthetic_main,
 )
 from cpmp.benchmarks.fit import (
     newton_solve_all,
@@ -22,9 +21,8 @@ from cpmp.benchmarks.fit import (
 from cpmp.benchmarks.sequencer import bench_sequencer, bench_ticks
 from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.errors import ConfigError
-from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.relay.demonstrator import make_demonstrations as relay_demonstrations
-from cpmp.worlds.two_point import evaluate, make_demonstrations
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -60,31 +58,6 @@ def test_bench_sim_prints_json(capsys):
 def test_bench_sim_rejects_a_bad_box(capsys):
     assert bench_sim_main(["--width", "-0.1", "--demos", "0"]) == 2
     assert "bench_sim: error: Box.width must be a positive length" in capsys.readouterr().err
-
-
-def test_bench_synthetic_counts_the_episodes_of_each_task(capsys):
-    """Each (task, D, seed, config) row counts the outcomes of ``klr`` fitted on D demos of that
-    task and run on held-out episodes seeded ``1000 + seed``: the same counts as the task's
-    own ``evaluate`` on a fit made here."""
-
-    args = ["--seeds", "1", "--sizes", "3", "--episodes", "4", "--configs", "defaults", "paper"]
-    assert bench_synthetic_main(args) == 0
-    captured = capsys.readouterr()
-    rows = json.loads(captured.out)["rows"]
-    assert [(r["task"], r["config"]) for r in rows] == [
-        ("two_point", "defaults"),
-        ("two_point", "paper"),
-        ("relay", "defaults"),
-        ("relay", "paper"),
-    ]
-    assert [json.loads(line) for line in captured.err.splitlines()] == rows  # one line per row
-    for row in rows:
-        assert (row["D"], row["seed"]) == (3, 1)
-        assert row["complete"] + row["wrong_start"] + row["incomplete"] == 4
-    demos = make_demonstrations(3, 1)
-    seq = ConcurrentSequencer.fit(demos, "klr", seed=1, logger=None, **PAPER_OPTIONS)
-    counts = evaluate(seq, None, 4, 1001)
-    assert {k: rows[1][k] for k in counts} == counts
 
 
 # ------------------------------------------------------------------------ scripts/bench.py

@@ -77,7 +77,7 @@ def test_world_options_change_the_demonstrations():
         ("nope", {}, "unknown synthetic world 'nope'"),
         ("two_point", {"gian": 2.0}, "bad task option for the two_point world"),
         ("relay", {"dt": -1.0}, "dt must be > 0"),
-        ("paced_relay", {"speed": [1, 2]}, "unknown option"),
+        ("paced_relay", {"speed": [1, 2]}, "bad task option for the paced_relay world"),
         ("paced_relay", {"demo": {"speed": [0.0, 2.0]}}, "speed"),
     ],
 )

@@ -112,7 +112,7 @@ def test_the_registry_names_its_worlds_and_refuses_unknown_ones() -> None:
     assert {"two_point", "relay", "paced_relay", "repetition"} <= set(world_names())
     with pytest.raises(ConfigError, match="unknown world 'nope'; registered: two_point"):
         make_world("nope")
-    with pytest.raises(ConfigError, match="bad option for the world RelayWorld"):
+    with pytest.raises(ConfigError, match="bad task option for the relay world"):
         make_world("relay", {"no_such_option": 1})
     with pytest.raises(ConfigError, match="paced_relay world's demo"):
         make_world("paced_relay", {"demo": 3})
