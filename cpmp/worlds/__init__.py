@@ -9,6 +9,12 @@ table. The worlds:
 * ``relay``: a carrier and a receiver hand an object over (three strategies, a
   cross-variable wait), with its scripted demonstrator and closed-loop evaluation;
 * ``repetition``: a ladling cycle repeated as often as a quantity in the state says;
+* ``peg`` (reactive): a peg inserted, retracted and re-aligned after jams read only from a
+  force, 1-3 tries decided during execution, while the other arm holds the base;
+* ``slip`` (reactive): a pick that slips mid-lift (read from contact and grip width) and is
+  lowered and re-grasped, while the other hand holds a drawer open across the tries;
+* ``procedural``: a generator of random concurrent tasks (a family: ``task=i``);
+* ``attractor``: an attractor's goal inferred from its motion (the scripted policies');
 * ``pacing``: MPs at varied speeds with holds mid-MP (:class:`~cpmp.worlds.pacing.Pacer`) and
   the face of a paced world (:class:`~cpmp.worlds.pacing.PacedWorld`; the relay's is
   :func:`cpmp.worlds.relay.varied.paced_relay`);

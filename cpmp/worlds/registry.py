@@ -63,6 +63,16 @@ WORLDS: dict[str, WorldEntry] = {
         _lazy("cpmp.worlds.repetition.registered", "RepetitionWorld"),
         "a scoop-pour cycle repeated as the soup left says; a helper holds across it",
     ),
+    "peg": WorldEntry(
+        _lazy("cpmp.worlds.peg.registered", "PegWorld"),
+        "peg-in-hole retried after jams read from a force; a holder holds across the retries",
+        reactive=True,
+    ),
+    "slip": WorldEntry(
+        _lazy("cpmp.worlds.slip.registered", "SlipWorld"),
+        "a pick that may slip mid-lift and is retried; the other hand holds a drawer open",
+        reactive=True,
+    ),
 }
 """The registered worlds, by name."""
 
