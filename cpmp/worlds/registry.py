@@ -73,6 +73,12 @@ WORLDS: dict[str, WorldEntry] = {
         "a pick that may slip mid-lift and is retried; the other hand holds a drawer open",
         reactive=True,
     ),
+    "procedural": WorldEntry(
+        _lazy("cpmp.worlds.procedural.registered", "ProceduralWorld"),
+        "random concurrent tasks from a seed: loops, waits, branches, distractors",
+        family=True,
+        reactive=True,
+    ),
 }
 """The registered worlds, by name."""
 

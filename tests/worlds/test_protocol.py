@@ -116,7 +116,11 @@ def test_the_registry_names_its_worlds_and_refuses_unknown_ones() -> None:
         make_world("relay", {"no_such_option": 1})
     with pytest.raises(ConfigError, match="paced_relay world's demo"):
         make_world("paced_relay", {"demo": 3})
+    with pytest.raises(ConfigError, match="bad task option for the procedural world"):
+        make_world("procedural", {"bogus": 1})
     assert len(members("relay", 7)) == 1
+    family = members("procedural", 3)
+    assert [w.spec.seed for w in family] == [0, 1, 2]  # member i is the generator's task i
 
 
 @pytest.mark.parametrize(
