@@ -230,8 +230,8 @@ def render_compare(result: Mapping[str, Any], name: str, seconds: float, workers
         "resamples the seeds, then each drawn seed's episodes (or held-out demonstrations). "
         "W / I / C = wrong start / incomplete / complete, in % of the episodes (a simulated "
         "world's episodes are its random boxes, the same boxes for every row); MAE = progress "
-        "error against eq. 1 over every held-out sample (goal_nearest: its nearest-sample "
-        "estimate, which it does not use to switch); fit [s], tick [ms] (mean `step()` over "
+        "error against eq. 1 over every held-out sample (goal_nearest, bc: their nearest-sample "
+        "estimate, which they do not use to switch); fit [s], tick [ms] (mean `step()` over "
         "a held-out demonstration) and support points: intervals over the seeds. "
         f"Wall time {seconds / 60:.1f} min on {workers} worker(s).",
         "",

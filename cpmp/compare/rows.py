@@ -6,7 +6,8 @@ in every world of ``compare.worlds``,
 * ``predictors``: the world's ``predictors`` (default ``compare.predictors``: every option of the
   ``predictor`` config group, and any registered predictor kind no option uses, with its
   built-in defaults), each with its default options, run with the job's ``sequencer``;
-* ``baselines``: each listed ``sequencer`` option that needs no predictor (``goal_nearest``);
+* ``baselines``: each listed ``sequencer`` option that needs no predictor (``goal_nearest``,
+  ``bc``);
 * ``support_sweep`` (the worlds of ``compare.sweep.worlds``): ``compare.sweep.predictor`` at
   each ``compare.sweep.support_scale``, and each ``compare.sweep.series`` predictor at each of
   its values and at its own default, at the training sizes ``compare.sweep.train_sizes``
@@ -30,6 +31,8 @@ from hydra.core.global_hydra import GlobalHydra
 
 from cpmp.compare.settings import CompareJob, CompareSettings
 from cpmp.compare.worlds import World
+from cpmp.config.bc import KIND as BC
+from cpmp.config.bc import bc_options
 from cpmp.config.goal_nearest import KIND, goal_nearest_options
 from cpmp.errors import ConfigError
 from cpmp.experiment.config import predictor_options
@@ -245,13 +248,15 @@ def row_specs(cfg: Any, job: CompareJob) -> list[RowSpec]:
             )
         for name in world.baselines:
             options = sequencers.get(name)
-            if options is None or options.get("kind") != KIND:
+            kinds = (KIND, BC)
+            if options is None or options.get("kind") not in kinds:
                 raise ConfigError(
-                    f"compare.baselines: {name!r} is not a sequencer option of kind {KIND!r}; "
-                    f"options of that kind: "
-                    f"{', '.join(n for n, o in sequencers.items() if o.get('kind') == KIND)}"
+                    f"compare.baselines: {name!r} is not a sequencer option of kind {KIND!r} "
+                    f"or {BC!r}; options of those kinds: "
+                    f"{', '.join(n for n, o in sequencers.items() if o.get('kind') in kinds)}"
                 )
-            goal_nearest_options({k: v for k, v in options.items() if k != "kind"})
+            check = goal_nearest_options if options["kind"] == KIND else bc_options
+            check({k: v for k, v in options.items() if k != "kind"})
             specs.append(RowSpec(world.name, "baselines", NO_PREDICTOR, name, {}, options, sizes))
         if world.name in compare.sweep.worlds:
             specs += _sweep_specs(world, compare, predictors, sequencer, sequencer_cfg)

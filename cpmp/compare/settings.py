@@ -19,6 +19,7 @@ from typing import Any
 from cpmp.compare.stats import BootstrapOptions
 from cpmp.compare.worlds import SYNTHETIC_WORLDS, WORLD_KINDS, World, synthetic_run
 from cpmp.config import TaskConfig
+from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 from cpmp.experiment.config import store_schema
@@ -147,7 +148,8 @@ class CompareSettings:
         predictors: ``all`` (every ``predictor`` group option and every registered kind) or
             a list of ``predictor`` group option names: the rows of every world that does not
             name its own.
-        baselines: ``sequencer`` group options run without a predictor (``goal_nearest``).
+        baselines: ``sequencer`` group options run without a predictor (``goal_nearest``,
+            ``bc``).
         sweep: the support-count axis.
         worlds: the worlds the rows run on, by name (``sim``: the job's own task).
         claims: pairs of rows whose differences the report tests in every world.
@@ -389,13 +391,14 @@ class CompareJob:
         The job's ``sequencer`` must be a learned one: the predictor rows run with it.
 
         Raises:
-            ConfigError: a bad option of any of them, or ``sequencer=goal_nearest``.
+            ConfigError: a bad option of any of them, or a baseline as the job's sequencer
+                (``sequencer=goal_nearest`` or ``bc``).
         """
-        if to_dict(cfg.get("sequencer")).get("kind") == GOAL_NEAREST:
+        kind = to_dict(cfg.get("sequencer")).get("kind")
+        if kind in (GOAL_NEAREST, BC):
             raise ConfigError(
                 "the comparison runs the predictors with the job's sequencer, which must be a "
-                "learned one (e.g. sequencer=coupled); goal_nearest is listed in "
-                "compare.baselines"
+                f"learned one (e.g. sequencer=coupled); list {kind} in compare.baselines"
             )
         settings = ExperimentSettings.from_cfg(cfg.experiment)
         task = TaskConfig.from_dict(cfg.task)

@@ -11,6 +11,7 @@ either is loaded; the classes are re-exported where they are used (:mod:`cpmp.pr
 :mod:`cpmp.sequencer.sequencer`, :mod:`cpmp.predictors.training`, :mod:`cpmp.sim`).
 """
 
+from cpmp.config.bc import BCConfig, bc_options
 from cpmp.config.fit import FIT_OPTIONS, FitConfig
 from cpmp.config.goal_nearest import GoalNearestConfig, goal_nearest_options
 from cpmp.config.predictors import (
@@ -55,6 +56,7 @@ __all__ = [
     "START_KERNELS",
     "START_RULES",
     "SWITCH_RULES",
+    "BCConfig",
     "DTWConfig",
     "FitConfig",
     "GoalNearestConfig",
@@ -69,6 +71,7 @@ __all__ = [
     "TaskConfig",
     "TimePhaseConfig",
     "TrainerConfig",
+    "bc_options",
     "goal_nearest_options",
     "predictor_config",
     "predictor_config_class",

@@ -10,8 +10,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from cpmp.baselines.bc import BCSequencer
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
-from cpmp.config.goal_nearest import KIND
 from cpmp.data.datafile import list_splits, load_demonstrations
 from cpmp.errors import ConfigError, CpmpFileError, DataError
 from cpmp.evaluation.checkpoints import load_sequencer
@@ -173,12 +173,12 @@ def _model_entry(seq: Any) -> dict[str, Any]:
     """What an evaluated checkpoint is.
 
     Returns:
-        ``sequencer`` (``learned`` or ``goal_nearest``) and ``predictor`` (its kind, ``none``
-        for goal_nearest, with a note on what its progress is).
+        ``sequencer`` (``learned``, ``goal_nearest`` or ``bc``) and ``predictor`` (its kind,
+        ``none`` for a baseline, with a note on what its progress is).
     """
-    if isinstance(seq, GoalNearestSequencer):
-        entry = predictor_entry("none", {}, {"kind": KIND})
-        return {"sequencer": KIND, "predictor": entry.pop("kind"), **entry}
+    if isinstance(seq, (GoalNearestSequencer, BCSequencer)):
+        entry = predictor_entry("none", {}, {"kind": seq.kind})
+        return {"sequencer": seq.kind, "predictor": entry.pop("kind"), **entry}
     options = seq.predictor.spec()["config"]
     return {
         "sequencer": "learned",

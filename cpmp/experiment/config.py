@@ -3,8 +3,9 @@
 **Registration** (:func:`register_configs`, run on import): the option dataclasses of
 :mod:`cpmp.config` (and :class:`~cpmp.experiment.settings.ExperimentSettings`) are stored in
 Hydra's ConfigStore as ``schema_task``, ``schema_trainer``, ``schema_sequencer``,
-``schema_experiment``, ``schema_sequencer_goal_nearest`` (the baseline's options and its
-``kind``) and one ``schema_predictor_<kind>`` per predictor kind (its options and ``kind``);
+``schema_experiment``, ``schema_sequencer_goal_nearest`` and ``schema_sequencer_bc`` (each
+baseline's options and its ``kind``) and one ``schema_predictor_<kind>`` per predictor kind (its
+options and ``kind``);
 :func:`store_schema` stores one more (the comparison registers ``schema_compare`` with it,
 :mod:`cpmp.compare.settings`). Each option of ``conf/`` starts from one of them
 (``defaults: [/schema_..., _self_]``) and holds only what differs from the dataclass's
@@ -31,15 +32,18 @@ from hydra.core.config_store import ConfigStore
 
 from cpmp.config import (
     PREDICTOR_CONFIGS,
+    BCConfig,
     FitConfig,
     GoalNearestConfig,
     PredictorConfig,
     SequencerConfig,
     TaskConfig,
     TrainerConfig,
+    bc_options,
     goal_nearest_options,
     predictor_config,
 )
+from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 from cpmp.experiment.settings import (
@@ -115,6 +119,7 @@ def register_configs() -> None:
     ):
         store_schema(name, cls)
     store_schema(f"schema_sequencer_{GOAL_NEAREST}", GoalNearestConfig, kind=GOAL_NEAREST)
+    store_schema(f"schema_sequencer_{BC}", BCConfig, kind=BC)
     for kind, cls in PREDICTOR_CONFIGS.items():
         store_schema(f"schema_predictor_{kind}", cls, kind=kind)
 
@@ -170,23 +175,28 @@ def fit_settings(
     """Typed :class:`FitSettings` from the ``predictor``, ``sequencer``, ``trainer`` groups.
 
     The groups are nodes or mappings (``None``: the defaults), validated; the ``goal_nearest``
-    baseline needs no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a predictor
-    that has one (the Adam-trained ones), so that the saved model says which rate it was
+    and ``bc`` baselines need no ``predictor``. A set ``trainer.lr`` replaces the ``lr`` of a
+    predictor that has one (the Adam-trained ones), so that the saved model says which rate it was
     trained with. ``logger_cfg`` (the ``logger`` group) is checked by :func:`logger_spec`.
 
     Raises:
         ConfigError: a bad option of any group.
     """
     sequencer = to_dict(sequencer_cfg)
-    goal_nearest = None
+    goal_nearest = bc = None
     if sequencer.get("kind") is not None:
-        if sequencer.pop("kind") != GOAL_NEAREST:
+        baseline = sequencer.pop("kind")
+        if baseline == GOAL_NEAREST:
+            goal_nearest = goal_nearest_options(sequencer)
+        elif baseline == BC:
+            bc = bc_options(sequencer)
+        else:
             raise ConfigError(
-                f"sequencer.kind must be {GOAL_NEAREST!r} or absent (the learned sequencer)"
+                f"sequencer.kind must be {GOAL_NEAREST!r}, {BC!r} or absent (the learned "
+                f"sequencer), got {baseline!r}"
             )
-        goal_nearest = goal_nearest_options(sequencer)
         sequencer = {}
-    if goal_nearest is not None and not to_dict(predictor_cfg):
+    if (goal_nearest is not None or bc is not None) and not to_dict(predictor_cfg):
         kind, predictor = FitConfig.predictor, None  # the baseline uses no predictor
     else:
         kind, predictor = predictor_from_cfg(predictor_cfg)
@@ -199,7 +209,7 @@ def fit_settings(
     if trainer.lr is not None and hasattr(predictor, "lr"):
         predictor = dataclasses.replace(predictor, lr=trainer.lr)
     return FitSettings(
-        FitConfig(kind, predictor, rule, trainer), goal_nearest, logger_spec(logger_cfg)
+        FitConfig(kind, predictor, rule, trainer), goal_nearest, logger_spec(logger_cfg), bc
     )
 
 

@@ -1,4 +1,4 @@
-"""Fitting a sequencer: the learned one or the ``goal_nearest`` baseline.
+"""Fitting a sequencer: the learned one or a baseline (``goal_nearest``, ``bc``).
 
 The learned sequencer fits a progress predictor per node in one Lightning fit; the jobs give
 it the held-out demonstrations as validation data and the logger of the ``logger`` group
@@ -16,6 +16,7 @@ from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from lightning.pytorch.loggers import Logger
 
+from cpmp.baselines.bc import BCSequencer
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
@@ -59,7 +60,7 @@ def train_sequencer(
     seed: int = 0,
     log_dir: str | Path | None = None,
     validation: Sequence[Demonstration] | None = None,
-) -> ConcurrentSequencer | GoalNearestSequencer:
+) -> ConcurrentSequencer | GoalNearestSequencer | BCSequencer:
     """Fit the sequencer ``settings`` describe on ``demos`` with ``seed``.
 
     Args:
@@ -73,11 +74,14 @@ def train_sequencer(
 
     Returns:
         A :class:`~cpmp.sequencer.ConcurrentSequencer`, or the
-        :class:`~cpmp.baselines.GoalNearestSequencer` baseline (no predictor, no trainer).
+        :class:`~cpmp.baselines.GoalNearestSequencer` or :class:`~cpmp.baselines.BCSequencer`
+        baseline (no predictor, no trainer).
     """
     if settings.goal_nearest is not None:
         options = dataclasses.asdict(settings.goal_nearest)
         return GoalNearestSequencer.fit(list(demos), seed=seed, **options)
+    if settings.bc is not None:
+        return BCSequencer.fit(list(demos), seed=seed, **dataclasses.asdict(settings.bc))
     fit = settings.fit
     trainer = fit.trainer
     if log_dir is not None:
@@ -94,7 +98,7 @@ def fit_sequencer(
     trainer_cfg: Any = None,
     seed: int = 0,
     log_dir: str | Path | None = None,
-) -> ConcurrentSequencer | GoalNearestSequencer:
+) -> ConcurrentSequencer | GoalNearestSequencer | BCSequencer:
     """:func:`train_sequencer` from config groups, without a logger.
 
     Args:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.evaluation.offline import progress_curves
 from cpmp.experiment.output import PAPER_TABLE_I, jsonable, mean_std, write_json
@@ -31,11 +32,24 @@ def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
 
-NEAREST_PROGRESS_NOTE = (
-    "sequencer=goal_nearest trains no progress predictor (the predictor group is not used); "
-    "its progress MAE is of a nearest-training-sample lookup of the expected progress (eq. 1), "
-    "which it never uses to switch"
-)
+BASELINES = (GOAL_NEAREST, BC)
+"""The ``sequencer`` kinds that train no progress predictor."""
+
+
+def nearest_progress_note(kind: str = GOAL_NEAREST) -> str:
+    """What the progress numbers of a run of the baseline ``kind`` are.
+
+    Args:
+        kind: one of :data:`BASELINES`.
+    """
+    return (
+        f"sequencer={kind} trains no progress predictor (the predictor group is not used); "
+        "its progress MAE is of a nearest-training-sample lookup of the expected progress "
+        "(eq. 1), which it never uses to switch"
+    )
+
+
+NEAREST_PROGRESS_NOTE = nearest_progress_note()
 """What the progress numbers of a ``goal_nearest`` run are."""
 
 
@@ -44,20 +58,28 @@ def is_goal_nearest(sequencer: Mapping[str, Any] | None) -> bool:
     return bool(sequencer) and sequencer.get("kind") == GOAL_NEAREST
 
 
+def baseline_kind(sequencer: Mapping[str, Any] | None) -> str | None:
+    """The baseline (one of :data:`BASELINES`) a ``sequencer`` config selects, else ``None``."""
+    kind = sequencer.get("kind") if sequencer else None
+    return kind if kind in BASELINES else None
+
+
 def predictor_entry(
     kind: str, predictor: Mapping[str, Any], sequencer: Mapping[str, Any] | None
 ) -> dict[str, Any]:
     """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran.
 
-    For ``sequencer=goal_nearest`` (which runs none) it is ``kind: "none"``, the progress
-    estimate it reports instead (``nearest_sample``) and a note saying so.
+    For a baseline (``sequencer=goal_nearest`` or ``bc``, which run none) it is
+    ``kind: "none"``, the progress estimate it reports instead (``nearest_sample``) and a note
+    saying so.
     """
-    if is_goal_nearest(sequencer):
+    baseline = baseline_kind(sequencer)
+    if baseline is not None:
         return {
             "kind": "none",
             "progress_estimate": "nearest_sample",
             "used_to_switch": False,
-            "note": NEAREST_PROGRESS_NOTE,
+            "note": nearest_progress_note(baseline),
         }
     return {"kind": kind, **predictor}
 
@@ -149,8 +171,8 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
 def _configs(job: ExperimentJob) -> dict[str, Any]:
     """The report's ``predictor``, ``sequencer`` and ``task`` sections: every option used."""
     fit = job.fit
-    if fit.goal_nearest is not None:
-        sequencer = {"kind": GOAL_NEAREST, **dataclasses.asdict(fit.goal_nearest)}
+    if fit.baseline is not None:
+        sequencer = fit.baseline_options()
     else:
         sequencer = dataclasses.asdict(fit.fit.sequencer)
     return {
@@ -173,10 +195,10 @@ def experiment_files(job: ExperimentJob) -> dict[str, str]:
         "seed_<s>/recordings/*.rrd": "rerun recordings (open with `rerun FILE.rrd`)",
         "seed_<s>/lightning/D<d>/": "Lightning CSV logs of the predictor fits",
     }
-    if job.fit.goal_nearest is not None:  # no predictor: nothing for Lightning to fit
+    if job.fit.baseline is not None:  # no predictor: nothing for Lightning to fit
         del files["seed_<s>/lightning/D<d>/"]
         files["seed_<s>/model_D<d>.pt"] = (
-            "goal_nearest checkpoints (cpmp.evaluation.checkpoints.load_sequencer)"
+            f"{job.fit.baseline} checkpoints (cpmp.evaluation.checkpoints.load_sequencer)"
         )
     return files
 
@@ -256,6 +278,19 @@ def _method_line(report: Mapping[str, Any]) -> str:
             f"`{seq.get('feature_scaling', '–')}`). No progress predictor is trained or used "
             "(the `predictor` group is ignored), so there is no coupling and no stall recovery"
         )
+    if baseline_kind(seq) == BC:
+        return (
+            f"Sequencer `{BC}` (behaviour cloning, the baseline without learned progress): per "
+            "variable and MP a kernel logistic regression of stay / successor trained on every "
+            f"demonstrated tick (RBF γ {seq.get('gamma', '–')} on `"
+            f"{seq.get('feature_scaling', '–')}`-scaled features, at most "
+            f"{seq.get('max_supports', '–')} support points per node plus every switch tick, l2 "
+            f"{seq.get('l2', '–')}, class weight `{seq.get('class_weight', '–')}`); a variable "
+            f"switches when a successor's probability exceeds {seq.get('threshold', '–')}; each "
+            "variable starts at the initial MP with the nearest demonstrated first sample. No "
+            "progress predictor is trained or used (the `predictor` group is ignored), so there "
+            "is no coupling and no stall recovery"
+        )
     pred = report["predictor"]
     return (
         f"Predictor `{pred['kind']}` (feature weighting `{pred.get('feature_weighting', '–')}`, "
@@ -270,11 +305,11 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     """The human-readable report: Table I beside the paper's, progress errors, strategy map.
 
     The header names what ran: the predictor and the learned sequencer's rules, or the
-    ``goal_nearest`` baseline's options (whose progress numbers are labelled as a
-    nearest-sample lookup it does not switch on).
+    options of a baseline, ``goal_nearest`` or ``bc`` (whose progress numbers are labelled as
+    a nearest-sample lookup it does not switch on).
     """
     exp = report["experiment"]
-    goal_nearest = is_goal_nearest(report.get("sequencer"))
+    baseline = baseline_kind(report.get("sequencer"))
     lines = [
         f"# cpmp experiment `{exp['name']}`",
         "",
@@ -298,7 +333,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             f"{_fmt(row['C'], row['C_std'], 1)} | {paper_counts} | "
             f"{_fmt(row['distance_mean'], row['distance_std'])} | "
             f"{_fmt(row.get('distance_continuous_mean'), row.get('distance_continuous_std'))} | "
-            f"{paper_dist} | {'–' if goal_nearest else _fmt(row.get('recoveries'), None, 1)} |"
+            f"{paper_dist} | {'–' if baseline else _fmt(row.get('recoveries'), None, 1)} |"
         )
     lines += [
         "",
@@ -312,11 +347,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "per seed (mean).",
         "",
     ]
-    if goal_nearest:
+    if baseline:
         lines += [
             "## Progress estimate (nearest-sample lookup, not used to switch)",
             "",
-            f"Not a learned prediction: {NEAREST_PROGRESS_NOTE}. Held-out demonstrations.",
+            f"Not a learned prediction: {nearest_progress_note(baseline)}. Held-out "
+            "demonstrations.",
             "",
         ]
     else:

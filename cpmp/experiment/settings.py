@@ -17,7 +17,9 @@ from typing import Any, Literal, get_args
 
 from omegaconf import DictConfig, OmegaConf
 
-from cpmp.config import FitConfig, GoalNearestConfig, TaskConfig
+from cpmp.config import BCConfig, FitConfig, GoalNearestConfig, TaskConfig
+from cpmp.config.bc import KIND as BC
+from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 
 RecordMode = Literal["failures", "all", "first", "none"]
@@ -165,11 +167,32 @@ class FitSettings:
             used), else ``None``.
         logger: the ``logger`` group: a Lightning logger's ``_target_`` and arguments, built
             per fit by :func:`cpmp.experiment.fitting.make_logger`; ``None``: no logging.
+        bc: the options of the ``bc`` (behaviour-cloning) baseline when the ``sequencer``
+            group selects it (``kind: bc``; the predictor and trainer are then not used),
+            else ``None``.
     """
 
     fit: FitConfig
     goal_nearest: GoalNearestConfig | None = None
     logger: dict[str, Any] | None = None
+    bc: BCConfig | None = None
+
+    @property
+    def baseline(self) -> str | None:
+        """The baseline the ``sequencer`` group selects (``goal_nearest``, ``bc``).
+
+        ``None`` for the learned sequencer.
+        """
+        if self.goal_nearest is not None:
+            return GOAL_NEAREST
+        return BC if self.bc is not None else None
+
+    def baseline_options(self) -> dict[str, Any]:
+        """The selected baseline's options with its ``kind`` (empty for the learned one)."""
+        options = self.goal_nearest if self.goal_nearest is not None else self.bc
+        if options is None:
+            return {}
+        return {"kind": self.baseline, **dataclasses.asdict(options)}
 
     @property
     def predictor(self) -> str:

@@ -21,6 +21,7 @@ from cpmp.compare.settings import CompareSettings, SweepSettings
 from cpmp.config import (
     ACTIVATIONS,
     PREDICTOR_CONFIGS,
+    BCConfig,
     FitConfig,
     GoalNearestConfig,
     KLRConfig,
@@ -248,6 +249,8 @@ def test_group_options_compose_to_every_option_of_their_dataclass(group):
             cls = PREDICTOR_CONFIGS[kind]
         elif kind == "goal_nearest":
             cls = GoalNearestConfig
+        elif kind == "bc":
+            cls = BCConfig
         else:
             cls = SCHEMAS[group]
         assert list(node) == [f.name for f in dataclasses.fields(cls)], name
@@ -284,6 +287,9 @@ def written_values(group: str, path: Path) -> list[tuple[str, object, dict]]:
         assert "kind" not in values, f"{path.name}: the schema carries the kind"
     elif first == "/schema_sequencer_goal_nearest":
         cls = GoalNearestConfig
+        assert "kind" not in values, f"{path.name}: the schema carries the kind"
+    elif first == "/schema_sequencer_bc":
+        cls = BCConfig
         assert "kind" not in values, f"{path.name}: the schema carries the kind"
     else:
         cls = SCHEMAS[group]
@@ -361,6 +367,16 @@ def test_fit_settings_are_converted_once_into_typed_configs():
     # the baseline needs no predictor group (experiment=compare runs it without one) ...
     alone = fit_settings({}, {"kind": "goal_nearest", "hold_time": 0.3})
     assert alone.goal_nearest.hold_time == 0.3
+    assert alone.baseline == "goal_nearest" and alone.bc is None
+    # sequencer=bc likewise, with its own options
+    bc = job_fit_settings(compose_cfg("experiment", ["sequencer=bc", "sequencer.threshold=0.7"]))
+    assert bc.bc == BCConfig(threshold=0.7) and bc.goal_nearest is None
+    assert bc.baseline_options() == {"kind": "bc", **dataclasses.asdict(BCConfig(threshold=0.7))}
+    assert fit_settings({}, {"kind": "bc", "gamma": 8.0}).bc.gamma == 8.0
+    with pytest.raises(ConfigError, match=r"unknown option.*hold_time.*sequencer=bc"):
+        fit_settings({}, {"kind": "bc", "hold_time": 0.3})
+    with pytest.raises(ConfigError, match=r"sequencer\.kind must be 'goal_nearest', 'bc'"):
+        fit_settings({}, {"kind": "nearest"})
     # ... the learned sequencer does
     with pytest.raises(ConfigError, match=r"predictor\.kind must be one of"):
         fit_settings({}, None)

@@ -1,6 +1,6 @@
 """``cpmp-evaluate`` reads every checkpoint kind ``cpmp-train`` and the main job write (every
-predictor option with the learned sequencer, and the ``goal_nearest`` baseline) through one
-loader, :func:`cpmp.evaluation.checkpoints.load_sequencer`."""
+predictor option with the learned sequencer, and the ``goal_nearest`` and ``bc`` baselines)
+through one loader, :func:`cpmp.evaluation.checkpoints.load_sequencer`."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 
+from cpmp.baselines.bc import BCSequencer
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.cli.main import CONF_DIR, run_job
 from cpmp.data.datafile import load_demonstrations, save_demonstrations
@@ -24,8 +25,10 @@ PREDICTORS = sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml"))
 FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.epochs=20"]}
 """Gradient fits cut short: the test is about loading and evaluating, not about their fit."""
 KINDS = [(name, [f"predictor={name}", *FAST.get(name, [])]) for name in PREDICTORS] + [
-    ("goal_nearest", ["sequencer=goal_nearest"])
+    ("goal_nearest", ["sequencer=goal_nearest"]),
+    ("bc", ["sequencer=bc"]),
 ]
+BASELINES = {"goal_nearest": GoalNearestSequencer, "bc": BCSequencer}
 
 
 def compose_cfg(name: str, overrides: list[str]):
@@ -41,14 +44,14 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
     data = f"data.path={demo_file}"
     checkpoint = train_from_file(compose_cfg("train", [data, *overrides]), train_dir)
     seq = load_sequencer(checkpoint)
-    goal_nearest = name == "goal_nearest"
-    assert isinstance(seq, GoalNearestSequencer if goal_nearest else ConcurrentSequencer)
+    baseline = name in BASELINES
+    assert isinstance(seq, BASELINES.get(name, ConcurrentSequencer))
 
     cfg = compose_cfg("evaluate", [data, f"checkpoint={checkpoint}"])
     out = json.loads(evaluate_checkpoint(cfg, eval_dir).read_text())
     assert out["n_demos"] == 2 and out["split"] == "test"
-    if goal_nearest:
-        assert out["model"]["sequencer"] == "goal_nearest"
+    if baseline:
+        assert out["model"]["sequencer"] == name
         assert out["model"]["predictor"] == "none"
         assert out["model"]["used_to_switch"] is False
     else:
@@ -78,7 +81,8 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
     # every variable matches in a demo counted in all_match
     assert replay["all_match"] <= min(replay["sequence_match"].values())
     markdown = (eval_dir / "evaluation.md").read_text()
-    if goal_nearest:
+    if baseline:
+        assert f"sequencer={name} trains no progress predictor" in markdown
         assert "nearest-training-sample lookup" in markdown and "never uses to switch" in markdown
     else:
         assert f"predictor `{seq.predictor.kind}`" in markdown

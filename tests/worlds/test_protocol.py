@@ -23,9 +23,7 @@ FAMILY_MEMBERS = 5
 def _every_world() -> list[tuple[str, int]]:
     """(name, member) of every registered world: single worlds once, a family's first few."""
     return [
-        (name, i)
-        for name in WORLDS
-        for i in range(FAMILY_MEMBERS if WORLDS[name].family else 1)
+        (name, i) for name in WORLDS for i in range(FAMILY_MEMBERS if WORLDS[name].family else 1)
     ]
 
 
