@@ -11,9 +11,10 @@ Every consumer (the benchmarks, the comparison, the tests) drives a world throug
 :func:`run_episodes` / :func:`evaluate` and finds it by name in :mod:`cpmp.worlds.registry`;
 nothing outside a world's own module knows its state.
 
-Scoring (:meth:`World.score`): ``wrong_start`` when the policy's initial MPs differ from the
-demonstrator's for the context, else ``complete`` when the world says so (:meth:`WorldRun.
-complete`, and for worlds that ask for it the demonstrator's MP sequence run exactly), else
+Scoring (:meth:`World.score`, :class:`WorldBase`): ``wrong_start`` when the policy's initial
+MPs differ from the demonstrator's for the context, else ``complete`` when the run reached the
+goal (:meth:`WorldRun.complete`; for a ``strict`` world also running exactly the
+demonstrator's MP sequences of the same context, hidden events included), else
 ``incomplete``.
 """
 
@@ -21,14 +22,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
+from typing_extensions import override
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
-from cpmp.worlds.common import note_switches, positive_count
+from cpmp.worlds.common import SteppedTask, note_switches, positive_count, seeded_episodes
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
 _EPS_T = 1e-9
@@ -175,37 +177,97 @@ class Evaluation:
         }
 
 
-def default_score(
-    world: World,
-    context: Any,
-    initial: Mapping[str, str],
-    sequences: Mapping[str, Sequence[str]],
-    completed: bool,
-) -> Outcome:
-    """``wrong_start`` / ``complete`` / ``incomplete`` from the start and the goal alone."""
-    return episode_outcome(dict(initial) == world.initial_mps(context), completed)
+class WorldBase:
+    """What the registered worlds share: the score, and a stepped task's contexts and runs.
 
-
-def sequence_score(
-    world: World,
-    context: Any,
-    initial: Mapping[str, str],
-    sequences: Mapping[str, Sequence[str]],
-    completed: bool,
-) -> Outcome:
-    """As :func:`default_score`, but ``complete`` also needs the demonstrator's MP sequences.
-
-    The demonstrator's sequences are those of its demonstration of the same context (hidden
-    events included), so a run that reached the goal by another route is ``incomplete``.
+    Attributes:
+        strict: ``complete`` also needs the demonstrator's exact MP sequences
+            (:meth:`expected_sequences`); otherwise the start and the goal state decide.
     """
-    from cpmp.data.demonstration import mp_sequences  # the demonstration only when scoring
 
-    started = dict(initial) == world.initial_mps(context)
-    if not (started and completed):
-        return episode_outcome(started, completed)
-    want = mp_sequences(world.demonstrate(context))
-    same = all(list(sequences[v]) == want[v] for v in world.variables)
-    return episode_outcome(True, same)
+    strict: ClassVar[bool] = False
+
+    def expected_sequences(self: Any, context: Any) -> dict[str, list[str]]:
+        """The demonstrator's MPs per variable in ``context`` (of :meth:`World.demonstrate`)."""
+        from cpmp.data.demonstration import mp_sequences  # the demonstration only when scoring
+
+        return mp_sequences(self.demonstrate(context))
+
+    def score(
+        self: Any,
+        context: Any,
+        initial: Mapping[str, str],
+        sequences: Mapping[str, Sequence[str]],
+        completed: bool,
+    ) -> Outcome:
+        """``wrong_start`` / ``complete`` / ``incomplete`` (see the module doc)."""
+        started = dict(initial) == self.initial_mps(context)
+        if not (self.strict and started and completed):
+            return episode_outcome(started, completed)
+        want = self.expected_sequences(context)
+        return episode_outcome(True, all(list(sequences[v]) == want[v] for v in self.variables))
+
+
+class SteppedRun:
+    """One episode of a stepped task in progress (a :class:`WorldRun`).
+
+    The task is a :class:`~cpmp.worlds.common.SteppedTask` whose ``features(state, episode)``
+    gives the features and whose ``advance`` takes a step ``dt`` (the relay's and the
+    repetition's); done and complete at its goal state.
+    """
+
+    def __init__(self, task: SteppedTask, episode: Any) -> None:
+        self.task, self.episode = task, episode
+        self.state = task.initial_state(episode)
+
+    @override
+    def features(self) -> np.ndarray:
+        return self.task.features(self.state, self.episode)  # type: ignore[attr-defined]
+
+    @override
+    def advance(self, active: Mapping[str, str], h: float) -> None:
+        n, hs = substeps(h, self.task.dt)
+        for _ in range(n):
+            self.task.advance(self.state, self.episode, dict(active), dt=hs)  # type: ignore[call-arg]
+
+    @override
+    def done(self, active: Mapping[str, str]) -> bool:
+        return self.complete(active)
+
+    @override
+    def complete(self, active: Mapping[str, str]) -> bool:
+        return self.task.at_goal(self.state, self.episode)
+
+
+class SteppedWorld(WorldBase):
+    """A world around a stepped task (see :class:`SteppedRun`): contexts cycle ``strategies``.
+
+    A subclass names its ``strategies`` and gives :meth:`demonstrations`,
+    :meth:`demonstrate` and :meth:`scripted_policy`.
+    """
+
+    strategies: tuple[str, ...]
+
+    def __init__(self, task: SteppedTask) -> None:
+        self.task = task
+        self.dt = task.dt
+        self.max_time = task.max_time
+
+    def contexts(self, n: int, seed: int) -> list[Any]:
+        """``n`` episodes cycling the strategies (the first is ``strategies[0]``)."""
+        return seeded_episodes(self.task.sample_episode, self.strategies, n, seed)  # type: ignore[attr-defined]
+
+    def start(self, context: Any) -> WorldRun:
+        """A :class:`SteppedRun` of ``context``."""
+        return SteppedRun(self.task, context)
+
+    def strategy(self, context: Any) -> str:
+        """The episode's ``strategy``."""
+        return str(context.strategy)
+
+    def initial_mps(self, context: Any) -> dict[str, str]:
+        """The task's initial MPs of the episode."""
+        return self.task.initial_mps(context)
 
 
 def run_episodes(

@@ -28,7 +28,7 @@ from cpmp.errors import ConfigError
 from cpmp.records import Policy
 from cpmp.worlds.common import note_switches, positive_count
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
-from cpmp.worlds.protocol import default_score, substeps
+from cpmp.worlds.protocol import WorldBase, substeps
 
 FEATURE_NAMES = ["p_a", "p_b", "context"]
 VARIABLES = ["a", "b"]
@@ -328,7 +328,7 @@ class _TwoPointRun:
         return bool(back and np.all(np.abs(self.p) < 0.01))
 
 
-class TwoPointWorld:
+class TwoPointWorld(WorldBase):
     """The two-point world; ``TwoPointWorld(**options)`` takes :class:`SyntheticTask`'s fields.
 
     Demonstrations alternate the strategies (:func:`make_demonstrations`); closed-loop contexts
@@ -376,13 +376,3 @@ class TwoPointWorld:
         from cpmp.worlds.two_point_policy import TwoPointFeaturePolicy  # lazy
 
         return TwoPointFeaturePolicy(self.task)
-
-    @override
-    def score(
-        self,
-        context: TwoPointEpisode,
-        initial: Mapping[str, str],
-        sequences: Mapping[str, Sequence[str]],
-        completed: bool,
-    ) -> Outcome:
-        return default_score(self, context, initial, sequences, completed)

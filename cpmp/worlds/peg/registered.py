@@ -8,7 +8,7 @@ the score (the demonstrator's exact MP sequences, hidden jams included, are requ
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -16,7 +16,6 @@ import numpy as np
 
 from cpmp.data import Demonstration
 from cpmp.worlds.common import positive_count
-from cpmp.worlds.outcomes import Outcome
 from cpmp.worlds.peg.demonstrator import demonstrate
 from cpmp.worlds.peg.policy import FeaturePolicy
 from cpmp.worlds.peg.world import (
@@ -27,7 +26,7 @@ from cpmp.worlds.peg.world import (
     PegState,
     PegTask,
 )
-from cpmp.worlds.protocol import sequence_score, substeps
+from cpmp.worlds.protocol import WorldBase, substeps
 
 
 @dataclass
@@ -74,8 +73,10 @@ class PegRun:
 
 
 @dataclass
-class PegWorld(PegTask):
+class PegWorld(PegTask, WorldBase):
     """The peg world (see :mod:`cpmp.worlds.peg.world`); its fields are the task's options."""
+
+    strict: ClassVar[bool] = True
 
     name: ClassVar[str] = "peg"
     variables: ClassVar[tuple[str, ...]] = VARIABLES
@@ -113,13 +114,3 @@ class PegWorld(PegTask):
     def scripted_policy(self) -> FeaturePolicy:
         """A fresh feature-only policy."""
         return FeaturePolicy(self)
-
-    def score(
-        self,
-        context: PegContext,
-        initial: Mapping[str, str],
-        sequences: Mapping[str, Sequence[str]],
-        completed: bool,
-    ) -> Outcome:
-        """``complete`` needs the demonstrator's start, its exact MP sequences and the goal."""
-        return sequence_score(self, context, initial, sequences, completed)

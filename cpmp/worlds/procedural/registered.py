@@ -8,16 +8,14 @@ skips or repeats a try is ``incomplete``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from cpmp.config.validation import finite_number
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
 from cpmp.worlds.common import positive_count
-from cpmp.worlds.outcomes import Outcome
 from cpmp.worlds.procedural.demonstrator import Switches, demonstrate, make_contexts
 from cpmp.worlds.procedural.generator import (
     MAX_GOAL_JITTER,
@@ -29,14 +27,14 @@ from cpmp.worlds.procedural.generator import (
 )
 from cpmp.worlds.procedural.policy import FeaturePolicy
 from cpmp.worlds.procedural.world import ProceduralContext, ProceduralRun
-from cpmp.worlds.protocol import sequence_score
+from cpmp.worlds.protocol import WorldBase
 
 DT = 0.01
 """The step and sample period of every member [s]."""
 
 
 @dataclass
-class ProceduralWorld:
+class ProceduralWorld(WorldBase):
     """Member ``task`` of the procedural family.
 
     Attributes:
@@ -48,6 +46,8 @@ class ProceduralWorld:
         max_time: an episode's time limit [s], at least 5.
         spec: the task (derived from ``task``).
     """
+
+    strict: ClassVar[bool] = True
 
     task: int = 0
     goal_jitter: float = 0.03
@@ -120,13 +120,3 @@ class ProceduralWorld:
     def scripted_policy(self) -> Policy:
         """A fresh feature-only policy (:class:`~cpmp.worlds.procedural.policy.FeaturePolicy`)."""
         return FeaturePolicy(self.spec)
-
-    def score(
-        self,
-        context: Any,
-        initial: Mapping[str, str],
-        sequences: Mapping[str, Sequence[str]],
-        completed: bool,
-    ) -> Outcome:
-        """``complete`` needs the right start, the goal state and the demonstrator's sequences."""
-        return sequence_score(self, context, initial, sequences, completed)

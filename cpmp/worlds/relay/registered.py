@@ -3,63 +3,27 @@
 :class:`RelayWorld` is the hand-over of :mod:`cpmp.worlds.relay.world` with its options;
 :class:`PacedRelayWorld` the same task with MPs at varied speeds (:mod:`cpmp.worlds.relay.
 varied`): paced demonstrations (varied speeds and holds mid-MP) and a paced robot (varied
-speeds). Both score an episode by its start and its goal state
-(:func:`~cpmp.worlds.protocol.default_score`).
+speeds). Both score an episode by its start and its goal state.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 from typing_extensions import override
 
 from cpmp.config.task import Pacing
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
-from cpmp.worlds.common import seeded_episodes
-from cpmp.worlds.outcomes import Outcome
-from cpmp.worlds.protocol import default_score, substeps
+from cpmp.worlds.protocol import SteppedRun, SteppedWorld
 from cpmp.worlds.relay import varied
 from cpmp.worlds.relay.demonstrator import demonstrate, make_demonstrations
-from cpmp.worlds.relay.world import (
-    FEATURE_NAMES,
-    STRATEGIES,
-    VARIABLES,
-    RelayEpisode,
-    RelayTask,
-)
+from cpmp.worlds.relay.world import FEATURE_NAMES, STRATEGIES, VARIABLES, RelayEpisode, RelayTask
 
 
-class _RelayRun:
-    """One relay episode in progress (a :class:`~cpmp.worlds.protocol.WorldRun`)."""
-
-    def __init__(self, task: RelayTask, episode: RelayEpisode) -> None:
-        self.task, self.episode = task, episode
-        self.state = task.initial_state(episode)
-
-    @override
-    def features(self) -> np.ndarray:
-        return self.task.features(self.state, self.episode)
-
-    @override
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        n, hs = substeps(h, self.task.dt)
-        for _ in range(n):
-            self.task.advance(self.state, self.episode, active, dt=hs)
-
-    @override
-    def done(self, active: Mapping[str, str]) -> bool:
-        return self.complete(active)
-
-    @override
-    def complete(self, active: Mapping[str, str]) -> bool:
-        return self.task.at_goal(self.state, self.episode)
-
-
-class RelayWorld:
+class RelayWorld(SteppedWorld):
     r"""The relay world; ``RelayWorld(**options)`` takes :class:`RelayTask`'s fields.
 
     Contexts are :class:`RelayEpisode`\ s alternating the strategies (``meet`` first).
@@ -71,75 +35,21 @@ class RelayWorld:
     strategies: tuple[str, ...] = STRATEGIES
 
     def __init__(self, **options: Any) -> None:
-        self.task = RelayTask(**options)
-        self.dt = self.task.dt
-        self.max_time = self.task.max_time
+        super().__init__(RelayTask(**options))
 
     @override
     def demonstrations(self, n: int, seed: int) -> list[Demonstration]:
         return make_demonstrations(n, seed=seed, task=self.task)
 
     @override
-    def contexts(self, n: int, seed: int) -> list[RelayEpisode]:
-        return seeded_episodes(self.task.sample_episode, STRATEGIES, n, seed)
-
-    @override
     def demonstrate(self, context: RelayEpisode, name: str | None = None) -> Demonstration:
         return demonstrate(self.task, context, name)
-
-    @override
-    def start(self, context: RelayEpisode) -> _RelayRun:
-        return _RelayRun(self.task, context)
-
-    @override
-    def strategy(self, context: RelayEpisode) -> str:
-        return context.strategy
-
-    @override
-    def initial_mps(self, context: RelayEpisode) -> dict[str, str]:
-        return self.task.initial_mps(context)
 
     @override
     def scripted_policy(self) -> Policy:
         from cpmp.worlds.relay.policy import RelayFeaturePolicy  # lazy: tables stay cheap
 
         return RelayFeaturePolicy(self.task)
-
-    @override
-    def score(
-        self,
-        context: Any,
-        initial: Mapping[str, str],
-        sequences: Mapping[str, Sequence[str]],
-        completed: bool,
-    ) -> Outcome:
-        return default_score(self, context, initial, sequences, completed)
-
-
-class _PacedRun:
-    """One paced relay episode in progress."""
-
-    def __init__(self, task: varied.PacedRelayTask, episode: varied.PacedEpisode) -> None:
-        self.task, self.episode = task, episode
-        self.state = task.initial_state(episode)
-
-    @override
-    def features(self) -> np.ndarray:
-        return self.task.features(self.state, self.episode)
-
-    @override
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        n, hs = substeps(h, self.task.dt)
-        for _ in range(n):
-            self.task.advance(self.state, self.episode, dict(active), dt=hs)
-
-    @override
-    def done(self, active: Mapping[str, str]) -> bool:
-        return self.complete(active)
-
-    @override
-    def complete(self, active: Mapping[str, str]) -> bool:
-        return self.task.at_goal(self.state, self.episode)
 
 
 def pacing(value: Pacing | Mapping[str, Any] | None, default: Pacing, what: str) -> Pacing:
@@ -193,7 +103,7 @@ class PacedRelayWorld(RelayWorld):
         return varied.make_demonstrations(n, seed, self.demo_task)
 
     @override
-    def contexts(self, n: int, seed: int) -> list[varied.PacedEpisode]:  # type: ignore[override]
+    def contexts(self, n: int, seed: int) -> list[varied.PacedEpisode]:
         return self.robot_task.episodes(n, seed, varied.ROBOT_STREAM)
 
     @override
@@ -203,13 +113,9 @@ class PacedRelayWorld(RelayWorld):
         return varied.demonstrate(self.robot_task, context, name)
 
     @override
-    def start(self, context: varied.PacedEpisode) -> _PacedRun:  # type: ignore[override]
-        return _PacedRun(self.robot_task, context)
+    def start(self, context: varied.PacedEpisode) -> SteppedRun:
+        return SteppedRun(self.robot_task, context)
 
     @override
-    def strategy(self, context: varied.PacedEpisode) -> str:  # type: ignore[override]
-        return context.strategy
-
-    @override
-    def initial_mps(self, context: varied.PacedEpisode) -> dict[str, str]:  # type: ignore[override]
+    def initial_mps(self, context: varied.PacedEpisode) -> dict[str, str]:
         return self.robot_task.initial_mps(context)

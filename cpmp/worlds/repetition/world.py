@@ -254,8 +254,10 @@ class RepetitionTask:
             remaining=float(episode.need),
         )
 
-    def features(self, state: RepetitionState) -> np.ndarray:
-        """Feature vector ``(7,)`` in :data:`FEATURE_NAMES` order."""
+    def features(
+        self, state: RepetitionState, episode: RepetitionEpisode | None = None
+    ) -> np.ndarray:
+        """Feature vector ``(7,)`` in :data:`FEATURE_NAMES` order (``episode`` is not needed)."""
         level = state.need - state.remaining
         return np.array([*state.ladle, state.fill, *state.bowl, level, state.remaining])
 

@@ -9,12 +9,11 @@ scoring that asks for the demonstrator's exact MP sequences.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 from cpmp.data import Demonstration
-from cpmp.worlds.outcomes import Outcome
-from cpmp.worlds.protocol import sequence_score
+from cpmp.worlds.protocol import WorldBase
 from cpmp.worlds.slip.demonstrator import demonstrate, make_contexts, make_demonstrations
 from cpmp.worlds.slip.policy import ScriptedSlipPolicy
 from cpmp.worlds.slip.world import (
@@ -28,12 +27,14 @@ from cpmp.worlds.slip.world import (
 
 
 @dataclass
-class SlipWorld(SlipTask):
+class SlipWorld(SlipTask, WorldBase):
     """The slip world: pick, maybe slip and retry, place in a drawer the other hand holds open.
 
     Its fields are :class:`~cpmp.worlds.slip.world.SlipTask`'s options (``SlipWorld(**options)``;
     a bad one raises :class:`~cpmp.errors.ConfigError`).
     """
+
+    strict: ClassVar[bool] = True
 
     name = "slip"
     variables = VARIABLES
@@ -75,13 +76,3 @@ class SlipWorld(SlipTask):
     def scripted_policy(self) -> ScriptedSlipPolicy:
         """A fresh feature-only scripted policy."""
         return ScriptedSlipPolicy(self)
-
-    def score(
-        self,
-        context: SlipContext,
-        initial: Mapping[str, str],
-        sequences: Mapping[str, Sequence[str]],
-        completed: bool,
-    ) -> Outcome:
-        """``complete`` needs the right start, the goal and the demonstrator's MP sequences."""
-        return sequence_score(self, context, initial, sequences, completed)
