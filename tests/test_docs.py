@@ -50,6 +50,11 @@ def test_readme_python_api_runs(tmp_path, monkeypatch):
     paper = ns["paper"]
     assert (paper.config.coupling, paper.config.recovery) == ("none", False)
     assert paper.config.start_rule == "independent"
+    # the worlds block: a fitted sequencer and the world's scripted policy on held-out contexts
+    learned, fair = ns["learned"], ns["fair"]
+    assert fair.counts == {"complete": 10, "wrong_start": 0, "incomplete": 0}
+    assert sum(learned.counts.values()) == 10 and learned.world == "relay"
+    assert set(ns["world_names"]()) >= {"relay", "peg", "slip", "procedural"}
 
 
 def test_data_format_examples_run_and_load(tmp_path, monkeypatch):
