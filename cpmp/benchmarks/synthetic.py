@@ -16,8 +16,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-import numpy as np
-
 from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
@@ -247,8 +245,3 @@ def main(argv: list[str] | None = None) -> int:
     return run_settings_benchmark(
         "bench_synthetic", args, SyntheticSettings, options, run_synthetic_benchmark, markdown
     )
-
-
-def mean_complete(result: Mapping[str, Any], world: str, policy: str, d: int) -> float:
-    """The complete fraction of ``policy`` on ``world`` at ``D = d`` (a table cell)."""
-    return float(np.asarray(result["summary"][world][policy][str(d)]["complete_frac"]))

@@ -160,22 +160,6 @@ class Evaluation:
         """Complete episodes."""
         return self.counts["complete"]
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the counts, ``n_episodes`` and ``per_episode`` rows."""
-        return {
-            **self.counts,
-            "n_episodes": len(self.episodes),
-            "per_episode": [
-                {
-                    "strategy": e.strategy,
-                    "outcome": e.outcome,
-                    "time": e.time,
-                    "sequences": e.sequences,
-                }
-                for e in self.episodes
-            ],
-        }
-
 
 class WorldBase:
     """What the registered worlds share: the score, and a stepped task's contexts and runs.
