@@ -48,7 +48,7 @@ def _lazy(module: str, name: str) -> Callable[..., World]:
 
 WORLDS: dict[str, WorldEntry] = {
     "two_point": WorldEntry(
-        _lazy("cpmp.worlds.two_point", "TwoPointWorld"),
+        _lazy("cpmp.worlds.two_point.registered", "TwoPointWorld"),
         "two points on a line; a context feature picks sequential or parallel",
     ),
     "relay": WorldEntry(

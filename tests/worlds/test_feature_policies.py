@@ -24,7 +24,7 @@ from cpmp.worlds.relay.world import RelayTask
 from cpmp.worlds.repetition.policy import RepetitionFeaturePolicy
 from cpmp.worlds.repetition.world import RepetitionTask
 from cpmp.worlds.two_point import SyntheticTask
-from cpmp.worlds.two_point_policy import TwoPointFeaturePolicy
+from cpmp.worlds.two_point.policy import TwoPointFeaturePolicy
 
 N_EPISODES = 100
 N_DEMOS = 10

@@ -16,19 +16,17 @@ synchronise through the shared features only.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
-from typing_extensions import override
 
 from cpmp.data import Demonstration, DemonstrationLog
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
 from cpmp.worlds.common import note_switches, positive_count
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
-from cpmp.worlds.protocol import WorldBase, substeps
 
 FEATURE_NAMES = ["p_a", "p_b", "context"]
 VARIABLES = ["a", "b"]
@@ -297,82 +295,3 @@ def curved_trajectories(n: int = 4, seed: int = 0, n_samples: int = 100) -> list
             )
         )
     return demos
-
-
-class _TwoPointRun:
-    """One two-point episode in progress (a :class:`~cpmp.worlds.protocol.WorldRun`)."""
-
-    def __init__(self, task: SyntheticTask, episode: TwoPointEpisode) -> None:
-        self.task, self.episode = task, episode
-        self.p = np.array(episode.start, dtype=float)
-        self.gain = np.asarray(task.gain)
-
-    @override
-    def features(self) -> np.ndarray:
-        return np.array([self.p[0], self.p[1], self.episode.context])
-
-    @override
-    def advance(self, active: Mapping[str, str], h: float) -> None:
-        n, hs = substeps(h, self.task.dt)
-        for _ in range(n):
-            goals = self.task.goals(self.episode, dict(active))
-            self.p = self.p + hs * self.gain * (goals - self.p)
-
-    @override
-    def done(self, active: Mapping[str, str]) -> bool:
-        return self.complete(active)
-
-    @override
-    def complete(self, active: Mapping[str, str]) -> bool:
-        back = active["a"] == "a_back" and active["b"] == "b_back"
-        return bool(back and np.all(np.abs(self.p) < 0.01))
-
-
-class TwoPointWorld(WorldBase):
-    """The two-point world; ``TwoPointWorld(**options)`` takes :class:`SyntheticTask`'s fields.
-
-    Demonstrations alternate the strategies (:func:`make_demonstrations`); closed-loop contexts
-    draw the context uniformly (as :func:`evaluate` does). Complete: both points home under
-    their ``*_back`` MPs.
-    """
-
-    name = "two_point"
-    variables = tuple(VARIABLES)
-    feature_names = tuple(FEATURE_NAMES)
-    strategies = ("sequential", "parallel")
-
-    def __init__(self, **options: Any) -> None:
-        self.task = SyntheticTask(**options)
-        self.dt = self.task.dt
-        self.max_time = self.task.max_time
-
-    @override
-    def demonstrations(self, n: int, seed: int) -> list[Demonstration]:
-        return make_demonstrations(n, seed=seed, task=self.task)
-
-    @override
-    def contexts(self, n: int, seed: int) -> list[TwoPointEpisode]:
-        rng = np.random.default_rng(seed)
-        return [self.task.sample_episode(rng) for _ in range(n)]
-
-    @override
-    def demonstrate(self, context: TwoPointEpisode, name: str | None = None) -> Demonstration:
-        return self.task.demonstrate(context, name)
-
-    @override
-    def start(self, context: TwoPointEpisode) -> _TwoPointRun:
-        return _TwoPointRun(self.task, context)
-
-    @override
-    def strategy(self, context: TwoPointEpisode) -> str:
-        return "parallel" if context.parallel else "sequential"
-
-    @override
-    def initial_mps(self, context: TwoPointEpisode) -> dict[str, str]:
-        return self.task.initial_mps(context)
-
-    @override
-    def scripted_policy(self) -> Policy:
-        from cpmp.worlds.two_point_policy import TwoPointFeaturePolicy  # lazy
-
-        return TwoPointFeaturePolicy(self.task)

@@ -1,6 +1,6 @@
 """A scripted policy for the two-point world that reads only the features.
 
-The two-point demonstrator (:meth:`cpmp.worlds.two_point.SyntheticTask._demo_switch`) knows
+The two-point demonstrator (:meth:`cpmp.worlds.two_point.task.SyntheticTask._demo_switch`) knows
 the episode's goals; :class:`TwoPointFeaturePolicy` decides the same switches from the feature
 stream alone, which proves the world fair: what a learned sequencer sees suffices.
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpmp.worlds.attractor import AttractorGoal
-from cpmp.worlds.two_point import VARIABLES, SyntheticTask
+from cpmp.worlds.two_point.task import VARIABLES, SyntheticTask
 
 
 class TwoPointFeaturePolicy:
