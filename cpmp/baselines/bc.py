@@ -36,7 +36,6 @@ does), which the switching never uses. Its options are :class:`~cpmp.config.BCCo
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -47,7 +46,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from cpmp.baselines.batch import GoalNearestBatch
+from cpmp.baselines.episodic import EpisodicBaseline
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.bc import KIND, BCConfig, bc_options
 from cpmp.data import Demonstration
@@ -55,8 +54,8 @@ from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
 from cpmp.progress import expected_progress
-from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
-from cpmp.sequencer import EpisodeBatch, checked_demonstrations, checked_features, checked_time
+from cpmp.records import SequencerNote, TickInfo, TransitionEvent
+from cpmp.sequencer import checked_demonstrations, checked_features, checked_time
 
 CHECKPOINT_FORMAT = "cpmp-bc"
 CHECKPOINT_VERSION = 1
@@ -257,7 +256,7 @@ class _NodeData(NamedTuple):
     y: np.ndarray
 
 
-class BCSequencer:
+class BCSequencer(EpisodicBaseline):
     """The behaviour-cloning baseline (see the module doc).
 
     Build with :meth:`fit` or :meth:`load`; drive with :meth:`reset` then :meth:`step` once per
@@ -317,20 +316,6 @@ class BCSequencer:
         self.notes: list[SequencerNote] = []
         self.last_tick: TickInfo | None = None
         self._last_t: float | None = None
-
-    def batched(self, n: int) -> GoalNearestBatch:
-        """``n`` independent episodes of this sequencer, stepped together.
-
-        A :class:`~cpmp.baselines.GoalNearestBatch` (it steps any single-episode policy),
-        the batched policy :func:`cpmp.sim.run_episodes` drives; each episode is a copy of
-        this sequencer sharing its fitted data.
-        """
-        episodes = []
-        for _ in range(EpisodeBatch.checked_count(n)):
-            episode = copy.copy(self)
-            episode._new_episode()
-            episodes.append(episode)
-        return GoalNearestBatch(episodes)
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -445,20 +430,6 @@ class BCSequencer:
         return clf, info
 
     # ----------------------------------------------------------------------------- inference
-    @property
-    def node_keys(self) -> list[tuple[str, str]]:
-        """(variable, MP) of every node, in the order of :meth:`progress`'s columns."""
-        return list(self.predictor.node_keys)
-
-    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        """Nearest-neighbour progress ``(..., K)`` of every node for features ``x (..., d)``.
-
-        For offline evaluation; the switching does not use it.
-        """
-        xn = checked_features(x, self.feature_names)
-        with torch.no_grad():
-            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
-
     def switch_probabilities(self, variable: str, mp: str, x: np.ndarray) -> np.ndarray:
         """Class probabilities ``(n, 1 + C)`` (stay, then the sorted successors) of a node.
 
@@ -521,23 +492,6 @@ class BCSequencer:
         self._last_t = t
         self.last_tick = TickInfo(t, {}, probs, dict(self.active))
         return dict(self.active)
-
-    def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
-        """Run open-loop over a recorded feature stream.
-
-        Args:
-            time: ``(n,)`` sample times [s].
-            features: ``(n, d)`` features.
-
-        Returns:
-            The MP sequence per variable and the transition events.
-        """
-        seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
-        for t, x in zip(time[1:], features[1:], strict=True):
-            for v, mp in self.step(t, x).items():
-                if mp != seqs[v][-1]:
-                    seqs[v].append(mp)
-        return ReplayResult(seqs, list(self.events))
 
     def describe(self) -> str:
         """The options, then the graphs, each classified node with its supports and fit."""

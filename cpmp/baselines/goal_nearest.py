@@ -32,7 +32,6 @@ uses it. Its options are :class:`~cpmp.config.GoalNearestConfig`.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -43,7 +42,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from cpmp.baselines.batch import GoalNearestBatch
+from cpmp.baselines.episodic import EpisodicBaseline
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.goal_nearest import KIND, GoalNearestConfig, goal_nearest_options
 from cpmp.data import Demonstration
@@ -51,9 +50,8 @@ from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
 from cpmp.progress import expected_progress
-from cpmp.records import ReplayResult, SequencerNote, TickInfo, TransitionEvent
+from cpmp.records import SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import (
-    EpisodeBatch,
     checked_demonstrations,
     checked_features,
     checked_time,
@@ -75,7 +73,7 @@ _EPS_T = 1e-9
 """Slack [s] when comparing tick times (ticks are sums of floating-point periods)."""
 
 
-class GoalNearestSequencer:
+class GoalNearestSequencer(EpisodicBaseline):
     """The goal-nearest baseline (see the module doc).
 
     Build with :meth:`fit` or :meth:`load`; drive with :meth:`reset` then :meth:`step` once per
@@ -147,20 +145,6 @@ class GoalNearestSequencer:
         self._still_since: dict[str, float | None] = {}
         self._z: np.ndarray | None = None
         self._last_t: float | None = None
-
-    def batched(self, n: int) -> GoalNearestBatch:
-        """``n`` independent episodes of this sequencer, stepped together.
-
-        A :class:`~cpmp.baselines.GoalNearestBatch`, the batched policy
-        :func:`cpmp.sim.run_episodes` drives; each episode is a copy of this sequencer sharing
-        its fitted data.
-        """
-        episodes = []
-        for _ in range(EpisodeBatch.checked_count(n)):
-            episode = copy.copy(self)
-            episode._new_episode()
-            episodes.append(episode)
-        return GoalNearestBatch(episodes)
 
     # ----------------------------------------------------------------------------- fitting
     @classmethod
@@ -236,20 +220,6 @@ class GoalNearestSequencer:
         )
 
     # ----------------------------------------------------------------------------- inference
-    @property
-    def node_keys(self) -> list[tuple[str, str]]:
-        """(variable, MP) of every node, in the order of :meth:`progress`'s columns."""
-        return list(self.predictor.node_keys)
-
-    def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        """Nearest-neighbour progress ``(..., K)`` of every node for features ``x (..., d)``.
-
-        For offline evaluation; the switching rule does not use it.
-        """
-        xn = self._features(x)
-        with torch.no_grad():
-            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
-
     def _features(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
         """``x`` as checked float64 features ``(..., d)``."""
         return checked_features(x, self.feature_names)
@@ -321,23 +291,6 @@ class GoalNearestSequencer:
             self._last_t = t
         self.last_tick = TickInfo(t, {}, {v: {} for v in self.graphs}, dict(self.active))
         return dict(self.active)
-
-    def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
-        """Run open-loop over a recorded feature stream.
-
-        Args:
-            time: ``(n,)`` sample times [s].
-            features: ``(n, d)`` features.
-
-        Returns:
-            The MP sequence per variable and the transition events.
-        """
-        seqs = {v: [mp] for v, mp in self.reset(time[0], features[0]).items()}
-        for t, x in zip(time[1:], features[1:], strict=True):
-            for v, mp in self.step(t, x).items():
-                if mp != seqs[v][-1]:
-                    seqs[v].append(mp)
-        return ReplayResult(seqs, list(self.events))
 
     def describe(self) -> str:
         """The graphs as text, each node followed by the features it waits on."""
