@@ -7,6 +7,12 @@ every gap longer than a limit; :func:`uniform_clock` makes the common clock;
 :func:`interpolate_linear` (continuous features) and :func:`zero_order_hold` (labels: the MP
 named last stays active) put a stream on it; :func:`merge_short_activations` removes label
 glitches shorter than a minimum duration.
+
+Rotations recorded as unit quaternions are not interpolated component by component (a sign
+flip ``q -> -q``, which mocap systems emit, would pass through ``|q| = 0``):
+:func:`align_quaternions` puts consecutive samples in one hemisphere, :func:`interpolate_slerp`
+interpolates along the great arc, and :func:`rotation_columns` gives a representation a kernel
+can use (the quaternion, the rotation vector, or the continuous 6-D representation).
 """
 
 from __future__ import annotations
@@ -264,15 +270,153 @@ def merge_short_activations(
     return Relabelled(out, tuple(glitches))
 
 
+# ----------------------------------------------------------------------------- rotations
+ROTATION_ELEMENTS: dict[str, tuple[str, ...]] = {
+    "quat": ("x", "y", "z", "w"),
+    "rotvec": ("rx", "ry", "rz"),
+    "matrix6": ("r11", "r21", "r31", "r12", "r22", "r32"),
+}
+"""Element names of each rotation representation (:func:`rotation_columns`)."""
+
+
+@dataclass(frozen=True)
+class AlignedQuaternions:
+    """Unit quaternions with consecutive samples in one hemisphere.
+
+    Attributes:
+        values: (n, 4) ``x, y, z, w``, unit norm, ``dot(values[i], values[i + 1]) >= 0``.
+        n_flips: samples whose sign was flipped relative to the one before (``q -> -q``).
+    """
+
+    values: np.ndarray
+    n_flips: int
+
+
+def align_quaternions(quaternions: np.ndarray, where: str = "quaternion") -> AlignedQuaternions:
+    """Normalise quaternions and flip each into the hemisphere of the one before it.
+
+    ``q`` and ``-q`` are the same rotation; mocap and some drivers switch between them, which
+    linear interpolation turns into a jump through ``|q| = 0``. After alignment the series is
+    continuous (for rotations slower than half a turn between samples).
+
+    Args:
+        quaternions: (n, 4) ``x, y, z, w`` in time order.
+        where: names the stream in messages.
+
+    Returns:
+        The aligned unit quaternions and how many sign flips were undone.
+
+    Raises:
+        DataError: a quaternion is (nearly) zero or not finite.
+    """
+    q = np.asarray(quaternions, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 4:
+        raise DataError(f"{where}: quaternions must be (n, 4) x, y, z, w, got shape {q.shape}")
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(~np.isfinite(norm) | (norm < 1e-6))
+    if bad.size:
+        raise DataError(
+            f"{where}: quaternion {bad[0]} is {q[bad[0]].tolist()}, not a rotation; a rotation "
+            "needs a unit quaternion (drop or repair the sample)"
+        )
+    q = q / norm[:, None]
+    if len(q) < 2:
+        return AlignedQuaternions(q, 0)
+    flipped = np.einsum("ij,ij->i", q[1:], q[:-1]) < 0
+    sign = np.concatenate([[1.0], np.cumprod(np.where(flipped, -1.0, 1.0))])
+    return AlignedQuaternions(q * sign[:, None], int(np.count_nonzero(flipped)))
+
+
+def interpolate_slerp(time: np.ndarray, quaternions: np.ndarray, clock: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions onto ``clock``.
+
+    Each interval takes the shorter arc (the sign of its end is chosen for that), so the
+    result is a unit quaternion at every tick; ticks are expected inside
+    ``[time[0], time[-1]]`` (outside, the nearest end is held).
+
+    Args:
+        time: (n,) [s] strictly increasing.
+        quaternions: (n, 4) unit quaternions ``x, y, z, w`` (:func:`align_quaternions`).
+        clock: (m,) [s].
+
+    Returns:
+        (m, 4) unit quaternions.
+    """
+    q = np.asarray(quaternions, dtype=np.float64)
+    if len(time) == 1:
+        return np.repeat(q, len(clock), axis=0)
+    i = np.clip(np.searchsorted(time, clock, side="right") - 1, 0, len(time) - 2)
+    u = np.clip((clock - time[i]) / (time[i + 1] - time[i]), 0.0, 1.0)[:, None]
+    q0, q1 = q[i], q[i + 1]
+    dot = np.einsum("ij,ij->i", q0, q1)
+    q1 = np.where((dot < 0)[:, None], -q1, q1)
+    dot = np.clip(np.abs(dot), 0.0, 1.0)[:, None]
+    theta = np.arccos(dot)
+    small = theta < 1e-6
+    sin = np.where(small, 1.0, np.sin(theta))
+    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * theta) / sin)
+    w1 = np.where(small, u, np.sin(u * theta) / sin)
+    out = w0 * q0 + w1 * q1
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def rotation_columns(quaternions: np.ndarray, representation: str) -> np.ndarray:
+    """Unit quaternions ``x, y, z, w`` as feature columns of ``representation``.
+
+    Args:
+        quaternions: (n, 4) unit quaternions.
+        representation: ``quat`` (the quaternions themselves), ``rotvec`` (axis times angle
+            [rad], angle in ``[0, pi]``) or ``matrix6`` (the rotation matrix's first two
+            columns, ``r11, r21, r31, r12, r22, r32``: continuous, Zhou et al. 2019).
+
+    Returns:
+        (n, 4), (n, 3) or (n, 6).
+
+    Raises:
+        DataError: an unknown representation.
+    """
+    q = np.asarray(quaternions, dtype=np.float64)
+    if representation == "quat":
+        return q.copy()
+    x, y, z, w = q.T
+    if representation == "rotvec":
+        s = np.where(w < 0, -1.0, 1.0)  # the same rotation with w >= 0: angle in [0, pi]
+        vec = q[:, :3] * s[:, None]
+        sin_half = np.linalg.norm(vec, axis=1)
+        angle = 2.0 * np.arctan2(sin_half, np.abs(w))
+        scale = np.where(sin_half < 1e-12, 2.0, angle / np.where(sin_half < 1e-12, 1.0, sin_half))
+        return vec * scale[:, None]
+    if representation == "matrix6":
+        return np.column_stack(
+            [
+                1 - 2 * (y * y + z * z),
+                2 * (x * y + w * z),
+                2 * (x * z - w * y),
+                2 * (x * y - w * z),
+                1 - 2 * (x * x + z * z),
+                2 * (y * z + w * x),
+            ]
+        )
+    raise DataError(
+        f"unknown rotation representation {representation!r}; use one of "
+        f"{', '.join(ROTATION_ELEMENTS)}"
+    )
+
+
 __all__ = [
+    "ROTATION_ELEMENTS",
+    "AlignedQuaternions",
     "CleanStream",
     "Gap",
     "Glitch",
     "Relabelled",
     "StreamReport",
+    "align_quaternions",
     "clean_stream",
     "interpolate_linear",
+    "interpolate_slerp",
     "merge_short_activations",
+    "rotation_columns",
     "uniform_clock",
     "zero_order_hold",
 ]

@@ -6,9 +6,12 @@ import pytest
 from cpmp.errors import DataError
 from cpmp.importers.resample import (
     Gap,
+    align_quaternions,
     clean_stream,
     interpolate_linear,
+    interpolate_slerp,
     merge_short_activations,
+    rotation_columns,
     uniform_clock,
     zero_order_hold,
 )
@@ -97,3 +100,41 @@ def test_merge_short_activations_keeps_long_ones_and_merges_a_short_start_forwar
     unchanged = merge_short_activations(time, labels, 0.0)
     np.testing.assert_array_equal(unchanged.labels, labels)
     assert unchanged.glitches == ()
+
+
+def _yaw(angle):
+    angle = np.asarray(angle, dtype=float)
+    return np.column_stack([0 * angle, 0 * angle, np.sin(angle / 2), np.cos(angle / 2)])
+
+
+def test_a_quaternion_sign_flip_is_aligned_and_slerped_without_a_dip():
+    t = np.arange(6) * 0.1
+    q = _yaw(t)
+    q[2:4] *= -1  # mocap: the same rotations with the other sign
+    clock = np.linspace(0.0, 0.5, 26)
+    linear = interpolate_linear(t, q, clock)
+    assert np.linalg.norm(linear, axis=1).min() < 0.21  # component-wise: |q| = 0.2 midway
+    aligned = align_quaternions(q)
+    assert aligned.n_flips == 2
+    np.testing.assert_allclose(aligned.values, _yaw(t))
+    slerped = interpolate_slerp(t, aligned.values, clock)
+    np.testing.assert_allclose(slerped, _yaw(clock), atol=1e-12)  # exact on one axis
+    # slerp takes the shorter arc even of unaligned samples
+    np.testing.assert_allclose(np.abs(interpolate_slerp(t, q, clock)), np.abs(_yaw(clock)))
+    with pytest.raises(DataError, match=r"quaternion 1 is .* not a rotation"):
+        align_quaternions(np.array([[0, 0, 0, 1.0], [0, 0, 0, 0]]), "topic /q")
+
+
+def test_rotation_columns_give_the_rotation_vector_and_the_6d_representation():
+    angle = np.array([0.0, 0.5, np.pi - 1e-3])
+    q = _yaw(angle)
+    np.testing.assert_allclose(rotation_columns(-q, "rotvec")[:, 2], angle, atol=1e-9)
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    general = np.append(axis * np.sin(0.35), np.cos(0.35))[None, :]
+    np.testing.assert_allclose(rotation_columns(general, "rotvec")[0], axis * 0.7)
+    six = rotation_columns(q, "matrix6")
+    c, s = np.cos(angle), np.sin(angle)
+    np.testing.assert_allclose(six, np.column_stack([c, s, 0 * c, -s, c, 0 * c]), atol=1e-12)
+    np.testing.assert_allclose(rotation_columns(q, "quat"), q)
+    with pytest.raises(DataError, match="unknown rotation representation 'euler'"):
+        rotation_columns(q, "euler")
