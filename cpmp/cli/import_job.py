@@ -9,21 +9,31 @@ one ``error:`` line and exits with status 2. The job then calls
 :func:`cpmp.importers.import_recordings`, prints :func:`cpmp.importers.summary_text` (also
 written to ``summary.txt`` in the run directory) and prints the written file's path last. A
 failed import leaves no output file.
+
+``on_error=skip`` (or ``on_error: skip`` in the mapping; ``on_error=raise`` on the command
+line overrides a mapping's ``skip``) imports the good demonstrations and reports every skipped
+one with its reason in the summary and in ``<output>.skipped.json``; when it skipped any, the
+command exits with status :data:`SKIPPED_STATUS` (3) after printing the path, so scripts notice.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from cpmp.cli.checks import Command
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.importers import SplitSpec, import_recordings, load_mapping, summary_text
+from cpmp.importers import ON_ERROR, SplitSpec, import_recordings, load_mapping, summary_text
 from cpmp.io import atomic_write_text
 
 NAME = "import"
 """The config (``conf/import.yaml``) and job name (runs go to ``logs/import/<timestamp>/``)."""
+
+SKIPPED_STATUS = 3
+"""The exit status of an import that wrote its file but skipped demonstrations
+(``on_error=skip``); 0: everything imported, 2: an error and no file."""
 
 
 def _inputs(cfg: Any) -> list[str]:
@@ -46,14 +56,30 @@ def split_from_cfg(cfg: Any) -> SplitSpec:
     )
 
 
-def check_import(cfg: Any) -> None:
-    """The mapping parses, every input exists and the split is valid.
+def on_error_from_cfg(cfg: Any) -> str | None:
+    """The job's ``on_error`` (``raise`` or ``skip``), or ``None`` for the mapping's.
 
     Raises:
-        ConfigError: an invalid mapping or split.
+        ConfigError: another value.
+    """
+    value = cfg.get("on_error")
+    if value is not None and value not in ON_ERROR:
+        raise ConfigError(
+            f"on_error={value!r}: give on_error=raise (a bad demonstration refuses the import) "
+            "or on_error=skip (import the others and report it)"
+        )
+    return value
+
+
+def check_import(cfg: Any) -> None:
+    """The mapping parses, every input exists, ``on_error`` and the split are valid.
+
+    Raises:
+        ConfigError: an invalid mapping, ``on_error`` or split.
         CpmpFileError: the mapping file or an input is missing.
     """
     load_mapping(str(cfg.mapping))
+    on_error_from_cfg(cfg)
     for path in _inputs(cfg):
         if not Path(path).exists():
             raise CpmpFileError(
@@ -67,13 +93,26 @@ def import_job(cfg: Any, run_dir: Path) -> Path:
 
     Returns:
         The written demonstration file.
+
+    Raises:
+        SystemExit: status :data:`SKIPPED_STATUS` when demonstrations were skipped, after the
+            summary and the file's path (printed last, as the command does) were printed.
     """
     output = Path(str(cfg.output))
     output = output if output.is_absolute() else run_dir / output
-    result = import_recordings(str(cfg.mapping), _inputs(cfg), output, split_from_cfg(cfg))
+    result = import_recordings(
+        str(cfg.mapping),
+        _inputs(cfg),
+        output,
+        split_from_cfg(cfg),
+        on_error=on_error_from_cfg(cfg),
+    )
     text = summary_text(result)
     atomic_write_text(run_dir / "summary.txt", text + "\n")
     print(text)
+    if result.skipped:
+        print(output, flush=True)
+        sys.exit(SKIPPED_STATUS)
     return output
 
 
@@ -88,4 +127,11 @@ IMPORT_COMMAND = Command(
 """The ``cpmp-import`` command, listed in :data:`cpmp.cli.main.COMMANDS` with the others."""
 
 
-__all__ = ["IMPORT_COMMAND", "check_import", "import_job", "split_from_cfg"]
+__all__ = [
+    "IMPORT_COMMAND",
+    "SKIPPED_STATUS",
+    "check_import",
+    "import_job",
+    "on_error_from_cfg",
+    "split_from_cfg",
+]

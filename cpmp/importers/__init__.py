@@ -5,8 +5,9 @@ Three sources, each described by a YAML mapping (``docs/importing.md``):
 - ROS 2 bags (rosbag2, sqlite3 or MCAP; read with ``rosbags``, no ROS install): topics and
   message fields -> features, a label topic per control variable; topics at different rates
   are resampled onto one clock (:mod:`cpmp.importers.resample`).
-- LeRobot v3 datasets on disk (parquet; read with ``pyarrow``): columns -> features, a
-  per-frame label column per control variable or ``subtask_index``.
+- LeRobot v3 datasets on disk (parquet; read with ``pyarrow``; lerobot 0.4.4 - 0.6.1):
+  columns -> features; per control variable a per-frame label column, ``subtask_index``,
+  the ``language_persistent`` subtasks of lerobot >= 0.6 or SARM annotations.
 - robomimic-style HDF5 of the MimicGen family: observation keys -> features, per-effector
   subtask termination signals (``datagen_info/subtask_term_signals``) -> labels.
 
@@ -18,15 +19,25 @@ Example::
     print(summary_text(result))
 
 Every problem raises a :class:`~cpmp.errors.CpmpError` naming the topic, column or key and
-the fix; a failed import writes no file.
+the fix; a failed import writes no file. With ``on_error="skip"`` (or ``on_error: skip`` in
+the mapping) a bad demonstration is left out and reported instead
+(:attr:`ImportResult.skipped`, ``<output>.skipped.json``).
 """
 
-from cpmp.importers.common import ImportedDemo, ImportNote
-from cpmp.importers.convert import ImportResult, import_recordings, make_splits, read_recordings
+from cpmp.importers.common import ImportedDemo, ImportNote, SkippedDemo
+from cpmp.importers.convert import (
+    SKIPPED_SUFFIX,
+    ImportResult,
+    import_recordings,
+    make_splits,
+    read_recordings,
+    skipped_report_path,
+)
 from cpmp.importers.lerobot import read_lerobot
 from cpmp.importers.mimicgen import read_mimicgen
 from cpmp.importers.rosbag import find_bags, read_bag, read_rosbags
 from cpmp.importers.spec import (
+    ON_ERROR,
     SOURCES,
     ColumnFeature,
     ColumnLabel,
@@ -46,6 +57,8 @@ from cpmp.importers.spec import (
 from cpmp.importers.summary import DemoSummary, demo_summary, summary_text
 
 __all__ = [
+    "ON_ERROR",
+    "SKIPPED_SUFFIX",
     "SOURCES",
     "ColumnFeature",
     "ColumnLabel",
@@ -59,6 +72,7 @@ __all__ = [
     "LeRobotSpec",
     "MimicGenSpec",
     "RosbagSpec",
+    "SkippedDemo",
     "SplitSpec",
     "Subtask",
     "TopicFeature",
@@ -74,5 +88,6 @@ __all__ = [
     "read_mimicgen",
     "read_recordings",
     "read_rosbags",
+    "skipped_report_path",
     "summary_text",
 ]

@@ -1,18 +1,19 @@
 """What the three importers share.
 
-The imported record with its notes, feature-column selection and naming, label decoding and
-the notes on cleaned streams.
+The imported record with its notes, the record of a skipped demonstration and the loop that
+skips (``on_error: skip``), feature-column selection, naming and derived velocities, label
+decoding, and the notes on cleaned streams and moved switches.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from cpmp.data import Demonstration
-from cpmp.errors import DataError
+from cpmp.errors import CpmpError, DataError
 from cpmp.importers.resample import Relabelled, StreamReport, merge_short_activations
 from cpmp.importers.spec import LabelNames, Selection
 
@@ -23,7 +24,9 @@ class ImportNote:
 
     Attributes:
         demo: the demonstration's name.
-        kind: ``gap``, ``duplicates``, ``out_of_order``, ``glitch`` or ``window``.
+        kind: ``gap``, ``duplicates``, ``out_of_order``, ``glitch``, ``switch_moved``,
+            ``chatter``, ``flip`` (quaternion signs aligned) or ``window`` (the clock: a trimmed
+            span, a resampling).
         where: the topic, column, key or control variable concerned.
         text: one readable sentence (times in seconds from the demonstration's start).
     """
@@ -47,6 +50,108 @@ class ImportedDemo:
     demo: Demonstration
     notes: tuple[ImportNote, ...]
     source: str
+
+
+@dataclass(frozen=True)
+class SkippedDemo:
+    """A demonstration left out of an ``on_error: skip`` import, and why.
+
+    Attributes:
+        demo: the name it would have had.
+        source: the recording (bag, ``dataset#episode_<i>``, ``file#demo_<i>``).
+        error: the error's class (``DataError``, ``CpmpFileError``, ...).
+        reason: the error's message (what is wrong and what to do).
+    """
+
+    demo: str
+    source: str
+    error: str
+    reason: str
+
+    def to_dict(self) -> dict[str, str]:
+        """The record as a JSON-ready dict."""
+        return {
+            "demo": self.demo,
+            "source": self.source,
+            "error": self.error,
+            "reason": self.reason,
+        }
+
+
+@dataclass(frozen=True)
+class DemoReader:
+    """How to read one demonstration, for the per-demonstration loop of :func:`read_each`.
+
+    Attributes:
+        demo: the demonstration's name.
+        source: the recording it comes from.
+        read: reads and checks it; raises a :class:`~cpmp.errors.CpmpError` when it cannot.
+    """
+
+    demo: str
+    source: str
+    read: Callable[[], ImportedDemo]
+
+
+def read_each(
+    readers: Iterable[DemoReader], skipped: list[SkippedDemo] | None = None
+) -> list[ImportedDemo]:
+    """Read every demonstration of ``readers`` in order.
+
+    Args:
+        readers: one reader per demonstration.
+        skipped: ``None``: the first error is raised (all or nothing); a list: a demonstration
+            that raises a :class:`~cpmp.errors.CpmpError` is left out and recorded there.
+
+    Returns:
+        The demonstrations that were read.
+    """
+    out = []
+    for reader in readers:
+        if skipped is None:
+            out.append(reader.read())
+            continue
+        try:
+            out.append(reader.read())
+        except CpmpError as err:
+            reason = " ".join(str(err).split())
+            skipped.append(SkippedDemo(reader.demo, reader.source, type(err).__name__, reason))
+    return out
+
+
+def velocity(time: np.ndarray, values: np.ndarray, where: str) -> np.ndarray:
+    """Time derivatives of ``values`` (n, k) sampled at ``time`` (n,) [s].
+
+    Central differences inside, one-sided at the ends (:func:`numpy.gradient`).
+
+    Raises:
+        DataError: fewer than two samples, or times that do not increase.
+    """
+    if len(time) < 2:
+        raise DataError(f"{where}: a velocity needs at least two samples, got {len(time)}")
+    if np.any(np.diff(time) <= 0):
+        raise DataError(f"{where}: the sample times do not increase; cannot derive a velocity")
+    return np.gradient(values, time, axis=0)
+
+
+def derived_names(names: Sequence[str], derive: str | None, explicit: bool) -> list[str]:
+    """Feature names of a derived entry: ``<name>.vel`` unless the mapping named them."""
+    if derive is None or explicit:
+        return list(names)
+    return [f"{n}.vel" for n in names]
+
+
+def velocity_hint(name: str, derive_from: str, what: str) -> str:
+    """The fix for a missing velocity ``name``: map it if recorded, or derive it.
+
+    Empty when ``name`` does not look like a velocity (``vel`` in it).
+    """
+    if "vel" not in name.lower():
+        return ""
+    return (
+        f"; if the recording has no velocity, derive one from the positions: "
+        f"{{{what}: {derive_from}, derive: velocity}}"
+    )
 
 
 @dataclass(frozen=True)
@@ -245,7 +350,11 @@ def stream_notes(
 def debounce(
     demo: str, variable: str, time: np.ndarray, labels: np.ndarray, min_activation: float
 ) -> tuple[np.ndarray, list[ImportNote]]:
-    """Merge activations shorter than ``min_activation`` [s]; one note per merged glitch."""
+    """Merge activations shorter than ``min_activation`` [s].
+
+    One note per merged glitch, and one per switch the merging moved (saying from when to
+    when and by how much).
+    """
     result: Relabelled = merge_short_activations(time, labels, min_activation)
     notes = [
         ImportNote(
@@ -257,7 +366,46 @@ def debounce(
         )
         for g in result.glitches
     ]
+    if result.glitches:
+        notes += moved_switches(demo, variable, time, labels, result.labels, "min_activation")
     return result.labels, notes
+
+
+def moved_switches(
+    demo: str,
+    variable: str,
+    time: np.ndarray,
+    recorded: np.ndarray,
+    cleaned: np.ndarray,
+    why: str,
+) -> list[ImportNote]:
+    """Notes on switches that cleaning moved later than recorded.
+
+    A switch into MP ``m`` of the cleaned labels is compared with the first recorded switch
+    into ``m`` since the cleaned labels' previous switch.
+    """
+    recorded, cleaned = np.asarray(recorded), np.asarray(cleaned)
+    notes = []
+    switches = np.flatnonzero(cleaned[1:] != cleaned[:-1]) + 1
+    previous = 0
+    for b in switches.tolist():
+        into = recorded[previous + 1 : b + 1] == cleaned[b]
+        before = recorded[previous:b] != cleaned[b]
+        firsts = np.flatnonzero(into & before) + previous + 1
+        if firsts.size and firsts[0] < b:
+            a = int(firsts[0])
+            notes.append(
+                ImportNote(
+                    demo,
+                    "switch_moved",
+                    variable,
+                    f"{variable}: the switch {cleaned[b - 1]} -> {cleaned[b]} moved from "
+                    f"{time[a]:.3f} s (first recorded) to {time[b]:.3f} s "
+                    f"(+{time[b] - time[a]:.3f} s, {why})",
+                )
+            )
+        previous = b
+    return notes
 
 
 def check_unique_names(blocks: Sequence[FeatureBlock], where: str) -> list[str]:
@@ -277,20 +425,36 @@ def check_unique_names(blocks: Sequence[FeatureBlock], where: str) -> list[str]:
 
 
 def demo_name(stem: str) -> str:
-    """A valid cpmp group name ``demo_<stem>`` (other characters become ``_``)."""
+    """A valid cpmp group name ``demo_<stem>``.
+
+    Demonstration names are stored as ASCII (``/data/demo_*``, ``mask/<split>``): a stem with
+    non-ASCII letters or digits (``試行_2``) is written in Punycode first, as internationalised
+    domain names are (``xn--_2-1e9fv5e``), so every letter is kept and distinct stems stay
+    distinct (``name.removeprefix("demo_xn--").encode().decode("punycode")`` gives the stem
+    back). Other characters become ``_``.
+    """
+    if any(not c.isascii() and c.isalnum() for c in stem):
+        stem = "xn--" + stem.encode("punycode").decode("ascii")
     clean = "".join(c if (c.isascii() and c.isalnum()) or c in "_.-" else "_" for c in stem)
     return clean if clean.startswith("demo_") else f"demo_{clean}"
 
 
 __all__ = [
+    "DemoReader",
     "FeatureBlock",
     "ImportNote",
     "ImportedDemo",
+    "SkippedDemo",
     "check_unique_names",
     "column_names",
     "debounce",
     "decode_labels",
     "demo_name",
+    "derived_names",
+    "moved_switches",
     "pick_columns",
+    "read_each",
     "stream_notes",
+    "velocity",
+    "velocity_hint",
 ]

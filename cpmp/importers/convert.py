@@ -6,10 +6,17 @@
 Nothing is written until every recording has been read and validated, and the file is
 written atomically, so a failed import leaves no file behind (and an existing file at the
 output path untouched).
+
+``on_error="skip"`` (the mapping's ``on_error``, or the argument) reads every demonstration on
+its own: one that raises a :class:`~cpmp.errors.CpmpError` is left out and reported
+(:attr:`ImportResult.skipped`, and ``<output>.skipped.json`` beside the written file); the
+import still fails when no demonstration is left.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -19,12 +26,13 @@ from typing import Any
 import numpy as np
 
 from cpmp.data import Demonstration, save_demonstrations
-from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.importers.common import ImportedDemo, ImportNote
+from cpmp.errors import ConfigError, CpmpError, CpmpFileError, DataError
+from cpmp.importers.common import ImportedDemo, ImportNote, SkippedDemo
 from cpmp.importers.lerobot import read_lerobot
 from cpmp.importers.mimicgen import read_mimicgen
-from cpmp.importers.rosbag import read_rosbags
+from cpmp.importers.rosbag import bag_demo_names, find_bags, read_rosbags
 from cpmp.importers.spec import (
+    ON_ERROR,
     ImportSpec,
     LeRobotSpec,
     MimicGenSpec,
@@ -32,9 +40,13 @@ from cpmp.importers.spec import (
     SplitSpec,
     load_mapping,
 )
+from cpmp.io import atomic_write_text
 
 PathLike = str | os.PathLike[str]
 Inputs = PathLike | Sequence[PathLike]
+
+SKIPPED_SUFFIX = ".skipped.json"
+"""The report of an ``on_error: skip`` import sits at ``<output>`` + this suffix."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +59,9 @@ class ImportResult:
         imported: every demonstration with its notes and source, in file order.
         splits: split name -> demonstration names (``train`` always, ``test`` when held out).
         path: the written demonstration file (``None`` when nothing was written).
+        skipped: the demonstrations an ``on_error: skip`` import left out, with the reason.
+        on_error: ``raise`` or ``skip``: how the import treated a bad demonstration.
+        skipped_path: the written ``<output>.skipped.json`` (``on_error: skip`` only).
     """
 
     source: str
@@ -54,6 +69,9 @@ class ImportResult:
     imported: tuple[ImportedDemo, ...]
     splits: dict[str, list[str]] = field(default_factory=dict)
     path: Path | None = None
+    skipped: tuple[SkippedDemo, ...] = ()
+    on_error: str = "raise"
+    skipped_path: Path | None = None
 
     @property
     def demos(self) -> list[Demonstration]:
@@ -83,7 +101,10 @@ def as_spec(mapping: ImportSpec | Mapping[str, Any] | PathLike) -> ImportSpec:
 
 
 def read_recordings(
-    mapping: ImportSpec | Mapping[str, Any] | PathLike, inputs: Inputs
+    mapping: ImportSpec | Mapping[str, Any] | PathLike,
+    inputs: Inputs,
+    *,
+    on_error: str | None = None,
 ) -> ImportResult:
     """Read recordings as the mapping says, without writing anything.
 
@@ -91,6 +112,8 @@ def read_recordings(
         mapping: the mapping (record, dict or YAML path).
         inputs: rosbag: bag directories/files or folders of bags; lerobot: the dataset's
             root folder; mimicgen: the HDF5 file.
+        on_error: ``raise`` or ``skip`` a demonstration that cannot be imported; ``None``:
+            the mapping's ``on_error`` (default ``raise``).
 
     Returns:
         The result with no ``path`` and every demonstration in ``train``.
@@ -98,14 +121,21 @@ def read_recordings(
     Raises:
         CpmpError: what the importer raises (:class:`~cpmp.errors.CpmpFileError` for
             unreadable recordings, :class:`~cpmp.errors.DataError` for data the mapping does
-            not fit, :class:`~cpmp.errors.ConfigError` for an invalid mapping).
+            not fit, :class:`~cpmp.errors.ConfigError` for an invalid mapping); with ``skip``,
+            only errors that concern every demonstration, or a :class:`DataError` when every
+            demonstration was skipped.
     """
     spec = as_spec(mapping)
+    if on_error is not None:
+        if on_error not in ON_ERROR:
+            raise ConfigError(f"on_error must be one of {', '.join(ON_ERROR)}, got {on_error!r}")
+        spec = dataclasses.replace(spec, on_error=on_error)
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     if not paths:
         raise ConfigError("no input recordings given")
+    skipped: list[SkippedDemo] | None = [] if spec.on_error == "skip" else None
     if isinstance(spec, RosbagSpec):
-        imported = read_rosbags(paths, spec)
+        imported = _read_bags(paths, spec, skipped)
     else:
         if len(paths) != 1:
             raise ConfigError(
@@ -114,16 +144,41 @@ def read_recordings(
                 f"{len(paths)} inputs; import them one at a time"
             )
         if isinstance(spec, LeRobotSpec):
-            imported = read_lerobot(paths[0], spec)
+            imported = read_lerobot(paths[0], spec, skipped=skipped)
         else:
-            imported = read_mimicgen(paths[0], spec)
+            imported = read_mimicgen(paths[0], spec, skipped=skipped)
+    if skipped and not imported:
+        first = skipped[0]
+        raise DataError(
+            f"every demonstration failed to import ({len(skipped)} skipped, none left); the "
+            f"first, {first.demo}: {first.reason}"
+        )
     names = [item.demo.name for item in imported]
     return ImportResult(
         source=source_of(spec),
         inputs=tuple(str(p) for p in paths),
         imported=tuple(imported),
         splits={"train": [str(n) for n in names]},
+        skipped=tuple(skipped or ()),
+        on_error=spec.on_error,
     )
+
+
+def _read_bags(
+    paths: list[PathLike], spec: RosbagSpec, skipped: list[SkippedDemo] | None
+) -> list[ImportedDemo]:
+    """Every bag of ``paths``; with ``skipped``, one bag at a time, a bad one recorded there."""
+    if skipped is None:
+        return read_rosbags(paths, spec)
+    imported: list[ImportedDemo] = []
+    bags = find_bags(paths)
+    for bag, demo in zip(bags, bag_demo_names(bags), strict=True):
+        try:
+            imported.extend(read_rosbags([bag], spec))
+        except CpmpError as err:
+            reason = " ".join(str(err).split())
+            skipped.append(SkippedDemo(demo, str(bag), type(err).__name__, reason))
+    return imported
 
 
 def make_splits(names: Sequence[str], split: SplitSpec) -> dict[str, list[str]]:
@@ -171,6 +226,8 @@ def import_recordings(
     inputs: Inputs,
     output: PathLike,
     split: SplitSpec | None = None,
+    *,
+    on_error: str | None = None,
 ) -> ImportResult:
     """Read recordings as the mapping says and write them as one cpmp demonstration file.
 
@@ -179,9 +236,13 @@ def import_recordings(
         inputs: the recordings (see :func:`read_recordings`).
         output: the HDF5 file to write (``docs/data_format.md``); its folder must exist.
         split: which demonstrations go to ``mask/test`` (default: none; all in ``mask/train``).
+        on_error: ``raise`` (all or nothing) or ``skip`` bad demonstrations; ``None``: the
+            mapping's ``on_error``. With ``skip``, ``<output>.skipped.json`` lists every
+            skipped demonstration and why (an empty list when none was), written atomically
+            after the output.
 
     Returns:
-        The result with ``path`` set.
+        The result with ``path`` (and with ``skip``, ``skipped_path``) set.
 
     Raises:
         CpmpError: as :func:`read_recordings`, or the output cannot be written; then no file
@@ -194,18 +255,46 @@ def import_recordings(
         raise CpmpFileError(
             f"cannot write {output}: folder {folder} does not exist; create it first"
         )
-    result = read_recordings(mapping, inputs)
+    result = read_recordings(mapping, inputs, on_error=on_error)
     names = [str(item.demo.name) for item in result.imported]
     splits = make_splits(names, split)
     save_demonstrations(output, result.demos, splits=splits)
-    return ImportResult(result.source, result.inputs, result.imported, splits, output)
+    report = None
+    if result.on_error == "skip":
+        report = skipped_report_path(output)
+        atomic_write_text(report, json.dumps(skipped_report(result, output), indent=2) + "\n")
+    return dataclasses.replace(result, splits=splits, path=output, skipped_path=report)
+
+
+def skipped_report_path(output: PathLike) -> Path:
+    """``<output>.skipped.json``: where an ``on_error: skip`` import reports what it skipped."""
+    output = Path(output)
+    return output.with_name(output.name + SKIPPED_SUFFIX)
+
+
+def skipped_report(result: ImportResult, output: PathLike) -> dict[str, Any]:
+    """The JSON report of an ``on_error: skip`` import.
+
+    Keys: ``output``, ``source``, ``inputs``, ``imported`` (names), ``skipped`` (one
+    ``{demo, source, error, reason}`` per skipped demonstration).
+    """
+    return {
+        "output": str(output),
+        "source": result.source,
+        "inputs": list(result.inputs),
+        "imported": [str(item.demo.name) for item in result.imported],
+        "skipped": [item.to_dict() for item in result.skipped],
+    }
 
 
 __all__ = [
+    "SKIPPED_SUFFIX",
     "ImportResult",
     "as_spec",
     "import_recordings",
     "make_splits",
     "read_recordings",
+    "skipped_report",
+    "skipped_report_path",
     "source_of",
 ]

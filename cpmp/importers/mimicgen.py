@@ -11,12 +11,15 @@ transition). MimicGen writes the signals under ``datagen_info/``, Isaac Lab Mimi
 
 Every effector is a control variable: its ``k``-th subtask is the MP the mapping names, from
 the end of subtask ``k - 1`` to the first 0 -> 1 transition of subtask ``k``'s signal (the last
-one to the end of the demonstration). A control variable can instead read a per-step label
-dataset. One demo group is one demonstration (same name).
+one to the end of the demonstration). A signal that chatters (turns 1, back to 0, then 1 again)
+still ends its subtask at its first rise, as MimicGen does, and the import notes how much
+earlier that is than where the signal settles. A control variable can instead read a per-step
+label dataset. One demo group is one demonstration (same name).
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 from pathlib import Path
@@ -27,14 +30,20 @@ import numpy as np
 from cpmp.data import Demonstration
 from cpmp.errors import CpmpFileError, DataError
 from cpmp.importers.common import (
+    DemoReader,
     FeatureBlock,
     ImportedDemo,
     ImportNote,
+    SkippedDemo,
     check_unique_names,
     column_names,
     debounce,
     decode_labels,
+    derived_names,
     pick_columns,
+    read_each,
+    velocity,
+    velocity_hint,
 )
 from cpmp.importers.spec import EffectorLabel, KeyFeature, MimicGenSpec
 
@@ -45,8 +54,19 @@ then Isaac Lab Mimic)."""
 _DEMO = re.compile(r"demo_[A-Za-z0-9_.\-]+")
 
 
-def read_mimicgen(path: str | os.PathLike[str], spec: MimicGenSpec) -> list[ImportedDemo]:
+def read_mimicgen(
+    path: str | os.PathLike[str],
+    spec: MimicGenSpec,
+    *,
+    skipped: list[SkippedDemo] | None = None,
+) -> list[ImportedDemo]:
     """Import the demonstrations of a robomimic/MimicGen HDF5 file with ``spec``.
+
+    Args:
+        path: the HDF5 file.
+        spec: the mapping.
+        skipped: ``None``: a bad demo raises; a list: a bad demo is left out and recorded
+            there (``on_error: skip``).
 
     Returns:
         One demonstration per ``/data/demo_<i>`` (natural order), stepped at ``spec.rate``.
@@ -71,7 +91,11 @@ def read_mimicgen(path: str | os.PathLike[str], spec: MimicGenSpec) -> list[Impo
                 "/data/demo_<i>"
             )
         names = _demo_names(f, path, spec)
-        return [_demo(f["data"][n], n, path, spec) for n in names]
+        readers = [
+            DemoReader(n, f"{path}#{n}", functools.partial(_demo, f["data"][n], n, path, spec))
+            for n in names
+        ]
+        return read_each(readers, skipped)
 
 
 def _demo_names(f: h5py.File, path: Path, spec: MimicGenSpec) -> list[str]:
@@ -99,7 +123,7 @@ def _demo_names(f: h5py.File, path: Path, spec: MimicGenSpec) -> list[str]:
 
 
 def _demo(group: h5py.Group, name: str, path: Path, spec: MimicGenSpec) -> ImportedDemo:
-    blocks = [_feature(group, feature, name) for feature in spec.features]
+    blocks = [_feature(group, feature, name, path) for feature in spec.features]
     n = len(blocks[0].values)
     for feature, block in zip(spec.features, blocks, strict=True):
         if len(block.values) != n:
@@ -110,11 +134,17 @@ def _demo(group: h5py.Group, name: str, path: Path, spec: MimicGenSpec) -> Impor
     if n < 2:
         raise DataError(f"{name} has {n} step(s); cpmp needs at least 2")
     time = np.arange(n) / spec.rate
+    blocks = [
+        FeatureBlock(velocity(time, b.values, f"{name}: {feature.key}"), b.names)
+        if feature.derive == "velocity"
+        else b
+        for feature, b in zip(spec.features, blocks, strict=True)
+    ]
     notes: list[ImportNote] = []
     labels: dict[str, np.ndarray] = {}
     for label in spec.labels:
         if label.subtasks is not None:
-            values = _subtask_labels(group, label, name, n, spec, time)
+            values = _subtask_labels(group, label, name, n, spec, time, notes)
         else:
             values = _dataset_labels(group, label, name, n)
             values, glitches = debounce(name, label.variable, time, values, spec.min_activation)
@@ -137,14 +167,19 @@ def _dataset(group: h5py.Group, key: str, demo: str, what: str) -> h5py.Dataset:
         holder = group[parent] if parent and parent in group else group
         keys = sorted(holder.keys()) if isinstance(holder, h5py.Group) else []
         place = f"{parent}/" if parent and parent in group else ""
+        hint = ""
+        if what == "dataset":
+            positions = [place + k for k in keys if "pos" in k and "vel" not in k]
+            hint = velocity_hint(key, positions[0] if positions else "<position key>", "key")
         raise DataError(
             f"{demo} has no {what} {key}; {place or 'the demo group'} holds "
             f"{', '.join(place + k for k in keys) or 'nothing'}; fix the key in the mapping"
+            f"{hint}"
         )
     return group[key]
 
 
-def _feature(group: h5py.Group, feature: KeyFeature, demo: str) -> FeatureBlock:
+def _feature(group: h5py.Group, feature: KeyFeature, demo: str, path: Path) -> FeatureBlock:
     dataset = _dataset(group, feature.key, demo, "dataset")
     where = f"{demo}: {feature.key}"
     if dataset.dtype.kind not in "biuf":
@@ -168,10 +203,14 @@ def _feature(group: h5py.Group, feature: KeyFeature, demo: str) -> FeatureBlock:
         elements = [f"{i}.{j}" for i in range(a) for j in range(b)]
     bad = np.argwhere(~np.isfinite(values))
     if bad.size:
-        raise DataError(f"{where} is NaN/inf at step {int(bad[0][0])}; repair or drop the demo")
+        raise DataError(
+            f"{where} is NaN/inf at step {int(bad[0][0])} (element {int(bad[0][1])}) in {path}; "
+            "repair the demo or leave it out (demos:, mask: or on_error: skip)"
+        )
     picked = pick_columns(feature, values.shape[1], where)
+    names = column_names(feature, feature.default_prefix, elements, picked, where)
     return FeatureBlock(
-        values[:, picked], column_names(feature, feature.default_prefix, elements, picked, where)
+        values[:, picked], derived_names(names, feature.derive, feature.names is not None)
     )
 
 
@@ -187,9 +226,18 @@ def _signal_group(group: h5py.Group, spec: MimicGenSpec, demo: str) -> h5py.Grou
 
 
 def _subtask_labels(
-    group: h5py.Group, label: EffectorLabel, demo: str, n: int, spec: MimicGenSpec, time: np.ndarray
+    group: h5py.Group,
+    label: EffectorLabel,
+    demo: str,
+    n: int,
+    spec: MimicGenSpec,
+    time: np.ndarray,
+    notes: list[ImportNote],
 ) -> np.ndarray:
-    """(n,) MP names of one effector from its subtasks' termination signals."""
+    """(n,) MP names of one effector from its subtasks' termination signals.
+
+    A chattering signal (more than one 0 -> 1 step) adds a note to ``notes``.
+    """
     assert label.subtasks is not None
     signals = _signal_group(group, spec, demo)
     out = np.empty(n, dtype=object)
@@ -219,6 +267,10 @@ def _subtask_labels(
                 "or leave the demo out (demos: / mask:)"
             )
         end = int(rises[0])
+        if rises.size > 1 or not done[end:].all():
+            settled = int(rises[-1]) if done[rises[-1] :].all() else None
+            note = _chatter_note(demo, label.variable, task.mp, task.signal, time, end, settled)
+            notes.append(note)
         if end <= start:
             raise DataError(
                 f"{demo}: {label.variable}'s subtask {task.mp!r} ends at step {end} "
@@ -229,6 +281,32 @@ def _subtask_labels(
         start = end
     out[start:] = label.subtasks[-1].mp
     return decode_labels(label, out.astype(str), f"{demo}: {label.variable} subtasks")
+
+
+def _chatter_note(
+    demo: str,
+    variable: str,
+    mp: str,
+    signal: str,
+    time: np.ndarray,
+    first: int,
+    settled: int | None,
+) -> ImportNote:
+    """The note on a chattering termination signal: how early its first rise is."""
+    if settled is None:
+        where = "and does not stay 1 to the end"
+    else:
+        where = (
+            f"and stays 1 only from step {settled} ({time[settled]:.3f} s); the switch is "
+            f"{time[settled] - time[first]:.3f} s earlier than there"
+        )
+    return ImportNote(
+        demo,
+        "chatter",
+        variable,
+        f"{variable}: signal {signal} chatters: {mp!r} ends at its first 0 -> 1 step "
+        f"{first} ({time[first]:.3f} s), as MimicGen does, {where}",
+    )
 
 
 def _dataset_labels(group: h5py.Group, label: EffectorLabel, demo: str, n: int) -> np.ndarray:

@@ -29,6 +29,9 @@ from cpmp.errors import ConfigError, CpmpFileError
 SOURCES = ("rosbag", "lerobot", "mimicgen")
 """The recording formats :func:`load_mapping` knows."""
 
+ON_ERROR = ("raise", "skip")
+"""What a demonstration that cannot be imported does: refuse the import, or be skipped."""
+
 T = TypeVar("T")
 
 
@@ -101,6 +104,15 @@ def _rename(value: Any, what: str) -> dict[str, str]:
 
 
 # ------------------------------------------------------------------------------- features
+DERIVED = ("velocity",)
+"""What a LeRobot or MimicGen feature entry can derive from its elements (``derive:``)."""
+
+
+def _check_derive(value: Any, where: str) -> None:
+    if value is not None:
+        _choice(value, DERIVED, f"{where}: derive")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Selection:
     """Which elements of an array-valued source become feature columns, and their names.
@@ -149,27 +161,90 @@ class Selection:
         return None
 
 
+ROTATIONS = ("quat", "rotvec", "matrix6")
+"""How a rotation becomes feature columns: ``quat`` the unit quaternion ``x, y, z, w``
+(hemisphere-aligned, so continuous), ``rotvec`` the rotation vector (axis times angle
+[rad]), ``matrix6`` the first two columns of the rotation matrix (Zhou et al.'s continuous
+6-D representation)."""
+
+
 @dataclass(frozen=True, kw_only=True)
-class TopicFeature(Selection):
-    """Features from one field of one ROS 2 topic's messages.
+class TfFrame:
+    """An object's pose from the transform tree (``tf2_msgs/TFMessage`` on ``/tf``).
 
     Attributes:
-        topic: the topic (``/joint_states``).
-        field: dotted path into the message (``position``, ``pose.position``, ``data``); a
-            number gives one column, a numeric array one per element, a message one per
-            numeric field (``pose.position`` -> ``x, y, z``) in definition order.
-        joints: for ``sensor_msgs/JointState``-like messages, pick elements by joint name
-            (looked up in the message's ``name`` list, per message).
+        child: the frame whose pose is wanted (a transform's ``child_frame_id``), found in
+            every message whatever its index among the message's transforms.
+        parent: the frame to express it in; transforms along the tree are composed (box in
+            world through world -> table -> box). ``None``: the child's own transform as
+            published (its ``header.frame_id``).
+        topic: the topic of the moving transforms.
+        static_topic: the topic of the fixed ones (read when the bag has it).
     """
 
-    topic: str
-    field: str = "data"
-    joints: tuple[str, ...] | None = None
+    child: str
+    parent: str | None = None
+    topic: str = "/tf"
+    static_topic: str = "/tf_static"
 
     def __post_init__(self) -> None:
+        where = "mapping feature tf"
+        object.__setattr__(self, "child", _text(self.child, f"{where}: child").strip("/"))
+        parent = _optional_text(self.parent, f"{where}: parent")
+        object.__setattr__(self, "parent", None if parent is None else parent.strip("/"))
+        _text(self.topic, f"{where}: topic")
+        _text(self.static_topic, f"{where}: static_topic")
+        if self.parent == self.child:
+            raise ConfigError(f"{where}: parent and child are both {self.child!r}; give two frames")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TopicFeature(Selection):
+    """Features from one field of one ROS 2 topic's messages, or a pose from ``/tf``.
+
+    Attributes:
+        topic: the topic (``/joint_states``); not with ``tf``.
+        field: dotted path into the message (``position``, ``pose.position``, ``data``; default
+            ``data``); a number gives one column, a numeric array one per element, a message
+            one per numeric field (``pose.position`` -> ``x, y, z``) in definition order.
+        joints: for ``sensor_msgs/JointState``-like messages, pick elements by joint name.
+            Each joint is its own series, sampled at the messages that hold it (several
+            publishers on one topic, each with some of the joints).
+        tf: instead of ``topic``: a frame's pose from the transform tree (elements
+            ``translation.x, .y, .z`` then the rotation's).
+        rotation: how every quaternion (``geometry_msgs/Quaternion``) of the feature becomes
+            columns (:data:`ROTATIONS`); quaternions are always hemisphere-aligned and
+            interpolated by slerp. ``index``/``slice`` pick among the converted elements.
+    """
+
+    topic: str | None = None
+    field: str | None = None
+    joints: tuple[str, ...] | None = None
+    tf: TfFrame | None = None
+    rotation: Literal["quat", "rotvec", "matrix6"] = "quat"
+
+    def __post_init__(self) -> None:
+        if self.tf is not None and not isinstance(self.tf, TfFrame):
+            object.__setattr__(self, "tf", _build(TfFrame, self.tf, "mapping feature tf"))
+        if (self.topic is None) == (self.tf is None):
+            raise ConfigError(
+                "mapping feature: give topic (a topic's message field) or tf: {child: <frame>, "
+                "parent: <frame>} (a pose from /tf), exactly one"
+            )
+        _choice(self.rotation, ROTATIONS, "mapping feature: rotation")
+        if self.tf is not None:
+            where = f"mapping feature tf {self.tf.child!r}"
+            if self.field is not None or self.joints is not None:
+                raise ConfigError(
+                    f"{where}: field and joints are for topic features; a tf feature's "
+                    "elements are translation.x, .y, .z and the rotation's (pick with index or "
+                    "slice)"
+                )
+            self._check_selection(where)
+            return
         where = f"mapping feature on topic {self.topic!r}"
         _text(self.topic, "mapping feature: topic")
-        _text(self.field, f"{where}: field")
+        object.__setattr__(self, "field", _text(self.field or "data", f"{where}: field"))
         object.__setattr__(self, "joints", _texts(self.joints, f"{where}: joints"))
         if self.joints is not None and (self.index is not None or self.slice is not None):
             raise ConfigError(f"{where}: give joints, index or slice, not several")
@@ -183,14 +258,31 @@ class TopicFeature(Selection):
 
     @property
     def width(self) -> int | None:
-        """The number of selected elements (joints count too), else ``None``."""
+        """The number of selected elements (joints and tf poses count too), else ``None``."""
         if self.joints is not None:
             return len(self.joints)
+        if self.tf is not None and self.index is None and self.slice is None:
+            return 3 + {"quat": 4, "rotvec": 3, "matrix6": 6}[self.rotation]
         return super().width
 
     @property
+    def topics(self) -> tuple[str, ...]:
+        """The topics the feature reads (``/tf`` and ``/tf_static`` for a tf feature)."""
+        if self.tf is not None:
+            return (self.tf.topic, self.tf.static_topic)
+        assert self.topic is not None
+        return (self.topic,)
+
+    @property
     def default_prefix(self) -> str:
-        """``<topic without leading slash, / as .>.<field>`` (``joint_states.position``)."""
+        """The prefix of default feature names.
+
+        ``<topic without leading slash, / as .>.<field>`` (``joint_states.position``), or
+        ``tf.<child>`` for a tf feature.
+        """
+        if self.tf is not None:
+            return f"tf.{self.tf.child}"
+        assert self.topic is not None
         return f"{self.topic.strip('/').replace('/', '.')}.{self.field}"
 
 
@@ -200,13 +292,19 @@ class ColumnFeature(Selection):
 
     Attributes:
         column: the column; a number gives one feature, a fixed-length list one per element.
+        derive: ``velocity``: the features are the time derivatives of the selected elements
+            (central differences over each episode's frames, before any resampling), named
+            ``<name>.<element>.vel`` unless ``names`` is given; ``None``: the values.
     """
 
     column: str
+    derive: Literal["velocity"] | None = None
 
     def __post_init__(self) -> None:
         _text(self.column, "mapping feature: column")
-        self._check_selection(f"mapping feature column {self.column!r}")
+        where = f"mapping feature column {self.column!r}"
+        _check_derive(self.derive, where)
+        self._check_selection(where)
 
     @property
     def default_prefix(self) -> str:
@@ -221,13 +319,19 @@ class KeyFeature(Selection):
     Attributes:
         key: path of the dataset inside ``/data/demo_<i>``, shape ``(T,)``, ``(T, k)`` or
             ``(T, a, b)`` (flattened row-major, e.g. a 4x4 pose matrix).
+        derive: ``velocity``: the time derivatives of the selected elements (central
+            differences over the demo's steps at the mapping's ``rate``), named
+            ``<name>.<element>.vel`` unless ``names`` is given; ``None``: the values.
     """
 
     key: str
+    derive: Literal["velocity"] | None = None
 
     def __post_init__(self) -> None:
         _text(self.key, "mapping feature: key")
-        self._check_selection(f"mapping feature key {self.key!r}")
+        where = f"mapping feature key {self.key!r}"
+        _check_derive(self.derive, where)
+        self._check_selection(where)
 
     @property
     def default_prefix(self) -> str:
@@ -315,22 +419,62 @@ class TopicLabel(LabelNames):
             )
 
 
+LANGUAGE_STYLES = ("subtask", "motion")
+"""The ``language_persistent`` styles (lerobot >= 0.6) that can label a control variable."""
+
+SARM_KINDS = ("sparse", "dense")
+"""The SARM annotation sets in ``meta/episodes`` (``<kind>_subtask_names``, ...)."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class ColumnLabel(LabelNames):
-    """The active MP of one control variable from a per-frame LeRobot column.
+    """The active MP of one control variable of a LeRobot dataset.
+
+    Exactly one of ``column``, ``language`` and ``sarm`` says where it is recorded.
 
     Attributes:
-        column: a string column (MP names) or an integer column with ``names``;
-            ``subtask_index`` takes its names from ``meta/subtasks.parquet`` unless ``names``
-            is given.
+        column: a per-frame string column (MP names) or an integer column with ``names``;
+            ``subtask_index`` (lerobot 0.4.4 - 0.5.x) takes its names from
+            ``meta/subtasks.parquet`` unless ``names`` is given.
+        language: a style of the ``language_persistent`` column (lerobot >= 0.6):
+            ``subtask`` or ``motion``; each row of that style names the MP (its ``content``)
+            active from its ``timestamp`` until the next row of the style.
+        sarm: SARM's subtask annotations in ``meta/episodes`` (``sparse`` or ``dense``):
+            ``<sarm>_subtask_names`` name the MPs, each active from its
+            ``<sarm>_subtask_start_frames`` entry until the next one starts (the first from
+            the episode's first frame).
     """
 
-    column: str
+    column: str | None = None
+    language: str | None = None
+    sarm: str | None = None
 
     def __post_init__(self) -> None:
         where = f"mapping label {self.variable!r}"
         self._check_names(where)
-        _text(self.column, f"{where}: column")
+        given = [k for k in ("column", "language", "sarm") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ConfigError(
+                f"{where}: give exactly one of column: <per-frame column>, language: "
+                f"<{' | '.join(LANGUAGE_STYLES)}> (language_persistent, lerobot >= 0.6) or sarm: "
+                f"<{' | '.join(SARM_KINDS)}> (SARM annotations in meta/episodes); got "
+                f"{', '.join(given) or 'none'}"
+            )
+        if self.column is not None:
+            _text(self.column, f"{where}: column")
+        if self.language is not None:
+            _choice(self.language, LANGUAGE_STYLES, f"{where}: language")
+        if self.sarm is not None:
+            _choice(self.sarm, SARM_KINDS, f"{where}: sarm")
+
+    @property
+    def source(self) -> str:
+        """Where the labels are read, for messages (``column left_arm_mp``, ...)."""
+        if self.language is not None:
+            return f"language_persistent (style {self.language})"
+        if self.sarm is not None:
+            return f"SARM {self.sarm}_subtask_* annotations"
+        return f"column {self.column}"
 
 
 @dataclass(frozen=True)
@@ -414,10 +558,15 @@ class _SourceSpec:
             0 keeps every activation.
         on_gap: ``report`` gaps longer than ``max_gap`` in the summary, or make them an
             ``error``.
+        on_error: ``raise``: a demonstration that cannot be imported refuses the whole import
+            (nothing is written); ``skip``: it is left out and reported (the summary and
+            ``<output>.skipped.json``), the others are imported. Errors that concern every
+            demonstration (the mapping, a missing input) always refuse the import.
     """
 
     min_activation: float = 0.0
     on_gap: Literal["report", "error"] = "report"
+    on_error: Literal["raise", "skip"] = "raise"
 
     def _check_common(
         self,
@@ -430,6 +579,7 @@ class _SourceSpec:
             self, "min_activation", _non_negative(self.min_activation, "min_activation")
         )
         _choice(self.on_gap, ("report", "error"), "on_gap")
+        _choice(self.on_error, ON_ERROR, "on_error")
         if not features:
             raise ConfigError("the mapping has no features; map at least one source to features")
         if not labels:
@@ -468,8 +618,9 @@ class RosbagSpec(_SourceSpec):
         features: topics and fields that become features.
         labels: one topic per control variable.
         rate: [Hz] the common clock every topic is resampled onto (linear interpolation for
-            features, zero-order hold for labels). It spans the time every feature topic and
-            every state label topic covers.
+            features, slerp for quaternions, zero-order hold for labels). It spans the time
+            every feature series and every state label topic covers (a note names the topic
+            that cut the recording short, and by how much).
         stamps: ``header``: a message's ``header.stamp`` where it has a header (the receive
             time where it has none); ``receive``: the time the bag recorded it.
         max_gap: [s] a topic silent for longer than this is reported (``on_gap``).
@@ -494,7 +645,8 @@ class LeRobotSpec(_SourceSpec):
 
     Attributes:
         features: columns that become features.
-        labels: one column per control variable (or ``subtask_index`` for a single one).
+        labels: one label source per control variable: a per-frame column (or
+            ``subtask_index``), a ``language_persistent`` style or SARM annotations.
         rate: [Hz] resample onto this clock; ``None`` keeps the recorded frames.
         episodes: episode indices to import (``None``: all).
         max_gap: [s] frames further apart are reported; ``None``: 1.5 frame periods.
@@ -686,6 +838,10 @@ def _one_line(text: str) -> str:
 
 
 __all__ = [
+    "DERIVED",
+    "LANGUAGE_STYLES",
+    "ON_ERROR",
+    "SARM_KINDS",
     "SOURCES",
     "ColumnFeature",
     "ColumnLabel",
@@ -699,6 +855,7 @@ __all__ = [
     "Selection",
     "SplitSpec",
     "Subtask",
+    "TfFrame",
     "TopicFeature",
     "TopicLabel",
     "load_mapping",

@@ -1,7 +1,9 @@
 """What an import produced, as text.
 
-Per demonstration its duration, rate and MP sequence per control variable, what the import
-repaired or noticed, and the sequence graphs the demonstrations imply
+Per demonstration its duration, rate and MP sequence per control variable, every note on what
+the import changed or noticed (the clock window or resampling, repaired stamps, gaps, merged
+glitches, moved switches, chattering signals), the demonstrations an ``on_error: skip`` import
+left out and why, and the sequence graphs the demonstrations imply
 (:func:`cpmp.graph.build_graphs`).
 """
 
@@ -58,14 +60,16 @@ def summaries(result: ImportResult) -> list[DemoSummary]:
 def summary_text(result: ImportResult) -> str:
     """The import as readable text.
 
-    A header, one block per demonstration, the notes, the features and the implied sequence
-    graphs (``*`` marks initial MPs).
+    A header, one block per demonstration, every note (each one changed the data shown or
+    says what the recording lacked), the skipped demonstrations with their reasons, the
+    features and the implied sequence graphs (``*`` marks initial MPs).
     """
     demos = result.demos
     first = demos[0]
     rows = summaries(result)
+    skipped = f", skipped {len(result.skipped)}" if result.skipped else ""
     lines = [
-        f"imported {len(demos)} demonstration(s) from {result.source} "
+        f"imported {len(demos)} demonstration(s){skipped} from {result.source} "
         f"({', '.join(result.inputs)}): {first.n_features} feature(s), control variable(s) "
         f"{', '.join(first.variables)}",
         "",
@@ -78,10 +82,13 @@ def summary_text(result: ImportResult) -> str:
         )
         for variable, sequence in row.sequences.items():
             lines.append(f"    {variable:<{width}}  {' -> '.join(sequence)}")
-    notes = [n for n in result.notes if n.kind != "window"]
+    notes = result.notes
     if notes:
         lines += ["", f"notes ({len(notes)}):"]
         lines += [f"  {n.demo}: {n.text}" for n in notes]
+    if result.skipped:
+        lines += ["", f"skipped {len(result.skipped)} demonstration(s) (on_error: skip):"]
+        lines += [f"  {s.demo} ({s.source}): {s.reason}" for s in result.skipped]
     durations = np.array([r.duration for r in rows])
     lines += [
         "",
@@ -95,6 +102,8 @@ def summary_text(result: ImportResult) -> str:
     if result.splits:
         counts = ", ".join(f"{split}: {len(names)}" for split, names in result.splits.items())
         lines += ["", f"splits: {counts}"]
+    if result.skipped_path is not None:
+        lines += [f"skipped demonstrations: {result.skipped_path}"]
     return "\n".join(lines)
 
 

@@ -4,6 +4,7 @@ failed import ends with exit status 2, one ``error:`` line and no output file.""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -135,3 +136,44 @@ def test_the_job_writes_relative_outputs_into_the_run_directory(inputs, tmp_path
     with pytest.raises(DataError, match=r"obs/eef_pos has 2 element\(s\)"):
         import_job(cfg, tmp_path)
     assert not (tmp_path / "out.hdf5").exists()
+
+
+def test_on_error_skip_imports_the_rest_reports_and_exits_3(inputs, tmp_path):
+    mapping, recording = inputs
+    with h5py.File(recording, "a") as f:
+        del f["data/demo_2/datagen_info/subtask_term_signals/reached"]
+    out = tmp_path / "demos.hdf5"
+    proc = run(
+        [f"mapping={mapping}", f"input={recording}", f"output={out}", "on_error=skip"], tmp_path
+    )
+    assert proc.returncode == 3, proc.stderr[-3000:]
+    assert "error:" not in proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert lines[-1] == str(out) and lines[0].startswith("imported 3 demonstration(s), skipped 1")
+    assert "skipped 1 demonstration(s) (on_error: skip):" in proc.stdout
+    assert "demo_2: no termination signal reached" in proc.stdout
+    assert list_splits(out) == {"train": ["demo_0", "demo_1", "demo_3"]}
+    report = json.loads((tmp_path / "demos.hdf5.skipped.json").read_text())
+    assert [s["demo"] for s in report["skipped"]] == ["demo_2"]
+    assert f"skipped demonstrations: {out}.skipped.json" in proc.stdout
+
+
+def test_on_error_skip_with_every_demo_bad_is_one_error_line_and_no_file(inputs, tmp_path):
+    mapping, recording = inputs
+    with h5py.File(recording, "a") as f:
+        for k in range(4):
+            del f[f"data/demo_{k}/datagen_info/subtask_term_signals/reached"]
+    proc = run(
+        [f"mapping={mapping}", f"input={recording}", "output=demos.hdf5", "on_error=skip"], tmp_path
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "every demonstration failed to import (4 skipped" in errors[0]
+    assert not list((tmp_path / "run").glob("demos.hdf5*"))
+
+
+def test_on_error_is_checked_with_the_command_line(inputs):
+    mapping, recording = inputs
+    with pytest.raises(ConfigError, match=r"on_error='later': give on_error=raise"):
+        _check([f"mapping={mapping}", f"input={recording}", "on_error=later"])
+    _check([f"mapping={mapping}", f"input={recording}", "on_error=skip"])

@@ -469,3 +469,129 @@ def fit_and_replay(path: Path) -> dict:
     everything = load_demonstrations(path)
     assert len(everything) == sum(len(v) for v in list_splits(path).values())
     return replay_demonstrations(seq, everything)
+
+
+# ------------------------------------------------------------------- LeRobot 0.6 and SARM
+LEROBOT_06_MAPPING = {
+    "source": "lerobot",
+    "features": [{"column": "observation.state", "name": "state"}],
+    "labels": {
+        "right_arm": {
+            "language": "subtask",
+            "rename": {
+                "Reach for the box": "reach",
+                "Grasp the box": "grasp",
+                "Lift the box": "lift",
+            },
+        },
+        "left_arm": {"language": "motion"},
+    },
+}
+"""Labels from lerobot 0.6's ``language_persistent``: subtasks (right arm), motions (left)."""
+
+
+def _frame_stamp(t: np.ndarray, at: float) -> float:
+    """The stored (float32) timestamp of the first frame at or after ``at`` [s]."""
+    return float(np.float32(t[np.searchsorted(t, at - 1e-9)]))
+
+
+def write_lerobot_v06(root: Path, episodes: Sequence[Episode], fps: int = 30) -> Path:
+    """A dataset as lerobot 0.6.1 leaves it after ``lerobot-annotate`` and SARM annotation.
+
+    Starts from :func:`write_lerobot` and applies what lerobot 0.6.1 writes
+    (``src/lerobot/annotations/steerable_pipeline/writer.py``, ``LanguageColumnsWriter``):
+    ``subtask_index`` dropped from the frames, ``language_persistent`` and ``language_events``
+    added, their arrow types inferred by ``pa.array`` from the row dicts (``role``,
+    ``content``, ``style``, ``timestamp``, ``camera``, ``tool_calls``, persistent rows sorted by
+    timestamp and broadcast to every frame of the episode), and ``meta/info.json`` features
+    gaining both with dtype ``language``. ``meta/subtasks.parquet`` is gone. The persistent rows
+    per episode: a ``task_aug`` row, ``subtask`` rows (the right arm's three subtasks), ``plan``
+    rows, and ``motion`` rows (the left arm: ``hold``, ``push``), stamped at the first frame of
+    each span. ``meta/episodes`` also gets SARM's sparse columns as its
+    ``subtask_annotation.py`` writes them with pandas (``sparse_subtask_names``,
+    ``sparse_subtask_start_times`` / ``_end_times`` / ``_start_frames`` / ``_end_frames`` and the
+    legacy unprefixed copies), with the right arm's subtasks.
+    """
+    write_lerobot(root, episodes, fps)
+    (root / "meta" / "subtasks.parquet").unlink()
+    persistent: dict[int, list[dict]] = {}
+    sarm: list[dict] = []
+    for k, e in enumerate(episodes):
+        t = np.arange(int(np.floor(e.t_end * fps)) + 1) / fps
+        spans = [
+            (0.0, "Reach for the box"),
+            (e.t_grasp, "Grasp the box"),
+            (e.t_lift, "Lift the box"),
+        ]
+        rows = [
+            {"role": "user", "content": "Pick up the box", "style": "task_aug", "timestamp": 0.0},
+            *(
+                {
+                    "role": "assistant",
+                    "content": text,
+                    "style": "subtask",
+                    "timestamp": _frame_stamp(t, at),
+                }
+                for at, text in spans
+            ),
+            *(
+                {
+                    "role": "assistant",
+                    "content": f"plan {i}",
+                    "style": "plan",
+                    "timestamp": _frame_stamp(t, at),
+                }
+                for i, (at, _) in enumerate(spans)
+            ),
+            {"role": "assistant", "content": "hold", "style": "motion", "timestamp": 0.0},
+            {
+                "role": "assistant",
+                "content": "push",
+                "style": "motion",
+                "timestamp": _frame_stamp(t, e.t_push),
+            },
+        ]
+        rows.sort(key=lambda r: (float(r["timestamp"]), r["style"], r["role"]))
+        persistent[k] = [{**r, "camera": None, "tool_calls": None} for r in rows]
+        starts = [_frame_stamp(t, at) for at, _ in spans]
+        ends = [*starts[1:], float(t[-1])]
+        sarm.append(
+            {
+                "names": [text for _, text in spans],
+                "start_times": starts,
+                "end_times": ends,
+                "start_frames": [int(np.searchsorted(t, at - 1e-9)) for at, _ in spans],
+                "end_frames": [
+                    *(int(np.searchsorted(t, at - 1e-9)) for at, _ in spans[1:]),
+                    len(t) - 1,
+                ],
+            }
+        )
+    for path in sorted(root.glob("data/*/*.parquet")):
+        table = pq.read_table(path).drop_columns(["subtask_index"])
+        episode = table.column("episode_index").to_pylist()
+        table = table.append_column(
+            "language_persistent", pa.array([persistent[k] for k in episode])
+        )
+        table = table.append_column("language_events", pa.array([[] for _ in episode]))
+        pq.write_table(table, path)
+    episodes_path = root / "meta" / "episodes" / "chunk-000" / "file-000.parquet"
+    table = pq.read_table(episodes_path)
+    for key in ("names", "start_times", "end_times", "start_frames", "end_frames"):
+        values = [s[key] for s in sarm]
+        table = table.append_column(f"sparse_subtask_{key}", pa.array(values))
+        table = table.append_column(f"subtask_{key}", pa.array(values))
+    pq.write_table(table, episodes_path)
+    info_path = root / "meta" / "info.json"
+    info = json.loads(info_path.read_text())
+    del info["features"]["subtask_index"]
+    for name in ("language_persistent", "language_events"):
+        info["features"][name] = {"dtype": "language", "shape": [1], "names": None}
+    info_path.write_text(json.dumps(info, indent=4))
+    return root
+
+
+@pytest.fixture(scope="session")
+def lerobot_v06_root(tmp_path_factory, episodes) -> Path:
+    """:func:`write_lerobot_v06` of the five episodes."""
+    return write_lerobot_v06(tmp_path_factory.mktemp("lerobot06") / "pick_lift", episodes)

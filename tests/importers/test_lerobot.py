@@ -116,8 +116,13 @@ def test_unannotated_frames_are_refused(lerobot_root, tmp_path):
 
     _rewrite_data(root, blank_one)
     out = tmp_path / "out.hdf5"
-    with pytest.raises(DataError, match=r"column left_arm_mp is empty \(null\) in 2 frame"):
+    with pytest.raises(DataError) as err:
         import_recordings(mapping(), root, out)
+    message = str(err.value)
+    assert (
+        "column left_arm_mp is empty (null) in 1 frame(s) of episode 0, first at frame 5" in message
+    )
+    assert "(row 5 of data/chunk-000/file-000.parquet)" in message
     assert not out.exists()
 
 
@@ -178,9 +183,15 @@ def test_other_layouts_and_videos_are_refused(lerobot_root, tmp_path):
     root = copy_dataset(lerobot_root, tmp_path)
     _set_info(root, codebase_version="v2.1")
     with pytest.raises(
-        CpmpFileError, match=r"codebase_version is v2.1; .*convert_dataset_v21_to_v30"
+        CpmpFileError, match=r"codebase_version is v2.1, older than .*convert_dataset_v21_to_v30"
     ):
         read_recordings(mapping(), root)
+    _set_info(root, codebase_version="v4.0")
+    with pytest.raises(CpmpFileError) as err:
+        read_recordings(mapping(), root)
+    message = str(err.value)
+    assert "codebase_version is v4.0, newer than the layouts cpmp knows" in message
+    assert "v3.x, lerobot 0.4.4 - 0.6.1" in message and "convert" not in message
     _set_info(
         root,
         codebase_version="v3.0",
@@ -190,3 +201,58 @@ def test_other_layouts_and_videos_are_refused(lerobot_root, tmp_path):
         read_recordings(mapping(features=[{"column": "observation.images.top"}]), root)
     with pytest.raises(ConfigError, match="reads one dataset folder, got 2 inputs"):
         read_recordings(mapping(), [root, lerobot_root])
+
+
+def test_a_data_file_without_rows_is_named(lerobot_root, tmp_path):
+    root = copy_dataset(lerobot_root, tmp_path)
+    _rewrite_data(root, lambda table: table.slice(0, 0))
+    with pytest.raises(DataError) as err:
+        read_recordings(mapping(), root)
+    message = str(err.value)
+    assert (
+        "data/chunk-000/file-000.parquet, data/chunk-000/file-001.parquet have no rows" in message
+    )
+    assert "lists of lengths" not in message
+    (root / "data" / "chunk-000" / "file-001.parquet").unlink()
+    with pytest.raises(DataError, match=r"file-000.parquet has no rows \(no frames\)"):
+        read_recordings(mapping(), root)
+
+
+def test_a_nan_names_the_episode_the_frame_and_the_file(lerobot_root, tmp_path):
+    root = copy_dataset(lerobot_root, tmp_path)
+    path = root / "data" / "chunk-000" / "file-001.parquet"
+    table = pq.read_table(path)
+    states = table.column("observation.state").to_pylist()
+    episodes = table.column("episode_index").to_pylist()
+    row = episodes.index(4) + 7  # episode 4, frame 7
+    states[row][2] = float("nan")
+    index = table.schema.get_field_index("observation.state")
+    column = pa.array(states, table.schema.field(index).type)
+    pq.write_table(table.set_column(index, "observation.state", column), path)
+    with pytest.raises(DataError) as err:
+        read_recordings(mapping(), root)
+    message = str(err.value)
+    assert f"column observation.state is NaN/inf in episode 4 at frame 7 (row {row} of " in message
+    assert "data/chunk-000/file-001.parquet" in message and "on_error: skip" in message
+
+
+def test_a_missing_velocity_says_how_to_derive_it(lerobot_root, episodes):
+    features = [{"column": "observation.velocity"}]
+    with pytest.raises(DataError) as err:
+        read_recordings(mapping(features=features), lerobot_root)
+    assert "derive one from the positions: {column: observation.state, derive: velocity}" in str(
+        err.value
+    )
+    features = [
+        {"column": "observation.state", "name": "state"},
+        {"column": "observation.state", "name": "state", "derive": "velocity", "index": [0]},
+    ]
+    result = read_recordings(mapping(features=features), lerobot_root)
+    demo, e = result.demos[0], episodes[0]
+    assert demo.feature_names[-1] == "state.hand_x.vel"
+    # central differences of the smooth reach (up to 0.6 m/s), away from its end where the
+    # smoothstep's curvature jumps: within 3e-3 m/s of the derivative
+    h = 1e-6
+    truth = (e.hand_x(demo.time + h) - e.hand_x(demo.time - h)) / (2 * h)
+    inside = (demo.time > 0.05) & (demo.time < e.t_grasp - 0.05)
+    np.testing.assert_allclose(demo.features[inside, -1], truth[inside], atol=3e-3)

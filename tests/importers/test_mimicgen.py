@@ -12,7 +12,7 @@ from conftest import EXPECTED, MIMICGEN_MAPPING, fit_and_replay
 
 from cpmp.data import list_splits, mp_sequences
 from cpmp.errors import ConfigError, CpmpFileError, DataError
-from cpmp.importers import SplitSpec, import_recordings, read_recordings
+from cpmp.importers import SplitSpec, import_recordings, read_recordings, summary_text
 
 
 def mapping(**changes):
@@ -164,3 +164,63 @@ def test_not_a_robomimic_file_is_a_file_error(tmp_path):
         f.create_group("demos")
     with pytest.raises(CpmpFileError, match=r"has no /data group; robomimic files keep"):
         read_recordings(mapping(), tmp_path / "empty.hdf5")
+
+
+def test_a_chattering_signal_switches_at_its_first_rise_with_a_note(mimicgen_file, tmp_path):
+    path = copy_file(mimicgen_file, tmp_path)
+    with h5py.File(path, "a") as f:  # reached: 1 four steps (0.2 s) early, then 0 again
+        signal = f["data/demo_2/datagen_info/subtask_term_signals/reached"]
+        values = signal[()]
+        settled = int(np.flatnonzero(values)[0])
+        values[settled - 4] = 1
+        signal[...] = values
+    result = read_recordings(mapping(), path)
+    demo = result.demos[2]
+    first = int(np.flatnonzero(demo.labels["right_arm"] == "grasp")[0])
+    assert first == settled - 4  # MimicGen's rule: the first 0 -> 1 step
+    (note,) = [n for n in result.notes if n.kind == "chatter"]
+    assert note.demo == "demo_2" and note.where == "right_arm"
+    assert f"'reach' ends at its first 0 -> 1 step {settled - 4}" in note.text
+    assert f"stays 1 only from step {settled}" in note.text
+    assert "the switch is 0.200 s earlier than there" in note.text
+    assert note.text in summary_text(import_recordings(mapping(), path, tmp_path / "out.hdf5"))
+
+
+def test_debouncing_notes_how_far_it_moved_a_switch(mimicgen_file, tmp_path, episodes):
+    path = copy_file(mimicgen_file, tmp_path)
+    with h5py.File(path, "a") as f:  # push, back to hold for 3 steps, then push for good
+        labels = f["data/demo_0/labels/left_arm"]
+        values = labels[()]
+        start = int(np.flatnonzero(values == b"push")[0])
+        values[start + 1 : start + 4] = b"hold"
+        labels[...] = values
+    labels = {"left_arm": {"dataset": "labels/left_arm"}}
+    result = read_recordings(mapping(labels=labels, min_activation=0.1, demos=["demo_0"]), path)
+    (demo,) = result.demos
+    assert int(np.flatnonzero(demo.labels["left_arm"] == "push")[0]) == start + 4
+    (moved,) = [n for n in result.notes if n.kind == "switch_moved"]
+    assert moved.text == (
+        f"left_arm: the switch hold -> push moved from {start / 20:.3f} s (first recorded) to "
+        f"{(start + 4) / 20:.3f} s (+0.200 s, min_activation)"
+    )
+
+
+def test_a_missing_velocity_says_how_to_derive_it(mimicgen_file, episodes):
+    with pytest.raises(DataError) as err:
+        read_recordings(mapping(features=[{"key": "obs/robot0_eef_vel_lin"}]), mimicgen_file)
+    assert "{key: obs/robot0_eef_pos, derive: velocity}" in str(err.value)
+    features = [{"key": "obs/robot0_eef_pos", "index": [0], "derive": "velocity"}]
+    (demo, *_) = read_recordings(mapping(features=features), mimicgen_file).demos
+    assert demo.feature_names == ["obs.robot0_eef_pos.0.vel"]
+    np.testing.assert_allclose(
+        demo.features[:, 0], np.gradient(episodes[0].hand_x(demo.time), demo.time)
+    )
+
+
+def test_a_nan_names_the_demo_the_step_and_the_file(mimicgen_file, tmp_path):
+    path = copy_file(mimicgen_file, tmp_path)
+    _edit(path, lambda g: g["obs/robot0_eef_pos"].__setitem__((5, 2), np.nan))
+    with pytest.raises(DataError) as err:
+        read_recordings(mapping(), path)
+    message = str(err.value)
+    assert f"demo_2: obs/robot0_eef_pos is NaN/inf at step 5 (element 2) in {path}" in message

@@ -163,3 +163,23 @@ def test_splits_are_seeded_and_keep_one_demonstration_to_train():
         make_splits(names, SplitSpec(test=("demo_x",)))
     with pytest.raises(ConfigError, match="needs at least 2 demonstrations"):
         make_splits(names[:1], SplitSpec(test_fraction=0.5))
+
+
+def test_on_error_derive_and_the_lerobot_label_sources_are_validated():
+    spec = load_mapping({**MIMICGEN_MAPPING, "on_error": "skip"})
+    assert spec.on_error == "skip" and load_mapping(MIMICGEN_MAPPING).on_error == "raise"
+    with pytest.raises(ConfigError, match="on_error must be one of raise, skip, got 'ignore'"):
+        load_mapping({**LEROBOT_MAPPING, "on_error": "ignore"})
+    with pytest.raises(ConfigError, match="derive must be one of velocity, got 'speed'"):
+        load_mapping({**LEROBOT_MAPPING, "features": [{"column": "a", "derive": "speed"}]})
+    labels = {"a": {"language": "motion"}, "b": {"sarm": "dense"}, "c": {"column": "x"}}
+    spec = load_mapping({**LEROBOT_MAPPING, "labels": labels})
+    assert [lab.source for lab in spec.labels] == [
+        "language_persistent (style motion)",
+        "SARM dense_subtask_* annotations",
+        "column x",
+    ]
+    with pytest.raises(ConfigError, match="sarm must be one of sparse, dense, got 'fine'"):
+        load_mapping({**LEROBOT_MAPPING, "labels": {"a": {"sarm": "fine"}}})
+    with pytest.raises(ConfigError, match=r"give exactly one of column: .* got none"):
+        load_mapping({**LEROBOT_MAPPING, "labels": {"a": {"rename": {"x": "y"}}}})
