@@ -46,16 +46,15 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from cpmp.baselines.episodic import EpisodicBaseline
+from cpmp.baselines.episodic import EpisodicBaseline, baseline_data
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.bc import KIND, BCConfig, bc_options
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
-from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
-from cpmp.progress import expected_progress
 from cpmp.records import SequencerNote, TickInfo, TransitionEvent
-from cpmp.sequencer import checked_demonstrations, checked_features, checked_time
+from cpmp.sequencer import checked_features, checked_time
 
 CHECKPOINT_FORMAT = "cpmp-bc"
 CHECKPOINT_VERSION = 1
@@ -341,24 +340,21 @@ class BCSequencer(EpisodicBaseline):
         """
         started = perf_counter()
         config = bc_options(options)
-        demos, feature_names = checked_demonstrations(demos, "BCSequencer.fit")
-        graphs = build_graphs(demos, variables)
-        all_x = np.concatenate([d.features for d in demos], axis=0)
-        node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        n_samples = sum(a.n_samples for v, mp in node_keys for a in graphs[v].activations[mp])
-        predictor = NearestProgress(node_keys, len(feature_names), n_samples)
-        predictor.scaler.fit(all_x, config.feature_scaling)
-        scale = predictor.scaler.transform
+        data = baseline_data(demos, variables, config.feature_scaling, "BCSequencer.fit")
+        demos, feature_names, graphs, predictor = (
+            data.demos,
+            data.feature_names,
+            data.graphs,
+            data.predictor,
+        )
         starts: dict[tuple[str, str], list[np.ndarray]] = {}
-        samples, targets, node = [], [], []
-        data: dict[tuple[str, str], _NodeData] = {}
-        for k, (v, mp) in enumerate(node_keys):
+        node_data: dict[tuple[str, str], _NodeData] = {}
+        for v, mp in data.node_keys:
             successors = sorted(graphs[v].successors(mp))
             index = {s: i + 1 for i, s in enumerate(successors)}
             zs, ys = [], []
-            for a in graphs[v].activations[mp]:
+            for a, z in zip(graphs[v].activations[mp], data.scaled[(v, mp)], strict=True):
                 demo = demos[a.demo]
-                z = scale(a.features)
                 y = np.zeros(len(z), dtype=np.int64)
                 if a.stop < demo.n_samples:
                     y[-1] = index[str(demo.labels[v][a.stop])]
@@ -366,16 +362,10 @@ class BCSequencer(EpisodicBaseline):
                     starts.setdefault((v, mp), []).append(z[0])
                 zs.append(z)
                 ys.append(y)
-                samples.append(z)
-                targets.append(expected_progress(z, a.time))
-                node.append(np.full(len(z), k))
             if successors:
-                data[(v, mp)] = _NodeData(np.concatenate(zs), np.concatenate(ys))
-        predictor.samples.copy_(torch.from_numpy(np.concatenate(samples)))
-        predictor.targets.copy_(torch.from_numpy(np.concatenate(targets)))
-        predictor.node.copy_(torch.from_numpy(np.concatenate(node)))
+                node_data[(v, mp)] = _NodeData(np.concatenate(zs), np.concatenate(ys))
         classifiers, fits = {}, {}
-        for (v, mp), nd in data.items():
+        for (v, mp), nd in node_data.items():
             clf, info = cls._fit_node(v, mp, sorted(graphs[v].successors(mp)), nd, config)
             classifiers[(v, mp)] = clf
             fits[f"{v}/{mp}"] = info._asdict()

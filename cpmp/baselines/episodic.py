@@ -10,15 +10,82 @@ evaluation reads and the switching never uses.
 from __future__ import annotations
 
 import copy
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 
 from cpmp.baselines.batch import GoalNearestBatch
 from cpmp.baselines.nearest_progress import NearestProgress
+from cpmp.data import Demonstration
+from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.progress import expected_progress
 from cpmp.records import ReplayResult, TransitionEvent
-from cpmp.sequencer import EpisodeBatch, checked_features
+from cpmp.sequencer import EpisodeBatch, checked_demonstrations, checked_features
+
+
+class BaselineData(NamedTuple):
+    """What a baseline's fit starts from (:func:`baseline_data`).
+
+    Attributes:
+        demos: the checked demonstrations.
+        feature_names: their ``d`` feature names.
+        graphs: variable -> sequence graph.
+        node_keys: (variable, MP) of every node, in graph order.
+        predictor: the nearest-neighbour progress, fitted (scaler, samples, eq. 1 targets).
+        scaled: (variable, MP) -> the scaled features ``(n_a, d)`` of each of the node's
+            activations, in the graph's order.
+        features: every demonstration's features stacked ``(N, d)`` (raw).
+    """
+
+    demos: list[Demonstration]
+    feature_names: list[str]
+    graphs: dict[str, SequenceGraph]
+    node_keys: list[tuple[str, str]]
+    predictor: NearestProgress
+    scaled: dict[tuple[str, str], list[np.ndarray]]
+    features: np.ndarray
+
+
+def baseline_data(
+    demos: Sequence[Demonstration],
+    variables: Sequence[str] | None,
+    feature_scaling: str,
+    where: str,
+) -> BaselineData:
+    """The graphs, the scaled activations and the fitted nearest-neighbour progress.
+
+    Args:
+        demos: labelled demonstrations sharing feature names and control variables.
+        variables: the control variables to sequence (``None``: all).
+        feature_scaling: the scaling of the features (as the progress predictors scale them).
+        where: the fit's name, for error messages.
+
+    Returns:
+        The data every baseline's fit starts from.
+    """
+    demos, feature_names = checked_demonstrations(demos, where)
+    graphs = build_graphs(demos, variables)
+    all_x = np.concatenate([d.features for d in demos], axis=0)
+    node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
+    n_samples = sum(a.n_samples for v, mp in node_keys for a in graphs[v].activations[mp])
+    predictor = NearestProgress(node_keys, len(feature_names), n_samples)
+    predictor.scaler.fit(all_x, feature_scaling)
+    scaled: dict[tuple[str, str], list[np.ndarray]] = {}
+    samples, targets, node = [], [], []
+    for k, (v, mp) in enumerate(node_keys):
+        scaled[(v, mp)] = []
+        for a in graphs[v].activations[mp]:
+            z = predictor.scaler.transform(a.features)
+            scaled[(v, mp)].append(z)
+            samples.append(z)
+            targets.append(expected_progress(z, a.time))
+            node.append(np.full(len(z), k))
+    predictor.samples.copy_(torch.from_numpy(np.concatenate(samples)))
+    predictor.targets.copy_(torch.from_numpy(np.concatenate(targets)))
+    predictor.node.copy_(torch.from_numpy(np.concatenate(node)))
+    return BaselineData(list(demos), feature_names, graphs, node_keys, predictor, scaled, all_x)
 
 
 class EpisodicBaseline:

@@ -42,17 +42,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from cpmp.baselines.episodic import EpisodicBaseline
+from cpmp.baselines.episodic import EpisodicBaseline, baseline_data
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.goal_nearest import KIND, GoalNearestConfig, goal_nearest_options
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
-from cpmp.graph import SequenceGraph, build_graphs
+from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
-from cpmp.progress import expected_progress
 from cpmp.records import SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import (
-    checked_demonstrations,
     checked_features,
     checked_time,
     indicator_features,
@@ -170,37 +168,28 @@ class GoalNearestSequencer(EpisodicBaseline):
         """
         started = perf_counter()
         config = goal_nearest_options(options)
-        demos, feature_names = checked_demonstrations(demos, "GoalNearestSequencer.fit")
-        graphs = build_graphs(demos, variables)
-        all_x = np.concatenate([d.features for d in demos], axis=0)
-        binary = indicator_features(all_x)
-        node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        n_samples = sum(a.n_samples for v, mp in node_keys for a in graphs[v].activations[mp])
-        predictor = NearestProgress(node_keys, len(feature_names), n_samples)
-        predictor.scaler.fit(all_x, config.feature_scaling)
-        scale = predictor.scaler.transform
+        data = baseline_data(demos, variables, config.feature_scaling, "GoalNearestSequencer.fit")
+        demos, feature_names, graphs, predictor = (
+            data.demos,
+            data.feature_names,
+            data.graphs,
+            data.predictor,
+        )
+        binary = indicator_features(data.features)
         motion: dict[str, dict[str, np.ndarray]] = {v: {} for v in graphs}
         entries: dict[tuple[str, str | None, str], list[np.ndarray]] = {}
         finals: dict[tuple[str, str], list[np.ndarray]] = {}
-        samples, targets, node = [], [], []
-        for k, (v, mp) in enumerate(node_keys):
+        for v, mp in data.node_keys:
             path = np.zeros(len(feature_names))
-            for a in graphs[v].activations[mp]:
-                z = scale(a.features)
+            for a, z in zip(graphs[v].activations[mp], data.scaled[(v, mp)], strict=True):
                 path += np.abs(np.diff(z, axis=0)).sum(axis=0)
                 source = None if a.start == 0 else str(demos[a.demo].labels[v][a.start - 1])
                 entries.setdefault((v, source, mp), []).append(z[0])
                 if a.stop == demos[a.demo].n_samples:
                     finals.setdefault((v, mp), []).append(z[-1])
-                samples.append(z)
-                targets.append(expected_progress(z, a.time))
-                node.append(np.full(len(z), k))
             path[binary] = 0.0
             top = float(path.max(initial=0.0))
             motion[v][mp] = (path >= config.motion_share * top) & (path > 0.0)
-        predictor.samples.copy_(torch.from_numpy(np.concatenate(samples)))
-        predictor.targets.copy_(torch.from_numpy(np.concatenate(targets)))
-        predictor.node.copy_(torch.from_numpy(np.concatenate(node)))
         summary = {
             "kind": KIND,
             "n_demos": len(demos),
