@@ -357,7 +357,7 @@ def _rng(seed: int, condition: str, episode: int) -> np.random.Generator:
 
 def synthetic_condition(
     world: World,
-    seq: ConcurrentSequencer,
+    seq: Policy,
     episodes: Sequence[Any],
     references: Sequence[Demonstration],
     condition: ClockCondition,
@@ -367,7 +367,7 @@ def synthetic_condition(
 
     Args:
         world: the world.
-        seq: the fitted sequencer (one episode at a time).
+        seq: the fitted sequencer, or any policy (one episode at a time).
         episodes: the held-out episodes.
         references: the demonstrator's demonstration of each episode.
         condition: the clock.
@@ -550,11 +550,16 @@ def bench_synthetic_world(
 
     A family world (the procedural one) pools its first ``settings.tasks`` members too.
 
+    The world's feature-only scripted policy runs the same episodes under every condition
+    beside the sequencer (``scripted``): how far the world stays fair on that clock.
+
     Returns:
         ``{"conditions": {condition: summary}, "per_seed": {seed: {condition: summary}},
-        "per_episode": {condition: [row, ...]}}`` (summaries: :func:`summarise`).
+        "per_episode": {condition: [row, ...]}, "scripted": {condition: summary}}``
+        (summaries: :func:`summarise`).
     """
     pooled: dict[str, list[EpisodeRecord]] = {}
+    scripted: dict[str, list[EpisodeRecord]] = {}
     per_seed: dict[str, dict[str, Any]] = {}
     for seed in settings.seeds:
         by_condition: dict[str, list[EpisodeRecord]] = {}
@@ -565,6 +570,10 @@ def bench_synthetic_world(
             for condition in _conditions(settings):
                 records = synthetic_condition(world, seq, episodes, references, condition, seed)
                 by_condition.setdefault(condition.name, []).extend(records)
+                fair = world.scripted_policy()
+                scripted.setdefault(condition.name, []).extend(
+                    synthetic_condition(world, fair, episodes, references, condition, seed)
+                )
         per_seed[str(seed)] = {}
         for condition, records in by_condition.items():
             pooled.setdefault(condition, []).extend(records)
@@ -572,7 +581,9 @@ def bench_synthetic_world(
             per_seed[str(seed)][condition] = summary
             if log is not None:
                 log(f"{name} seed {seed} {condition}: {summary['complete']}/{len(records)}")
-    return _world_result(pooled, per_seed)
+    result = _world_result(pooled, per_seed)
+    result["scripted"] = {c: summarise(records) for c, records in scripted.items()}
+    return result
 
 
 def bench_sim(settings: ClockSettings, log: Callable[[str], None] | None = None) -> dict[str, Any]:
@@ -645,7 +656,8 @@ def run_clock_benchmark(
 def markdown(result: Mapping[str, Any]) -> str:
     """Completion per world and condition as a Markdown table.
 
-    Each cell: ``complete / episodes``, then the mean absolute switch-time error in ms.
+    Each cell: ``complete / episodes``, then the mean absolute switch-time error in ms; a
+    synthetic world's scripted policy on the same episodes in the row below it.
     """
     names = list(result["conditions"])
     lines = [
@@ -660,6 +672,12 @@ def markdown(result: Mapping[str, Any]) -> str:
             ms = "-" if err is None else f"{1000 * err:.0f} ms"
             cells.append(f"{s['complete']}/{s['n_episodes']} ({ms})")
         lines.append(f"| {world} | " + " | ".join(cells) + " |")
+        if "scripted" in data:
+            fair = [
+                f"{data['scripted'][n]['complete']}/{data['scripted'][n]['n_episodes']}"
+                for n in names
+            ]
+            lines.append(f"| {world} (scripted) | " + " | ".join(fair) + " |")
     return "\n".join(lines) + "\n"
 
 
