@@ -22,14 +22,14 @@ from cpmp.benchmarks.settings import BenchSettings
 from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, time_rollouts
 from cpmp.config import TaskConfig
 from cpmp.data.demonstration import Demonstration
-from cpmp.errors import ConfigError, CpmpFileError
+from cpmp.errors import ConfigError
 from cpmp.experiment.strategies import balanced_subset
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, record_demonstration, sample_box
 from cpmp.sim.collect import sample_boxes
 
-ROOT = Path(__file__).resolve().parents[2]
-"""The repository (``scripts/experiment.py`` for the ``stages`` section)."""
+MAIN_JOB = "from cpmp.cli.main import experiment_main; experiment_main()"
+"""What ``cpmp-experiment`` and ``scripts/experiment.py`` run (the ``stages`` section runs it)."""
 
 
 class SimData:
@@ -106,25 +106,23 @@ def bench_stages(
 ) -> dict[str, Any]:
     """Run the main job in a fresh process; its wall time and the seconds of every stage.
 
-    ``scripts/experiment.py experiment=<experiment> [overrides]`` runs as a user runs it; the
+    ``cpmp-experiment experiment=<experiment> [overrides]`` runs as a user runs it; the
     report has its wall time and its ``timings.json``: seconds per stage (kinematics set-up,
     collect, expected, train, evaluate, reproduce, strategy map, plots).
     """
-    script = ROOT / "scripts" / "experiment.py"
-    if not script.is_file():
-        raise CpmpFileError(f"{script} not found: the stages section needs the repository")
     with tempfile.TemporaryDirectory(prefix="cpmp-bench-") as tmp:
         run_dir = Path(tmp) / "run"
         command = [
             sys.executable,
-            str(script),
+            "-c",
+            MAIN_JOB,
             f"experiment={experiment}",
             f"hydra.run.dir={run_dir}",
             f"++threads={threads}",
             *overrides,
         ]
         start = time.perf_counter()
-        proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
+        proc = subprocess.run(command, cwd=tmp, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - start
         if proc.returncode != 0:
             error = ConfigError if proc.returncode == 2 else RuntimeError

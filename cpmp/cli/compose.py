@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hydra import compose, initialize_config_dir
+from hydra import compose, initialize_config_module
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra._internal.utils import get_args_parser
 from hydra.core.hydra_config import HydraConfig
@@ -26,11 +26,13 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from cpmp.compare.settings import register_compare
+from cpmp.config.paths import CONF_PACKAGE, conf_dir
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.experiment.config import register_configs
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-"""The Hydra config directory: ``conf/`` of the repository this package is installed from."""
+CONF_DIR = conf_dir()
+"""The Hydra config directory: the checkout's ``conf/`` (editable install) or its installed copy
+(:mod:`cpmp.config.paths`); Hydra reads it as the package ``cpmp._conf``."""
 
 
 def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
@@ -140,10 +142,10 @@ def _composition_error(
         return ConfigError(f"{merging.group(1)}: {one_line(str(err.__cause__))}")
     if "Cannot find primary config" in text:
         return ConfigError(f"{one_line(text)}; the configs live in {CONF_DIR}")
-    if "Primary config directory not found" in text:
+    if "Primary config module" in text:
         return ConfigError(
-            f"cpmp's config directory {CONF_DIR} is missing: the cpmp commands run from a "
-            "source checkout installed with pip install -e ."
+            f"cpmp's configs (the package {CONF_PACKAGE}) are not installed: reinstall cpmp "
+            "(bash scripts/install.sh, or pip install -e . in a checkout)"
         )
     cause = err.__cause__
     detail = f": {one_line(str(cause))}" if cause is not None and str(cause) else ""
@@ -187,7 +189,7 @@ def compose_config(config_name: str, overrides: Sequence[str], config_dir: str |
         overrides = _with_search_path(overrides, config_dir)
     parsed = parse_overrides(overrides)
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        with initialize_config_module(config_module=CONF_PACKAGE, version_base="1.3"):
             return compose(config_name, overrides=overrides, return_hydra_config=True)
     except (HydraException, OmegaConfBaseException, ValueError) as err:
         raise _composition_error(err, parsed, config_name, config_dir) from None

@@ -22,8 +22,9 @@ A Hydra command checks its configuration before it imports anything heavy
    same way (:func:`run_job`).
 
 A failed check prints one ``error: ...`` line on stderr and exits with status 2. The commands
-read their configs from the repository's ``conf/`` (next to the installed, editable, package);
-``--config-dir DIR`` adds a directory of your own config group options.
+read their configs from the package ``cpmp._conf`` (:mod:`cpmp.config.paths`): the checkout's
+``conf/`` in an editable install, its copy in a wheel; ``--config-dir DIR`` adds a directory of
+your own config group options.
 
 The job functions below are the one place where heavy modules (torch, Lightning, MuJoCo,
 rerun, matplotlib) are imported: inside the function, after the command line was checked.
@@ -43,10 +44,11 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 
 from cpmp.cli.checks import CheckedJob, Command, check_command_line, check_jobs
-from cpmp.cli.compose import CONF_DIR
+from cpmp.cli.compose import CONF_DIR  # noqa: F401 (re-exported: where the configs are)
 from cpmp.cli.import_job import IMPORT_COMMAND
 from cpmp.compare.settings import CompareJob
 from cpmp.config import TaskConfig
+from cpmp.config.paths import CONF_SEARCH_PATH
 from cpmp.errors import CpmpError, CpmpFileError
 from cpmp.experiment.config import (
     experiment_job,
@@ -320,7 +322,7 @@ def run_command(name: str) -> None:
         check_jobs(COMMANDS[name], jobs)
     except CpmpError as err:
         _fail(err)
-    hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name=name)(_Task(name))()
+    hydra.main(version_base="1.3", config_path=CONF_SEARCH_PATH, config_name=name)(_Task(name))()
 
 
 def _entry_point(name: str) -> Callable[[], None]:

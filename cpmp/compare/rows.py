@@ -23,10 +23,9 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
-from hydra import compose, initialize_config_dir
+from hydra import compose, initialize_config_module
 from hydra.core.global_hydra import GlobalHydra
 
 from cpmp.compare.settings import CompareJob, CompareSettings
@@ -34,6 +33,7 @@ from cpmp.compare.worlds import World
 from cpmp.config.bc import KIND as BC
 from cpmp.config.bc import bc_options
 from cpmp.config.goal_nearest import KIND, goal_nearest_options
+from cpmp.config.paths import CONF_PACKAGE
 from cpmp.errors import ConfigError
 from cpmp.experiment.config import predictor_options
 from cpmp.experiment.settings import to_dict
@@ -44,8 +44,6 @@ NO_PREDICTOR = "none"
 
 CONFIG_NAME = "compare"
 """The comparison's top config, ``conf/compare.yaml``."""
-
-_CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 
 RowGroup = Literal["predictors", "baselines", "support_sweep"]
@@ -144,7 +142,7 @@ def group_options(group: str) -> dict[str, dict[str, Any]]:
 
     if GlobalHydra.instance().is_initialized():
         return compose_all()
-    with initialize_config_dir(config_dir=str(_CONF_DIR), version_base="1.3"):
+    with initialize_config_module(config_module=CONF_PACKAGE, version_base="1.3"):
         return compose_all()
 
 

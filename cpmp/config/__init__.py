@@ -9,6 +9,7 @@ means. The classes validate themselves when built (``__post_init__``): wrong val
 This package imports neither torch nor MuJoCo, so that a command line is checked before
 either is loaded; the classes are re-exported where they are used (:mod:`cpmp.predictors`,
 :mod:`cpmp.sequencer.sequencer`, :mod:`cpmp.predictors.training`, :mod:`cpmp.sim`).
+:mod:`cpmp.config.paths` says where ``conf/`` itself is installed.
 """
 
 from cpmp.config.bc import BCConfig, bc_options

@@ -10,3 +10,9 @@ processes, ``checkpoint_jobs`` are ``cpmp-train`` / ``cpmp-evaluate`` for your o
 
 Submodules import their heavy dependencies themselves, so ``import cpmp.experiment`` is cheap.
 """
+
+from cpmp.errors import require as _require
+
+_require("hydra", "jobs", "cpmp.experiment (the main job)")
+_require("matplotlib", "jobs", "cpmp.experiment (the main job)")
+_require("tqdm", "jobs", "cpmp.experiment (the main job)")

@@ -24,6 +24,13 @@ the mapping) a bad demonstration is left out and reported instead
 (:attr:`ImportResult.skipped`, ``<output>.skipped.json``).
 """
 
+# ruff: noqa: E402
+# The extra is checked before the imports that need it.
+from cpmp.errors import require as _require
+
+_require("rosbags", "import", "cpmp.importers (ROS 2 bags)")
+_require("pyarrow", "import", "cpmp.importers (LeRobot datasets)")
+
 from cpmp.importers.common import ImportedDemo, ImportNote, SkippedDemo
 from cpmp.importers.convert import (
     SKIPPED_SUFFIX,

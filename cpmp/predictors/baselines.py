@@ -23,7 +23,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
-from sklearn.linear_model import LogisticRegression
 
 from cpmp.config.predictors import (
     RegressionClipConfig,
@@ -31,6 +30,7 @@ from cpmp.config.predictors import (
     TimePhaseConfig,
 )
 from cpmp.config.trainer import SolverOptions
+from cpmp.errors import require
 from cpmp.predictors.base import NodeData
 from cpmp.predictors.klr import KLRPredictor
 from cpmp.predictors.newton import NewtonInfo, penalised_loss
@@ -63,6 +63,9 @@ class SklearnKLRPredictor(KLRPredictor):
             Per node scikit-learn's iterations and the max-norm of the gradient of ``klr``'s
             loss at the result.
         """
+        require("sklearn", "baselines", "the sklearn_klr predictor")
+        from sklearn.linear_model import LogisticRegression  # lazy: the [baselines] extra
+
         c = self.config
 
         def solve(i: int, k: torch.Tensor, phi: torch.Tensor) -> tuple:

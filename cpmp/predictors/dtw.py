@@ -38,12 +38,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
-from dtw import asymmetric, dtw
 from torch.nn import functional as F
 
 from cpmp.config.predictors import DTWConfig
 from cpmp.config.trainer import SolverOptions
-from cpmp.errors import ConfigError, DataError
+from cpmp.errors import ConfigError, DataError, require
 from cpmp.predictors.base import (
     START_PREFIX,
     NodeData,
@@ -410,6 +409,9 @@ class DTWPredictor(ProgressPredictor):
         ``width``-column cost matrix) ends within that segment, interpolated towards its
         neighbours (:func:`interpolate_progress`, ``steps (R,)`` as :meth:`_steps`).
         """
+        require("dtw", "baselines", "the dtw predictor")
+        from dtw import asymmetric, dtw  # lazy: the [baselines] extra
+
         local = np.full((dist.shape[0], width), np.inf)
         local[:, columns] = dist
         result = dtw(

@@ -98,6 +98,12 @@ beside the target under a temporary name and renamed onto it only by a successfu
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# The extra is checked before the imports that need it.
+from cpmp.errors import require as _require
+
+_require("rerun", "rerun", "cpmp.recordings (rerun .rrd files)")
+
 from cpmp.recordings.layout import (
     EVENT_WIDTH,
     GEOM_TYPES,

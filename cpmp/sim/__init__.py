@@ -15,6 +15,13 @@ are :class:`~cpmp.config.task.TaskConfig`; the simulator's speed benchmark is
 :mod:`cpmp.benchmarks.sim_speed`.
 """
 
+# ruff: noqa: E402
+# The extra is checked before the imports that need it.
+from cpmp.errors import require as _require
+
+_require("mujoco", "sim", "cpmp.sim (the MuJoCo world)")
+_require("pytorch_kinematics", "sim", "cpmp.sim (the MuJoCo world)")
+
 from cpmp.config.task import TaskConfig
 from cpmp.data.demonstration import mp_sequences
 from cpmp.records import BatchedPolicy, TickInfo
