@@ -9,11 +9,14 @@ with ``K (n, S)`` the node's kernel matrix, soft labels ``y ∈ [0, 1]``, sample
 in ``θ = (w, b)`` are ``Xᵀ c(p - y) + l2 w`` and ``Xᵀ diag(c p (1 - p)) X + l2 I_w`` with
 ``X = [K, 1]`` and ``p = σ(z)``. The nodes are independent problems, solved one after the other;
 each Newton step costs one ``(S+1)²`` Cholesky factorisation, and a few steps reach the optimum
-to float64 precision.
+to float64 precision. The loss, gradient and Hessian are sums over samples:
+:func:`newton_solve_blocks` accumulates them over blocks of kernel rows, so that memory does
+not grow with the samples (:func:`newton_solve` is its one-block case).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import torch
@@ -92,6 +95,66 @@ def newton_direction(hessian: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
     return -torch.linalg.lstsq(hessian, grad[:, None], driver="gelsd").solution[:, 0]
 
 
+KernelRows = Callable[[int, int], torch.Tensor]
+"""``rows(start, stop)``: the kernel ``(stop - start, S)`` of samples ``start:stop`` against the
+supports (any float dtype and device; it is detached and taken to float64)."""
+
+
+def block_bounds(n: int, rows: int | None) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``range(n)`` in blocks of at most ``rows`` samples.
+
+    Args:
+        n: the number of samples (>= 0).
+        rows: samples per block at most (``None``: one block).
+
+    Returns:
+        The blocks in order; one block ``(0, n)`` when ``rows`` is ``None`` or ``>= n`` (also
+        for ``n == 0``).
+    """
+    if rows is None or rows >= n:
+        return [(0, n)]
+    step = max(int(rows), 1)
+    return [(a, min(a + step, n)) for a in range(0, n, step)]
+
+
+class _Design:
+    """The design matrix ``X = [K, 1]`` (``K`` alone without a bias) in blocks of rows.
+
+    With one block the block is built once and kept (it *is* the whole kernel, as a plain
+    solve holds it); with several, each pass rebuilds every block from ``rows``, so at most
+    one block of ``(rows, S + 1)`` entries (and a few temporaries of that size) is alive.
+    """
+
+    def __init__(
+        self,
+        kernel_rows: KernelRows,
+        bounds: list[tuple[int, int]],
+        fit_bias: bool,
+        device: torch.device,
+    ) -> None:
+        self.kernel_rows = kernel_rows
+        self.bounds = bounds
+        self.fit_bias = fit_bias
+        self.f64 = {"dtype": torch.float64, "device": device}
+        self._kept: torch.Tensor | None = None
+
+    def _build(self, start: int, stop: int) -> torch.Tensor:
+        k = self.kernel_rows(start, stop).detach().to(**self.f64)
+        if not self.fit_bias:
+            return k
+        return torch.cat([k, torch.ones(stop - start, 1, **self.f64)], 1)
+
+    def blocks(self) -> Iterator[tuple[slice, torch.Tensor]]:
+        """Each block's rows ``slice(start, stop)`` and its design rows ``(stop - start, S')``."""
+        if len(self.bounds) == 1:
+            if self._kept is None:
+                self._kept = self._build(*self.bounds[0])
+            yield slice(*self.bounds[0]), self._kept
+            return
+        for start, stop in self.bounds:
+            yield slice(start, stop), self._build(start, stop)
+
+
 def newton_solve(
     kernel: torch.Tensor,
     target: torch.Tensor,
@@ -119,40 +182,117 @@ def newton_solve(
     Returns:
         ``(w (S,), b, info)``, ``w`` in float64.
     """
-    k = kernel.detach().to(torch.float64)
-    n, s = k.shape
-    f64 = {"dtype": torch.float64, "device": k.device}
+    n, s = kernel.shape
+    return newton_solve_blocks(
+        lambda start, stop: kernel[start:stop],
+        n,
+        s,
+        target,
+        l2,
+        weight=weight,
+        w0=w0,
+        b0=b0,
+        fit_bias=fit_bias,
+        tol=tol,
+        max_iter=max_iter,
+        device=kernel.device,
+    )
+
+
+def newton_solve_blocks(
+    kernel_rows: KernelRows,
+    n: int,
+    n_support: int,
+    target: torch.Tensor,
+    l2: float,
+    weight: torch.Tensor | None = None,
+    w0: torch.Tensor | None = None,
+    b0: float = 0.0,
+    fit_bias: bool = True,
+    tol: float = NEWTON_TOL,
+    max_iter: int = NEWTON_MAX_ITER,
+    block_rows: int | None = None,
+    device: torch.device | str | None = None,
+) -> tuple[torch.Tensor, float, NewtonInfo]:
+    """:func:`newton_solve` with the kernel streamed in blocks of rows (float64).
+
+    The loss, gradient and Hessian are sums over samples, so each is accumulated block by
+    block: ``g = Σ_b X_bᵀ c_b (p_b - y_b) + reg θ``, ``H = Σ_b X_bᵀ diag(c_b p_b (1 - p_b)) X_b
+    + diag(reg)``. Memory is ``O(block_rows · S + S²)`` whatever ``n`` is; each Newton step
+    costs one pass over the blocks (the full step's loss, gradient and Hessian together), a
+    halving of the step one more. With one block (``block_rows`` ``None`` or ``>= n``) the
+    block is built once and every number is the one a solve on the whole kernel gives, to
+    the bit.
+
+    Args:
+        kernel_rows: ``rows(start, stop)`` -> the kernel ``(stop - start, n_support)`` of
+            those samples (see :data:`KernelRows`).
+        n: the number of samples.
+        n_support: the kernel's columns ``S``.
+        target: ``(n,)`` soft labels in [0, 1].
+        l2: weight of ``½ l2 ||w||²`` (the bias is not penalised).
+        weight: ``(n,)`` per-sample weights ``c``; ``None``: ``1/n`` each (mean BCE).
+        w0: ``(S,)`` starting weights (``None``: zeros).
+        b0: starting bias, kept fixed when ``fit_bias`` is off.
+        fit_bias: optimise the bias too.
+        tol: stop when ``max|g| <= tol`` or the Newton decrement ``λ <= tol``.
+        max_iter: Newton steps at most.
+        block_rows: samples per block at most (``None``: one block).
+        device: where the solve runs (``None``: ``target``'s device).
+
+    Returns:
+        ``(w (S,), b, info)``, ``w`` in float64 on ``device``.
+    """
+    on = torch.device(device) if device is not None else target.device
+    f64 = {"dtype": torch.float64, "device": on}
+    s = n_support
     y = target.detach().to(**f64)
     c = torch.full((n,), 1.0 / max(n, 1), **f64) if weight is None else weight
     c = c.detach().to(**f64)
-    x = torch.cat([k, torch.ones(n, 1, **f64)], 1) if fit_bias else k
-    reg = torch.full((x.shape[1],), float(l2), **f64)
+    design = _Design(kernel_rows, block_bounds(n, block_rows), fit_bias, on)
+    width = s + 1 if fit_bias else s
+    reg = torch.full((width,), float(l2), **f64)
     if fit_bias:
         reg[-1] = 0.0
-    theta = torch.zeros(x.shape[1], **f64)
+    theta = torch.zeros(width, **f64)
     if w0 is not None:
         theta[:s] = w0.detach().to(**f64)
     offset = 0.0 if fit_bias else float(b0)
     if fit_bias:
         theta[-1] = float(b0)
 
-    def loss_at(t: torch.Tensor) -> float:
-        z = x @ t + offset
-        return float((c * bce_terms(z, y)).sum() + 0.5 * (reg * t * t).sum())
+    def evaluate(
+        t: torch.Tensor, derivatives: bool
+    ) -> tuple[float, torch.Tensor | None, torch.Tensor | None]:
+        """The penalised loss at ``t`` and (``derivatives``) its gradient and Hessian, one pass."""
+        total = torch.zeros((), **f64)
+        g: torch.Tensor | None = None
+        h: torch.Tensor | None = None
+        for rows, x in design.blocks():
+            z = x @ t + offset
+            total = total + (c[rows] * bce_terms(z, y[rows])).sum()
+            if derivatives:
+                p = torch.sigmoid(z)
+                g_part = x.T @ (c[rows] * (p - y[rows]))
+                h_part = (x.T * (c[rows] * p * torch.sigmoid(-z))) @ x
+                g = g_part if g is None else g + g_part
+                h = h_part if h is None else h + h_part
+        loss = float(total + 0.5 * (reg * t * t).sum())
+        if not derivatives:
+            return loss, None, None
+        g = (torch.zeros(width, **f64) if g is None else g) + reg * t
+        h = (torch.zeros(width, width, **f64) if h is None else h) + torch.diag(reg)
+        return loss, g, h
 
-    loss = loss_at(theta)
+    loss, grad, hessian = evaluate(theta, True)
     grad_max, decrement, converged, iterations = float("inf"), float("nan"), False, 0
     for it in range(max_iter + 1):
-        z = x @ theta + offset
-        p = torch.sigmoid(z)
-        grad = x.T @ (c * (p - y)) + reg * theta
+        assert grad is not None and hessian is not None
         grad_max = float(grad.abs().max()) if grad.numel() else 0.0
         decrement = float("nan")
         if grad_max <= tol:
             converged = True
             break
-        curvature = c * p * torch.sigmoid(-z)
-        hessian = (x.T * curvature) @ x + torch.diag(reg)
         direction = newton_direction(hessian, grad)
         slope = float(grad @ direction)
         decrement = max(-slope, 0.0) ** 0.5
@@ -164,13 +304,18 @@ def newton_solve(
         step, slack = 1.0, 16.0 * _EPS * abs(loss)
         for _ in range(_MAX_HALVINGS):
             candidate = theta + step * direction
-            new_loss = loss_at(candidate)
+            # the full step is nearly always taken: its pass brings the next step's derivatives
+            new_loss, new_grad, new_hessian = evaluate(candidate, step == 1.0)
             if new_loss <= loss + _ARMIJO * step * slope + slack:
                 break
             step *= 0.5
         else:
             break
-        theta, loss, iterations = candidate, new_loss, it + 1
+        if new_grad is None:  # a shortened step: its derivatives in one more pass
+            _, new_grad, new_hessian = evaluate(candidate, True)
+        theta, loss, grad, hessian, iterations = (
+            candidate, new_loss, new_grad, new_hessian, it + 1,
+        )  # fmt: skip
     w = theta[:s].clone()
     b = float(theta[-1]) if fit_bias else float(b0)
     info = NewtonInfo(iterations, grad_max, decrement, loss, converged)

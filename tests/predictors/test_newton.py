@@ -1,12 +1,22 @@
 """Newton (IRLS) solver of the convex KLR fit: same optimum as LBFGS, zero gradient, hard
-nodes, trainer options."""
+nodes, trainer options; the kernel streamed in blocks of samples."""
+
+import itertools
 
 import numpy as np
 import pytest
 import torch
 
 from cpmp.errors import ConfigError
-from cpmp.predictors.newton import newton_fit, newton_solve, penalised_loss
+from cpmp.predictors.newton import (
+    bce_terms,
+    block_bounds,
+    newton_direction,
+    newton_fit,
+    newton_solve,
+    newton_solve_blocks,
+    penalised_loss,
+)
 from cpmp.predictors.training import TrainerConfig
 from cpmp.sequencer.fit_data import node_training_data
 from cpmp.sequencer.sequencer import ConcurrentSequencer
@@ -180,3 +190,95 @@ def test_newton_iteration_cap_is_reported(train_demos):
     assert seq.fit_summary["newton_iterations"] == 1
     assert not seq.fit_summary["newton_converged"]
     assert seq.fit_summary["newton_grad_max"] > 1e-10
+
+
+def _problem(n=300, s=25, seed=3):
+    """A random RBF problem ``(kernel (n, s), soft labels (n,))`` in float64."""
+    gen = torch.Generator().manual_seed(seed)
+    x = torch.rand(n, 2, generator=gen, dtype=torch.float64)
+    support = torch.rand(s, 2, generator=gen, dtype=torch.float64)
+    target = torch.sigmoid(3.0 * (x[:, 0] - x[:, 1]) + 0.3 * torch.randn(n, generator=gen))
+    return _rbf(x, support), target.double()
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 64, 65])
+def test_block_bounds_cover_the_samples_in_order(n):
+    for rows in (None, 1, 8, 64, 1000):
+        bounds = block_bounds(n, rows)
+        assert bounds[0][0] == 0 and bounds[-1][1] == n
+        assert all(a[1] == b[0] for a, b in itertools.pairwise(bounds))
+        assert all(0 < stop - start <= (rows or n) for start, stop in bounds) or n == 0
+
+
+def _reference_solve(kernel, target, l2, weight=None, b0=0.0, fit_bias=True, tol=1e-10):
+    """The solver as it was before the kernel was streamed: one kernel, a pass per use."""
+    n, s = kernel.shape
+    y, c = target, torch.full((n,), 1.0 / n, dtype=torch.float64) if weight is None else weight
+    x = torch.cat([kernel, torch.ones(n, 1, dtype=torch.float64)], 1) if fit_bias else kernel
+    reg = torch.full((x.shape[1],), float(l2), dtype=torch.float64)
+    if fit_bias:
+        reg[-1] = 0.0
+    theta = torch.zeros(x.shape[1], dtype=torch.float64)
+    offset = 0.0 if fit_bias else float(b0)
+    if fit_bias:
+        theta[-1] = float(b0)
+
+    def loss_at(t):
+        z = x @ t + offset
+        return float((c * bce_terms(z, y)).sum() + 0.5 * (reg * t * t).sum())
+
+    loss = loss_at(theta)
+    for _ in range(101):
+        z = x @ theta + offset
+        p = torch.sigmoid(z)
+        grad = x.T @ (c * (p - y)) + reg * theta
+        if float(grad.abs().max()) <= tol:
+            break
+        hessian = (x.T * (c * p * torch.sigmoid(-z))) @ x + torch.diag(reg)
+        direction = newton_direction(hessian, grad)
+        slope = float(grad @ direction)
+        if max(-slope, 0.0) ** 0.5 <= tol:
+            break
+        step, slack = 1.0, 16.0 * torch.finfo(torch.float64).eps * abs(loss)
+        while (new_loss := loss_at(theta + step * direction)) > loss + 1e-4 * step * slope + slack:
+            step *= 0.5
+        theta, loss = theta + step * direction, new_loss
+    return theta[:s], (float(theta[-1]) if fit_bias else float(b0)), loss
+
+
+@pytest.mark.parametrize("fit_bias", [True, False])
+def test_one_block_gives_the_unstreamed_solvers_numbers_to_the_bit(fit_bias):
+    kernel, target = _problem()
+    w_ref, b_ref, loss_ref = _reference_solve(kernel, target, 1e-3, b0=0.2, fit_bias=fit_bias)
+    w, b, info = newton_solve(kernel, target, 1e-3, b0=0.2, fit_bias=fit_bias)
+    w1, b1, info1 = newton_solve_blocks(
+        lambda a, c: kernel[a:c], *kernel.shape, target, 1e-3, b0=0.2, fit_bias=fit_bias,
+        block_rows=len(target),
+    )  # fmt: skip
+    assert torch.equal(w, w_ref) and b == b_ref and info.loss == loss_ref
+    assert torch.equal(w1, w_ref) and b1 == b_ref and info1.loss == loss_ref
+    assert info1.iterations == info.iterations and info1.grad_max == info.grad_max
+
+
+@pytest.mark.parametrize("fit_bias", [True, False])
+@pytest.mark.parametrize("rows", [1, 7, 64, 299])
+def test_blocks_reach_the_whole_kernel_optimum(rows, fit_bias):
+    kernel, target = _problem()
+    weight = torch.linspace(0.5, 1.5, len(target), dtype=torch.float64) / len(target)
+    *_, info = newton_solve(kernel, target, 1e-3, weight=weight, b0=0.2, fit_bias=fit_bias)
+    seen = []
+
+    def rows_of(a, c):
+        seen.append(c - a)
+        return kernel[a:c].float().double()  # any dtype: taken to float64
+
+    wb, bb, infob = newton_solve_blocks(
+        rows_of, *kernel.shape, target, 1e-3, weight=weight, b0=0.2, fit_bias=fit_bias,
+        block_rows=rows,
+    )  # fmt: skip
+    assert max(seen) <= rows  # no evaluation is larger than a block
+    kernel32 = kernel.float().double()
+    w32, b32, _ = newton_solve(kernel32, target, 1e-3, weight=weight, b0=0.2, fit_bias=fit_bias)
+    # the same problem summed in another order: equal to rounding (1e-10 is 10^5 ulps of 1)
+    assert torch.allclose(wb, w32, atol=1e-10, rtol=0) and abs(bb - b32) < 1e-10
+    assert infob.converged and infob.iterations == info.iterations

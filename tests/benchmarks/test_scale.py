@@ -1,0 +1,105 @@
+"""The scale benchmark (cpmp.benchmarks.scale, scripts/bench_scale.py): the quick run writes the
+documented JSON from a process per size, its numbers other than times and memory are
+reproducible, the exponents are least-squares slopes, the targets read the right sizes, and bad
+options fail with exit status 2."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from cpmp.benchmarks.scale import (
+    TARGETS,
+    ScaleSettings,
+    growth_exponent,
+    main,
+    measure_size,
+    summarise,
+)
+from cpmp.errors import ConfigError
+
+MEASURED = ("fit_s", "predictor_s", "peak_rss_gb", "base_rss_gb", "threads")
+
+
+def test_quick_run_writes_the_documented_json(tmp_path, capsys):
+    out = tmp_path / "scale.json"
+    assert main(["--quick", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["targets"] == TARGETS
+    assert [(r["world"], r["D"]) for r in result["rows"]] == [("two_point", 4), ("two_point", 8)]
+    for row in result["rows"]:
+        assert "error" not in row
+        assert set(row) >= {"samples", "supports", "mae", "complete", *MEASURED}
+        assert 0 < row["predictor_s"] < row["fit_s"]
+        assert 0 < row["base_rss_gb"] <= row["peak_rss_gb"]
+        assert 0 <= row["complete"] <= row["episodes"] == 2 and 0 < row["mae"] < 1
+    small, large = result["rows"]
+    assert large["samples"] > small["samples"] and large["supports"] > small["supports"]
+    exponents = result["summary"]["two_point"]["exponents"]
+    samples = [small["samples"], large["samples"]]
+    assert exponents["fit"] == growth_exponent(samples, [small["fit_s"], large["fit_s"]])
+    assert exponents["fit_last"] == exponents["fit"]  # two sizes: the same two points
+    assert result["summary"]["two_point"]["targets"] == {}  # no 768 in a quick run
+    table = capsys.readouterr().out
+    assert "| two_point | 4 |" in table and str(out) in table
+    # a fresh process per size: the same settings give the same numbers (times aside)
+    again = measure_size("two_point", 4, ScaleSettings.quick())
+    assert {k: v for k, v in again.items() if k not in MEASURED} == {
+        k: v for k, v in small.items() if k not in MEASURED
+    }
+
+
+def test_growth_exponent_is_the_log_log_slope():
+    assert growth_exponent([10, 100, 1000], [2.0, 20.0, 200.0]) == pytest.approx(1.0)
+    assert growth_exponent([10, 100, 1000], [1.0, 100.0, 1e4]) == pytest.approx(2.0)
+    assert growth_exponent([10, 40], [3.0, 3.0]) == pytest.approx(0.0)
+    assert growth_exponent([10], [1.0]) is None
+
+
+def _row(d, samples, fit_s, rss, supports, mae, complete):
+    return {
+        "world": "w", "D": d, "samples": samples, "fit_s": fit_s, "peak_rss_gb": rss,
+        "supports": supports, "mae": mae, "complete": complete,
+    }  # fmt: skip
+
+
+def test_targets_read_768_against_48_and_192():
+    rows = [
+        _row(48, 1000, 2.0, 0.5, 100, 0.03, 18),
+        _row(192, 4000, 8.0, 0.6, 150, 0.02, 20),
+        _row(768, 16000, 40.0, 2.5, 250, 0.02, 19),
+        {"world": "w", "D": 1536, "error": "ran past the timeout of 1 s"},
+    ]
+    summary = summarise(rows)["w"]
+    targets = summary["targets"]
+    assert targets["fit_s"] == {"value": 40.0, "met": True}
+    assert targets["peak_rss_gb"] == {"value": 2.5, "met": False}
+    assert targets["supports_ratio"] == {"value": 2.5, "met": False}
+    assert targets["fit_exponent"]["value"] == pytest.approx(math.log(5) / math.log(4))
+    assert targets["fit_exponent"]["met"] is False
+    assert targets["mae"] == {"value": [0.02, 0.02], "met": True}
+    assert targets["complete"] == {"value": [20, 19], "met": False}
+    assert summary["exponents"]["fit_last"] == targets["fit_exponent"]["value"]
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"worlds": ("nowhere",)},
+        {"sizes": (48, 12)},
+        {"sizes": (0,)},
+        {"episodes": 0},
+        {"pythonpath": "/nonexistent"},
+    ],
+)
+def test_bad_settings_are_config_errors(options):
+    with pytest.raises(ConfigError):
+        ScaleSettings(**options)
+
+
+def test_bad_options_exit_with_status_2(tmp_path, capsys):
+    assert main(["--sizes", "12", "0", "--out", str(tmp_path / "x.json")]) == 2
+    assert "bench_scale: error: sizes" in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
