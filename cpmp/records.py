@@ -95,10 +95,11 @@ class StartOption(NamedTuple):
     """One start the start rule weighed.
 
     Attributes:
-        combination: variable -> initial MP (every variable for the ``joint`` rule, one for
-            ``independent``).
-        score: ``Σ log(1 - φ)`` of its MPs' start heads: the log-likelihood that each MP is at
-            its beginning (higher is more likely; 0 is certain).
+        combination: variable -> initial MP (every variable for the ``learned`` and ``joint``
+            rules, one for ``independent``).
+        score: ``learned``: the log-probability of this demonstrated start at the first
+            state; otherwise ``Σ log(1 - φ)`` of its MPs' start heads: the log-likelihood that
+            each MP is at its beginning (higher is more likely; 0 is certain).
     """
 
     combination: dict[str, str]
@@ -111,10 +112,12 @@ class StartDecision:
 
     Attributes:
         t: the time [s] of the reset.
-        rule: ``joint`` (the best of the demonstrated initial combinations) or ``independent``
-            (each variable's best initial MP on its own).
+        rule: ``learned`` (the demonstrated combination of initial MPs the learned start
+            choice finds most probable), ``joint`` (the demonstrated combination of highest
+            entry probability) or ``independent`` (each variable's best initial MP on its own).
         options: the starts weighed, in the order weighed (``joint``: each demonstrated
-            combination; ``independent``: each variable's initial MPs, one variable each).
+            combination (``learned``, ``joint``); ``independent``: each variable's initial MPs,
+            one variable each).
         chosen: variable -> the initial MP taken.
     """
 

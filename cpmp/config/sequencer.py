@@ -15,7 +15,7 @@ NONFINITE_POLICIES = ("hold", "raise")
 """Values of :attr:`SequencerConfig.nonfinite`."""
 START_KERNELS = ("shared", "isotropic")
 """Values of :attr:`SequencerConfig.start_kernel`."""
-START_RULES = ("independent", "joint")
+START_RULES = ("independent", "joint", "learned")
 """Values of :attr:`SequencerConfig.start_rule`."""
 BRANCHES = ("none", "learned")
 """Values of :attr:`SequencerConfig.branch`."""
@@ -59,8 +59,9 @@ class SequencerConfig:
         recovery_threshold: the relaxed threshold of a recovery transition.
         min_exit: a transition also needs the current node's exit probability ``φ`` above this
             (0 = off, the paper's rule).
-        start_kernel: ``shared`` (paper): the initial node is chosen with the nodes' progress
-            predictors. ``isotropic``: with extra heads for the initial nodes, fitted in the same
+        start_kernel: the φ the ``independent`` and ``joint`` start rules read (the ``learned``
+            rule reads none). ``shared`` (paper, and the default): the nodes' progress
+            predictors. ``isotropic``: extra heads for the initial nodes, fitted in the same
             run on the same data but always with the isotropic kernel. Meant for
             ``feature_weighting=path``, which de-weights features that stay constant along an
             activation, such as box size; those are exactly what decides the strategy.
@@ -68,7 +69,13 @@ class SequencerConfig:
             highest entry probability. ``joint``: choose among the combinations of initial MPs
             seen together in a demonstration the one with the highest summed log entry
             probability, so graphs cannot start in a mixture of strategies that was never
-            demonstrated (the coupling the paper's discussion proposes).
+            demonstrated (the coupling the paper's discussion proposes). ``learned`` (cpmp's
+            default): the demonstrated combination that a multinomial logistic regression on
+            the demonstrations' first states gives the highest probability, on the features
+            weighted by how well they separate the demonstrated starts, so features that vary
+            at the start without deciding it (a home jitter, a distractor) cannot mislead it
+            (:class:`cpmp.sequencer.branches.StartChoice`; the branch choice of a virtual
+            root). A sequencer built without it (not by a fit) uses ``joint``.
         nonfinite: what a tick with non-finite features or φ does: ``hold`` (keep every MP,
             note it once per run of such ticks) or ``raise`` (:class:`~cpmp.errors.DataError`).
             A non-finite φ never fires.
@@ -81,6 +88,9 @@ class SequencerConfig:
             states fire (a multinomial logistic regression on the features at the demonstrated
             switches out of that node; :mod:`cpmp.sequencer.branches`); ``none`` (paper): the
             most probable ``p`` fires.
+            ``learned`` also scales the entry probability of the demonstrated switches whose
+            target φ reads "done" where the demonstrator entered it (a node re-entered in a
+            loop: :func:`cpmp.sequencer.branches.entry_scales`).
         joint: with ``coupling=context``, a switch always demonstrated in the same sample as
             another variable's switch (a bowl served as the last pour ends) waits until that
             variable has switched or its rule decides to switch in the same tick, and a
@@ -98,8 +108,8 @@ class SequencerConfig:
     rest_speed: float = 0.01
     recovery_threshold: float = 0.2
     min_exit: float = 0.0
-    start_kernel: str = "isotropic"
-    start_rule: str = "joint"
+    start_kernel: str = "shared"
+    start_rule: str = "learned"
     nonfinite: str = "hold"
     stale_time: float = 0.25
     branch: str = "learned"

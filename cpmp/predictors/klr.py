@@ -24,7 +24,14 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from cpmp.config.predictors import KLRConfig, SparseKLRConfig
+from cpmp.config.predictors import (
+    CHUNK_SIZE,
+    MERGE_SIMILARITY,
+    POOL_SIZE,
+    SUPPORT_CAP,
+    KLRConfig,
+    SparseKLRConfig,
+)
 from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.base import (
@@ -52,31 +59,10 @@ START_REGION = 0.25
 ``klr_sparse`` distils it (``start_share``)."""
 START_SAMPLES = 512
 """Start-region samples per variable, at most, on which a start head is distilled."""
-CHUNK_SIZE = 2**22
-"""Default kernel block size (the bank's ``chunk_size``): kernel entries (samples x supports)
-evaluated at a time by the Newton solve, the training loss and the logits of many samples.
-4,194,304 float64 entries are 32 MiB; a block and its few temporaries of the same size bound
-the fit's kernel memory, whatever the number of samples. A node whose whole kernel fits in one
-block is solved exactly as a kernel held whole is (the same numbers, to the bit)."""
-SUPPORT_CAP = 512
-"""Default ``support_cap``: a node whose fixed rule places more support points than this has
-them pooled (:func:`pool_supports`); a node at or below it keeps the rule's points. The rule
-places about 2 per unit of path length per activation (4-20 per activation on the synthetic
-worlds), so only fits on tens to hundreds of demonstrations reach it."""
 POOL_CANDIDATES = 20
 """Pooling places every point of the rule first: a fit whose rule places more than this many
 times ``max_total_support`` points stops with a :class:`~cpmp.errors.ConfigError` (1,000,000
 candidates by default: 8 MB per feature)."""
-POOL_SIZE = 256
-"""Default ``pool_size``: the most supports a pooled node keeps (see :func:`pool_supports`)."""
-MERGE_SIMILARITY = 0.995
-"""Default ``merge_similarity``: a pooled node stops adding supports once every one of its
-rule's points has a chosen support of kernel value at least this (with γ = 4 and unit feature
-weights: closer than 0.035 in scaled features). Measured by merging alone (no ``pool_size``)
-on two_point, seed 0, 768 demonstrations (20,352 rule points), 20 held-out demonstrations:
-0.8 / 0.95 / 0.99 / 0.995 / 0.999 kept 60 / 116 / 369 / 717 / 2,794 supports at held-out
-progress MAE 0.030 / 0.028 / 0.026 / 0.025 / 0.024 (the rule's 5,088 supports of 192
-demonstrations: 0.023); 0.999 took four times as long to fit as 0.995."""
 
 WARM_SHARE = 8
 """A node of several kernel blocks first solves every k-th of its samples, a ``1/WARM_SHARE``

@@ -15,6 +15,13 @@ those demonstrated in the current context) fire; the others are not candidates a
 Nodes with one successor, or whose demonstrations always went the same way, have no choice and
 nothing changes for them.
 
+**The start** is the same choice out of a virtual root node (:class:`StartChoice`, the default
+``start_rule="learned"``): every demonstration's first state is one example, labelled with its
+combination of initial MPs, and the most probable demonstrated combination starts the episode.
+Features that never separate the demonstrated starts (an arm's home jitter, a distractor, a
+context quantity that decides something later) weigh about nothing (:func:`separability`), so
+only what told the demonstrated starts apart decides.
+
 **Staying** is a choice too. While a cycle repeats, the variable that waits across it (the bowl
 held out in ``hold``) sees, between two repetitions, a state much like the one in which it moved
 on after the last. Every switch of another variable is a moment the demonstrator decided
@@ -31,8 +38,8 @@ coupling alone (:meth:`BranchChoices.learn` without stays), it has the branching
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -46,6 +53,61 @@ MIN_SPREAD = 0.01
 L2 = 1e-4
 """The L2 penalty on the weights, per example (features in training ranges)."""
 _NEWTON_STEPS = 50
+MIN_ENTRY = 0.05
+"""The least demonstrated entry :func:`entry_scales` divides by (a factor of at most 20)."""
+
+
+class LinearChoice(NamedTuple):
+    """A multinomial logistic regression on separability-weighted features (:func:`learn_choice`).
+
+    Attributes:
+        center: ``(d,)`` mean of the examples' weighted, scaled features.
+        scale: ``(d,)`` multiplier to weighted training-range units (0 for constant features
+            and for features that do not separate the classes).
+        weights: ``(K, d)`` per class, on centred weighted features.
+        bias: ``(K,)`` per class.
+    """
+
+    center: np.ndarray
+    scale: np.ndarray
+    weights: np.ndarray
+    bias: np.ndarray
+
+    def probabilities(self, x: np.ndarray) -> np.ndarray:
+        """The probability of each class at features ``x (..., d)``: ``(..., K)``, summing to 1."""
+        z = (np.asarray(x, dtype=np.float64) * self.scale - self.center) @ self.weights.T
+        z = z + self.bias
+        z = z - z.max(axis=-1, keepdims=True)
+        e = np.exp(z)
+        return e / e.sum(axis=-1, keepdims=True)
+
+    def to_dict(self) -> dict[str, list[Any]]:
+        """JSON/checkpoint-friendly form."""
+        return {k: np.asarray(v).tolist() for k, v in self._asdict().items()}
+
+    @classmethod
+    def from_dict(cls, row: Mapping[str, Any]) -> LinearChoice:
+        """Inverse of :meth:`to_dict`."""
+        return cls(*(np.asarray(row[k], dtype=np.float64) for k in cls._fields))
+
+
+def learn_choice(
+    states: np.ndarray, y: np.ndarray, k: int, feature_range: np.ndarray
+) -> LinearChoice:
+    """Fit the choice among ``k`` classes from examples ``states (n, d)`` of classes ``y (n,)``.
+
+    Features are put in units of their training range ``feature_range (d,)`` (range 0: left
+    out), weighted by how well each separates the classes (:func:`separability`), and a
+    multinomial logistic regression (:func:`fit_softmax`) is fitted on them.
+    """
+    r = np.asarray(feature_range, dtype=np.float64)
+    scale = np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
+    z = np.asarray(states, dtype=np.float64) * scale
+    weight = separability(z, y, k)
+    z = z * weight
+    center = z.mean(axis=0)
+    weights, bias = fit_softmax(z - center, y, k)
+    return LinearChoice(center, scale * weight, weights, bias)
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,20 +119,14 @@ class BranchChoice:
         source: the branching MP.
         targets: the demonstrated successors (sorted).
         counts: how many demonstrated switches went to each target.
-        center: ``(d,)`` mean of the examples' scaled features.
-        scale: ``(d,)`` multiplier to training-range units (0 for constant features).
-        weights: ``(K, d)`` per target, on centred scaled features.
-        bias: ``(K,)`` per target.
+        model: the fitted choice over :attr:`targets`.
     """
 
     variable: str
     source: str
     targets: list[str]
     counts: list[int]
-    center: np.ndarray
-    scale: np.ndarray
-    weights: np.ndarray
-    bias: np.ndarray
+    model: LinearChoice
 
     def probabilities(self, x: np.ndarray) -> np.ndarray:
         """The probability of each target in :attr:`targets` at features ``x (..., d)``.
@@ -78,11 +134,7 @@ class BranchChoice:
         Returns:
             ``(..., K)``, summing to 1 over the last axis.
         """
-        z = (np.asarray(x, dtype=np.float64) * self.scale - self.center) @ self.weights.T
-        z = z + self.bias
-        z = z - z.max(axis=-1, keepdims=True)
-        e = np.exp(z)
-        return e / e.sum(axis=-1, keepdims=True)
+        return self.model.probabilities(x)
 
     def choose(self, x: np.ndarray, among: Sequence[str]) -> str | None:
         """The most probable of ``among`` and :data:`STAY` (if learned) at ``x (d,)``.
@@ -100,17 +152,93 @@ class BranchChoice:
 
     def describe(self, feature_names: Sequence[str] | None = None, top: int = 3) -> str:
         """One line: the examples per target and the features that weigh most in the choice."""
-        spread = np.ptp(self.weights, axis=0)
-        order = np.argsort(-spread, kind="stable")[:top]
-        names = [
-            feature_names[j] if feature_names is not None else f"x[{j}]"
-            for j in order
-            if spread[j] > 0
-        ]
         examples = ", ".join(f"{s} x{n}" for s, n in zip(self.targets, self.counts, strict=True))
+        names = _weighs_most(self.model, feature_names, top)
         return (
             f"  {self.source} -> {' | '.join(self.targets)} chosen from the state "
-            f"({examples} demonstrated; weighs most: {', '.join(names) or '-'})"
+            f"({examples} demonstrated; weighs most: {names})"
+        )
+
+
+def _weighs_most(model: LinearChoice, feature_names: Sequence[str] | None, top: int) -> str:
+    """The ``top`` features whose weights differ most between the classes, comma-separated."""
+    spread = np.ptp(model.weights, axis=0)
+    order = np.argsort(-spread, kind="stable")[:top]
+    names = [
+        feature_names[j] if feature_names is not None else f"x[{j}]" for j in order if spread[j] > 0
+    ]
+    return ", ".join(names) or "-"
+
+
+@dataclass(frozen=True, eq=False)
+class StartChoice:
+    """The learned choice among the demonstrated combinations of initial MPs (the start).
+
+    Attributes:
+        combinations: each demonstrated combination, variable -> initial MP (sorted).
+        counts: how many demonstrations started with each.
+        model: the fitted choice over :attr:`combinations` (``None``: one combination only).
+    """
+
+    combinations: list[dict[str, str]]
+    counts: list[int]
+    model: LinearChoice | None
+
+    @classmethod
+    def learn(
+        cls, demos: Sequence[Demonstration], variables: Sequence[str], feature_range: np.ndarray
+    ) -> StartChoice:
+        """Learn the start from each demonstration's first state and initial MPs.
+
+        Args:
+            demos: the fit's demonstrations (at least one).
+            variables: the control variables.
+            feature_range: ``(d,)`` each feature's range in the training data.
+        """
+        keys = [tuple(str(d.labels[v][0]) for v in variables) for d in demos]
+        classes = sorted(set(keys))
+        counts = [keys.count(c) for c in classes]
+        combinations = [dict(zip(variables, c, strict=True)) for c in classes]
+        if len(classes) < 2:
+            return cls(combinations, counts, None)
+        y = np.array([classes.index(c) for c in keys])
+        states = np.stack([np.asarray(d.features[0], dtype=np.float64) for d in demos])
+        return cls(combinations, counts, learn_choice(states, y, len(classes), feature_range))
+
+    def probabilities(self, x: np.ndarray) -> np.ndarray:
+        """The probability of each of :attr:`combinations` at the first features ``x (..., d)``."""
+        if self.model is None:
+            return np.ones((*np.shape(x)[:-1], 1))
+        return self.model.probabilities(x)
+
+    def describe(self, feature_names: Sequence[str] | None = None, top: int = 3) -> str:
+        """One line: the demonstrated starts and the features that weigh most in the choice."""
+        starts = "; ".join(
+            f"{', '.join(f'{v}={mp}' for v, mp in sorted(c.items()))} x{n}"
+            for c, n in zip(self.combinations, self.counts, strict=True)
+        )
+        if self.model is None:
+            return f"start: {starts} (the one demonstrated start)"
+        return f"start chosen from the first state: {starts} (weighs most: " + (
+            f"{_weighs_most(self.model, feature_names, top)})"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON/checkpoint-friendly form."""
+        return {
+            "combinations": [dict(c) for c in self.combinations],
+            "counts": list(self.counts),
+            "model": None if self.model is None else self.model.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, row: Mapping[str, Any]) -> StartChoice:
+        """Inverse of :meth:`to_dict`."""
+        model = row.get("model")
+        return cls(
+            [{str(v): str(mp) for v, mp in c.items()} for c in row["combinations"]],
+            [int(n) for n in row["counts"]],
+            None if model is None else LinearChoice.from_dict(model),
         )
 
 
@@ -187,9 +315,16 @@ class BranchChoices:
 
     Attributes:
         choices: ``(variable, source)`` -> its :class:`BranchChoice`.
+        start: the learned start (``None``: not learned, e.g. a checkpoint written before it).
+        entry_scale: ``(variable, source, target)`` -> the factor on the entry probability
+            ``1 - φ_target`` of that switch, for the switches whose demonstrated entries the
+            progress predictor does not see as beginnings (a node re-entered in a loop starts
+            where its earlier activations ended; see :func:`entry_scales`); 1 for the others.
     """
 
     choices: dict[tuple[str, str], BranchChoice]
+    start: StartChoice | None = None
+    entry_scale: dict[tuple[str, str, str], float] = field(default_factory=dict)
 
     @classmethod
     def learn(
@@ -197,6 +332,8 @@ class BranchChoices:
         coupling: Coupling,
         feature_range: np.ndarray,
         stays: Mapping[tuple[str, str], Sequence[np.ndarray]] | None = None,
+        start: StartChoice | None = None,
+        entry_scale: Mapping[tuple[str, str, str], float] | None = None,
     ) -> BranchChoices:
         """One choice per node that branches or whose demonstrator stayed where φ says go.
 
@@ -207,12 +344,12 @@ class BranchChoices:
             stays: ``(variable, MP)`` -> states ``(d,)`` at which the demonstrator kept the MP
                 although the progress predictor would have switched (:func:`stay_examples`,
                 filtered by the fit); those nodes get :data:`STAY` as one more choice.
+            start: the learned start (:meth:`StartChoice.learn`), kept as it is.
+            entry_scale: the switches' entry factors (:func:`entry_scales`), kept as they are.
 
         Returns:
             The choices (none for a coupling without switch instances).
         """
-        r = np.asarray(feature_range, dtype=np.float64)
-        scale = np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
         stays = stays or {}
         choices = {}
         for (v, source), instances in sorted(coupling.instances.items()):
@@ -223,16 +360,10 @@ class BranchChoices:
             if len(targets) < 2:
                 continue
             y = np.array([targets.index(t) for t in labels])
-            z = np.stack(states) * scale
-            weight = separability(z, y, len(targets))
-            z = z * weight
-            center = z.mean(axis=0)
-            weights, bias = fit_softmax(z - center, y, len(targets))
+            model = learn_choice(np.stack(states), y, len(targets), feature_range)
             counts = [int(np.sum(y == i)) for i in range(len(targets))]
-            choices[(v, source)] = BranchChoice(
-                v, source, targets, counts, center, scale * weight, weights, bias
-            )
-        return cls(choices)
+            choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
+        return cls(choices, start, dict(entry_scale or {}))
 
     def to_dict(self) -> list[dict[str, Any]]:
         """JSON/checkpoint-friendly form."""
@@ -242,17 +373,19 @@ class BranchChoices:
                 "source": c.source,
                 "targets": list(c.targets),
                 "counts": list(c.counts),
-                "center": c.center.tolist(),
-                "scale": c.scale.tolist(),
-                "weights": c.weights.tolist(),
-                "bias": c.bias.tolist(),
+                **c.model.to_dict(),
             }
             for _, c in sorted(self.choices.items())
         ]
 
     @classmethod
-    def from_dict(cls, rows: Sequence[Mapping[str, Any]]) -> BranchChoices:
-        """Inverse of :meth:`to_dict`."""
+    def from_dict(
+        cls,
+        rows: Sequence[Mapping[str, Any]],
+        start: Mapping[str, Any] | None = None,
+        entry_scale: Sequence[Sequence[Any]] | None = None,
+    ) -> BranchChoices:
+        """Inverse of :meth:`to_dict`, :meth:`StartChoice.to_dict` and :meth:`entry_rows`."""
         choices = {}
         for r in rows:
             c = BranchChoice(
@@ -260,13 +393,15 @@ class BranchChoices:
                 str(r["source"]),
                 [str(t) for t in r["targets"]],
                 [int(n) for n in r["counts"]],
-                np.asarray(r["center"], dtype=np.float64),
-                np.asarray(r["scale"], dtype=np.float64),
-                np.asarray(r["weights"], dtype=np.float64),
-                np.asarray(r["bias"], dtype=np.float64),
+                LinearChoice.from_dict(r),
             )
             choices[(c.variable, c.source)] = c
-        return cls(choices)
+        scales = {(str(v), str(a), str(b)): float(g) for v, a, b, g in entry_scale or []}
+        return cls(choices, None if start is None else StartChoice.from_dict(start), scales)
+
+    def entry_rows(self) -> list[list[Any]]:
+        """:attr:`entry_scale` as ``[variable, source, target, factor]`` rows (sorted)."""
+        return [[v, a, b, g] for (v, a, b), g in sorted(self.entry_scale.items())]
 
     def get(self, variable: str, source: str) -> BranchChoice | None:
         """The choice at ``variable``'s node ``source``, ``None`` if it does not branch."""
@@ -277,6 +412,40 @@ class BranchChoices:
         return [
             c.describe(feature_names) for (v, _), c in sorted(self.choices.items()) if v == variable
         ]
+
+
+def entry_scales(
+    exit_phi: Mapping[tuple[str, str, str], np.ndarray],
+    entry: Mapping[tuple[str, str, str], np.ndarray],
+    threshold: float,
+) -> dict[tuple[str, str, str], float]:
+    """The entry factors of the switches the progress predictor would not make as demonstrated.
+
+    For each demonstrated switch ``variable: source -> target``, the fitted φ at the states
+    where the demonstrator made it gives ``p = φ_source · (1 - φ_target)``. Where the median of
+    ``p`` stays at or below ``threshold``, the rule would not make the switch where the
+    demonstrator did. When it is the entry ``1 - φ_target`` that is low there (the target is
+    re-entered in a loop, starting where its earlier activations ended, so its progress reads
+    "done"), the entry is read relative to its demonstrated value: it is multiplied by the
+    inverse of its median at the demonstrated switches (the product capped at 1 at run
+    time), so that the switch fires as the source ends, as demonstrated.
+
+    Args:
+        exit_phi: ``(variable, source, target)`` -> φ of ``source`` at each demonstrated switch.
+        entry: the same keys -> ``1 - φ_target`` at the same states.
+        threshold: the switching rule's threshold.
+
+    Returns:
+        ``(variable, source, target)`` -> factor > 1, only for the switches that need one.
+    """
+    out = {}
+    for key, e in sorted(entry.items()):
+        e = np.asarray(e, dtype=np.float64)
+        p = np.asarray(exit_phi[key], dtype=np.float64) * e
+        level = float(np.median(e))
+        if float(np.median(p)) <= threshold and level < threshold:
+            out[key] = 1.0 / max(level, MIN_ENTRY)
+    return out
 
 
 def stay_examples(
@@ -316,4 +485,15 @@ def stay_examples(
     return out
 
 
-__all__ = ["L2", "STAY", "BranchChoice", "BranchChoices", "fit_softmax", "stay_examples"]
+__all__ = [
+    "L2",
+    "STAY",
+    "BranchChoice",
+    "BranchChoices",
+    "LinearChoice",
+    "StartChoice",
+    "entry_scales",
+    "fit_softmax",
+    "learn_choice",
+    "stay_examples",
+]

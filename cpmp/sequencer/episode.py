@@ -61,6 +61,8 @@ class PlanRow(NamedTuple):
         checks: the φ that add one inconsistency each while below their bound.
         joints: per successor, the other variables' switches ``(variable, from, to)`` it is
             demonstrated together with (:attr:`~cpmp.sequencer.switching.Coupling.joint`).
+        entry_scale: per successor, the factor on its entry probability
+            (:attr:`~cpmp.sequencer.branches.BranchChoices.entry_scale`; 1 for most).
     """
 
     variable: str
@@ -71,6 +73,7 @@ class PlanRow(NamedTuple):
     unseen: list[int]
     checks: list[PhiCheck]
     joints: list[list[tuple[str, str, str]]]
+    entry_scale: list[float]
 
 
 class TransitionPlan(NamedTuple):
@@ -92,7 +95,8 @@ class TickRow(NamedTuple):
         variable: the control variable.
         current: its active MP at the tick.
         successors: the active MP's successors.
-        p: each successor's transition probability ``φ_current · (1 - φ_successor)``.
+        p: each successor's transition probability ``φ_current · (1 - φ_successor)`` (the
+            entry scaled for a re-entered successor, capped at 1).
         inconsistent: per successor, the number of other variables inconsistent with the
             demonstrated contexts of that switch.
     """
@@ -189,7 +193,7 @@ class SequencerEpisode:
                 "(check its parameters) or the features are far outside the training data"
             )
         model = self.model
-        self.start_decision = self._initial_mps(t, phi)
+        self.start_decision = self._initial_mps(t, x, phi)
         self.active = dict(self.start_decision.chosen)
         self.events = []
         self.notes = []
@@ -291,9 +295,9 @@ class SequencerEpisode:
         rows = []
         fired = False
         chosen_by: dict[str, str | None] = {}
-        for v, current, names, columns, exit_column, unseen, checks, _ in plan:
+        for v, current, names, columns, exit_column, unseen, checks, _, scale in plan:
             exit_p = phi[exit_column]
-            p = [exit_p * (1.0 - phi[i]) for i in columns]
+            p = [exit_p * min(1.0, (1.0 - phi[i]) * g) for i, g in zip(columns, scale, strict=True)]
             bad = unseen
             if checks:
                 bad = list(unseen)
@@ -464,15 +468,26 @@ class SequencerEpisode:
             )
         )
 
-    def _initial_mps(self, t: float, phi: np.ndarray) -> StartDecision:
-        """The start rule on every head's φ ``(H,)`` at ``t`` [s]: the MPs and the scores.
+    def _initial_mps(self, t: float, x: np.ndarray, phi: np.ndarray) -> StartDecision:
+        """The start rule at ``t`` [s] on the features ``x (d,)`` or every head's φ ``(H,)``.
 
-        See :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`.
+        Returns:
+            The MPs and the scores. See :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`.
         """
         model = self.model
+        rule = model.config.start_rule
+        start = model.branches.start
+        if rule == "learned" and start is not None:
+            prob = start.probabilities(np.asarray(x, dtype=np.float64).reshape(-1))
+            options = [
+                StartOption(dict(combo), float(np.log(max(q, 1e-300))))
+                for combo, q in zip(start.combinations, prob, strict=True)
+            ]
+            chosen = dict(start.combinations[int(np.argmax(prob))])
+            return StartDecision(t, "learned", options, chosen)
         start_index = model.nodes.start_index
         entry = np.clip(1.0 - phi, 1e-12, 1.0)
-        if model.config.start_rule == "joint" and model.initial_combinations:
+        if rule in ("joint", "learned") and model.initial_combinations:
             scores = [
                 sum(np.log(entry[start_index[(v, mp)]]) for v, mp in combo.items())
                 for combo in model.initial_combinations
@@ -532,6 +547,7 @@ class SequencerEpisode:
                     unseen_counts,
                     checks,
                     joints,
+                    [model.branches.entry_scale.get((v, current, s), 1.0) for s in names],
                 )
             )
         return plan

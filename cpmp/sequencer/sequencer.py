@@ -1,8 +1,11 @@
 """The concurrent sequencer: one sequence graph per control variable.
 
 Transition rule (paper section III): at the start each graph activates the initial node with
-the highest entry probability ``1 - φ`` (or, with ``start_rule="joint"``, the demonstrated
-combination of initial nodes with the highest summed log entry probability). At every tick, for
+the highest entry probability ``1 - φ`` (cpmp's default, ``start_rule="learned"``: the
+demonstrated combination of initial MPs that the demonstrations' first states say, a learned
+choice on the features that separate them, :class:`~cpmp.sequencer.branches.StartChoice`;
+``start_rule="joint"``: the demonstrated combination with the highest summed log entry
+probability). At every tick, for
 each successor ``s`` of the current node ``c`` the transition probability is
 ``p_s = φ_c(x) · (1 - φ_s(x))``; a switching rule (:mod:`cpmp.sequencer.switching`) decides when
 the best successor fires. In the paper the graphs are coupled only through the shared features
@@ -37,7 +40,7 @@ from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import ProgressPredictor, predictor_from_spec
 from cpmp.records import ReplayResult, SequencerNote, StartDecision, TickInfo, TransitionEvent
 from cpmp.sequencer.batch import BatchedSequencer
-from cpmp.sequencer.branches import BranchChoices, stay_examples
+from cpmp.sequencer.branches import BranchChoices, StartChoice, entry_scales, stay_examples
 from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.fit_data import nonfinite_parameters
 from cpmp.sequencer.inputs import checked_features, checked_time
@@ -128,9 +131,13 @@ class ConcurrentSequencer:
         """The choices learned at the fit (:mod:`cpmp.sequencer.branches`; without them, those
         at the nodes with several demonstrated successors, from the coupling)."""
         self.branches = (
-            self.learned_branches if self.config.branch == "learned" else BranchChoices({})
+            self.learned_branches
+            if self.config.branch == "learned"
+            else BranchChoices({}, self.learned_branches.start)
+            # the paper's rule (branch=none) reads the plain entry probability
         )
-        """The choices the transition rule uses (none with ``branch=none``)."""
+        """The choices the transition rule uses (no branch or stay choice with ``branch=none``;
+        the start is read with ``start_rule=learned``)."""
         self.transition_model = TransitionModel(
             self.graphs,
             self.nodes,
@@ -236,7 +243,34 @@ class ConcurrentSequencer:
         )
         stays = seq._confusing(stays)
         fitted.summary["stay_choices"] = sorted(f"{v}: {mp}" for v, mp in stays)
-        return seq._with_branches(BranchChoices.learn(fitted.coupling, fitted.feature_range, stays))
+        start = StartChoice.learn(fitted.demos, sorted(graphs), fitted.feature_range)
+        scales = seq._entry_scales()
+        fitted.summary["entry_scale"] = {f"{v}: {a} -> {b}": g for (v, a, b), g in scales.items()}
+        return seq._with_branches(
+            BranchChoices.learn(fitted.coupling, fitted.feature_range, stays, start, scales)
+        )
+
+    def _entry_scales(self) -> dict[tuple[str, str, str], float]:
+        """The entry factors of the demonstrated switches φ would not make.
+
+        See :func:`~cpmp.sequencer.branches.entry_scales`; none for a stateful predictor.
+        """
+        if self.predictor.stateful:
+            return {}
+        exit_phi, entry = {}, {}
+        for (v, source), instances in sorted(self.coupling.instances.items()):
+            phi = self.progress(np.stack([inst.state for inst in instances]))
+            for k, inst in enumerate(instances):
+                key = (v, source, inst.target)
+                if (v, inst.target) not in self.nodes.index:
+                    continue
+                exit_phi.setdefault(key, []).append(phi[k, self.nodes.index[(v, source)]])
+                entry.setdefault(key, []).append(1.0 - phi[k, self.nodes.index[(v, inst.target)]])
+        return entry_scales(
+            {k: np.asarray(e) for k, e in exit_phi.items()},
+            {k: np.asarray(e) for k, e in entry.items()},
+            self.config.threshold,
+        )
 
     def _confusing(
         self, stays: Mapping[tuple[str, str], list[np.ndarray]]
@@ -423,6 +457,12 @@ class ConcurrentSequencer:
                 "coupling": self.coupling.to_dict(),
                 "feature_range": self.feature_range.tolist(),
                 "branches": self.learned_branches.to_dict(),
+                "entry_scale": self.learned_branches.entry_rows(),
+                "start_choice": (
+                    None
+                    if self.learned_branches.start is None
+                    else self.learned_branches.start.to_dict()
+                ),
             },
         )
 
@@ -487,7 +527,11 @@ class ConcurrentSequencer:
             payload.get("initial_combinations", []),
             Coupling.from_dict(payload.get("coupling", [])),
             feature_range,
-            BranchChoices.from_dict(payload.get("branches", [])),
+            BranchChoices.from_dict(
+                payload.get("branches", []),
+                payload.get("start_choice"),
+                payload.get("entry_scale"),
+            ),
         )
 
     def with_config(self, **options: Any) -> ConcurrentSequencer:
@@ -508,6 +552,9 @@ class ConcurrentSequencer:
     def describe(self) -> str:
         """All graphs as text, each followed by its learned switch contexts (the coupling)."""
         parts = []
+        start = self.branches.start
+        if start is not None and self.config.start_rule == "learned":
+            parts.append(start.describe(self.feature_names))
         for v in sorted(self.graphs):
             parts.append(self.graphs[v].to_text())
             lines = self.coupling.describe(v)

@@ -112,7 +112,7 @@ def test_sequencer_configs_mean_what_they_say():
     paper = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=paper"]).sequencer))
     assert (paper.threshold, paper.patience, paper.start_rule) == (0.65, 0.05, "independent")
     coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
-    assert (coupled.start_rule, coupled.start_kernel) == ("joint", "isotropic")
+    assert (coupled.start_rule, coupled.start_kernel) == ("learned", "shared")
     assert (coupled.coupling, coupled.recovery) == ("context", True)
     assert coupled.threshold == paper.threshold
 

@@ -24,13 +24,18 @@ MAE_BOUND = 0.06
 def validated(train_demos, test_demos):
     """``klr_sparse`` fitted with the held-out demonstrations as validation data."""
     return ConcurrentSequencer.fit(
-        train_demos, "klr_sparse", seed=0, logger=None, validation=test_demos
+        train_demos,
+        "klr_sparse",
+        seed=0,
+        logger=None,
+        validation=test_demos,
+        start_kernel="isotropic",  # start heads (for start_rule=joint), distilled
     )
 
 
 @pytest.fixture(scope="module")
 def klr_count(fit_on_train):
-    return fit_on_train("klr").fit_summary["n_support_total"]
+    return fit_on_train("klr", start_kernel="isotropic").fit_summary["n_support_total"]
 
 
 def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_demos):
@@ -63,7 +68,8 @@ def _split_counts(counts: dict[str, int]) -> tuple[int, dict[str, int]]:
 
 def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, klr_count):
     summary = validated.fit_summary
-    klr_graph, klr_start = _split_counts(fit_on_train("klr").fit_summary["support_counts"])
+    klr = fit_on_train("klr", start_kernel="isotropic")
+    klr_graph, klr_start = _split_counts(klr.fit_summary["support_counts"])
     assert summary["n_support_rule"] == klr_graph  # the candidates are the fixed rule's
     assert summary["n_support_graph"] <= 0.25 * klr_graph  # the largest level
     assert all(n >= 1 for n in summary["support_counts"].values())
@@ -77,8 +83,10 @@ def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, klr_count
 
 
 def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, fit_on_train):
-    distilled = fit_on_train("klr_sparse")
-    full = ConcurrentSequencer.fit(train_demos, "klr_sparse", seed=0, logger=None, start_share=1.0)
+    distilled = fit_on_train("klr_sparse", start_kernel="isotropic")
+    full = ConcurrentSequencer.fit(
+        train_demos, "klr_sparse", seed=0, logger=None, start_share=1.0, start_kernel="isotropic"
+    )
     _, rule_start = _split_counts(full.fit_summary["support_counts"])
     _, start = _split_counts(distilled.fit_summary["support_counts"])
     assert start == {k: max(1, int(0.25 * n)) for k, n in rule_start.items()}

@@ -7,7 +7,14 @@ import pytest
 
 from cpmp.data import Demonstration
 from cpmp.sequencer import ConcurrentSequencer
-from cpmp.sequencer.branches import STAY, BranchChoices, fit_softmax, stay_examples
+from cpmp.sequencer.branches import (
+    STAY,
+    BranchChoices,
+    StartChoice,
+    entry_scales,
+    fit_softmax,
+    stay_examples,
+)
 from cpmp.sequencer.switching import Coupling, SwitchInstance
 from cpmp.worlds import repetition
 
@@ -147,3 +154,95 @@ def test_checkpoint_keeps_the_choices(repetition_fit, tmp_path):
             back.branches.choices[key].probabilities(x), choice.probabilities(x)
         )
     assert seq.with_config(branch="none").branches.choices == {}
+
+
+def _start_demo(name: str, first: np.ndarray, starts: tuple[str, str]) -> Demonstration:
+    """Two samples; ``arm`` and ``gripper`` start with ``starts``, then move on."""
+    x = np.stack([first, first + 0.5])
+    labels = {"arm": np.array([starts[0], "b"]), "gripper": np.array([starts[1], "c"])}
+    return Demonstration(
+        np.array([0.0, 0.01]), x, labels, ["switch", "home", "light"], f"demo_{name}"
+    )
+
+
+def test_start_choice_reads_the_feature_that_separates_the_starts_not_the_jitter():
+    rng = np.random.default_rng(3)
+    demos = []
+    for i in range(6):
+        shut = i % 2 == 0  # x[0]: 0 (shut) or 1 (open) decides; x[1], x[2] jitter widely
+        first = np.array([0.0 if shut else 1.0, rng.uniform(-2, 2), rng.uniform(-2, 2)])
+        demos.append(_start_demo(f"d{i}", first, ("pull", "wait") if shut else ("hold", "wait")))
+    choice = StartChoice.learn(demos, ["arm", "gripper"], np.array([1.0, 4.0, 4.0]))
+    assert choice.combinations == [
+        {"arm": "hold", "gripper": "wait"},
+        {"arm": "pull", "gripper": "wait"},
+    ]
+    assert choice.counts == [3, 3]
+    # the jitter of every demonstration with the other start does not move the choice
+    for demo in demos:
+        for shut in (True, False):
+            x = demo.features[0].copy()
+            x[0] = 0.0 if shut else 1.0
+            best = choice.combinations[int(np.argmax(choice.probabilities(x)))]
+            assert best["arm"] == ("pull" if shut else "hold")
+    assert "weighs most: switch" in choice.describe(["switch", "home", "light"])
+    back = StartChoice.from_dict(choice.to_dict())
+    x = np.array([[0.2, 1.0, -1.0], [0.9, -1.5, 0.3]])
+    np.testing.assert_allclose(back.probabilities(x), choice.probabilities(x))
+
+
+def test_one_demonstrated_start_needs_no_choice():
+    demos = [_start_demo(f"d{i}", np.array([i, 0.0, 1.0]), ("pull", "wait")) for i in range(3)]
+    choice = StartChoice.learn(demos, ["arm", "gripper"], np.ones(3))
+    assert choice.model is None and choice.counts == [3]
+    np.testing.assert_array_equal(choice.probabilities(np.zeros((2, 3))), np.ones((2, 1)))
+    assert "the one demonstrated start" in choice.describe()
+    assert StartChoice.from_dict(choice.to_dict()).combinations == choice.combinations
+
+
+def test_entry_scales_only_where_the_demonstrated_entry_reads_done():
+    key_loop, key_fine, key_exit = ("arm", "retract", "align"), ("arm", "a", "b"), ("arm", "c", "d")
+    exit_phi = {
+        key_loop: np.array([0.95, 0.96, 0.94]),
+        key_fine: np.array([0.95, 0.9, 0.92]),
+        key_exit: np.array([0.3, 0.4, 0.35]),  # low exit, fine entry: not the entry's doing
+    }
+    entry = {
+        key_loop: np.array([0.2, 0.15, 0.4]),  # re-entered: the target reads "done"
+        key_fine: np.array([0.9, 0.95, 0.93]),
+        key_exit: np.array([0.9, 0.95, 0.93]),
+    }
+    scales = entry_scales(exit_phi, entry, 0.65)
+    assert set(scales) == {key_loop}
+    assert scales[key_loop] == pytest.approx(1.0 / 0.2)
+    # an entry of about nothing is scaled by at most 20
+    tiny = entry_scales({key_loop: np.ones(3)}, {key_loop: np.full(3, 1e-4)}, 0.65)
+    assert tiny[key_loop] == pytest.approx(20.0)
+    back = BranchChoices.from_dict([], None, BranchChoices({}, None, scales).entry_rows())
+    assert back.entry_scale == scales
+
+
+def test_a_re_entered_node_fires_with_its_entry_scaled():
+    """The peg world's re-align starts where the first align ended (align's φ near 1 there):
+    the fit scales the entry of ``retract -> align``, and in closed loop a jam re-aligns."""
+    from cpmp.worlds.protocol import run_episodes
+    from cpmp.worlds.registry import make_world
+
+    world = make_world("peg", {})
+    seq = ConcurrentSequencer.fit(world.demonstrations(9, 0), seed=0, logger=None)
+    scales = seq.branches.entry_scale
+    assert scales.get(("inserter", "retract", "align"), 1.0) > 1.0
+    assert all(target != "retract" for _, _, target in scales)  # the first tries are untouched
+    plain = seq._with_branches(BranchChoices(seq.branches.choices, seq.branches.start))
+    jammed = [c for c in world.contexts(12, 1000) if c.n_jams > 0][:4]
+    assert jammed
+
+    def realigned(policy) -> list[bool]:
+        """Per episode that retracted after a jam, whether the arm aligned again."""
+        runs = run_episodes(world, policy, jammed)
+        tails = [r.sequences["inserter"] for r in runs if "retract" in r.sequences["inserter"]]
+        return [mps[mps.index("retract") :][1:2] == ["align"] for mps in tails]
+
+    with_scale, without = realigned(seq), realigned(plain)
+    assert len(with_scale) >= 2 and all(with_scale)
+    assert len(without) >= 2 and not any(without)

@@ -8,13 +8,33 @@ import numpy as np
 from cpmp.sequencer import PAPER_OPTIONS
 
 
-def test_joint_rule_keeps_every_demonstrated_start_and_takes_the_best(fitted_klr, test_demos):
-    assert fitted_klr.config.start_rule == "joint"
+def test_learned_rule_weighs_every_demonstrated_start_by_its_probability(fitted_klr, test_demos):
+    assert fitted_klr.config.start_rule == "learned"
+    start = fitted_klr.branches.start
+    assert start is not None and len(start.combinations) >= 2
+    assert sorted(map(str, start.combinations)) == sorted(
+        map(str, fitted_klr.initial_combinations)
+    )
     for demo in test_demos:
         active = fitted_klr.reset(0.0, demo.features[0])
         decision = fitted_klr.start_decision
+        assert decision.rule == "learned" and decision.chosen == active
+        assert [o.combination for o in decision.options] == start.combinations
+        scores = np.array([o.score for o in decision.options])
+        assert np.all(np.isfinite(scores)) and scores.max() <= 0.0
+        np.testing.assert_allclose(np.exp(scores).sum(), 1.0)
+        assert decision.options[int(np.argmax(scores))].combination == active
+        # each test demonstration starts as the demonstrator started it
+        assert active == {v: str(demo.labels[v][0]) for v in fitted_klr.graphs}
+
+
+def test_joint_rule_keeps_every_demonstrated_start_and_takes_the_best(fit_on_train, test_demos):
+    seq = fit_on_train("klr", start_rule="joint", start_kernel="isotropic")
+    for demo in test_demos:
+        active = seq.reset(0.0, demo.features[0])
+        decision = seq.start_decision
         assert decision.rule == "joint" and decision.chosen == active
-        assert [o.combination for o in decision.options] == fitted_klr.initial_combinations
+        assert [o.combination for o in decision.options] == seq.initial_combinations
         scores = [o.score for o in decision.options]
         assert all(np.isfinite(scores)) and max(scores) <= 0.0
         assert decision.options[int(np.argmax(scores))].combination == active
