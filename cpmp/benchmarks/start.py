@@ -42,7 +42,8 @@ from cpmp.sim.simulation import Simulation
 SEQUENCER_RULES: dict[str, dict[str, Any]] = {
     "cpmp defaults": {},
     "paper (PAPER_OPTIONS)": dict(PAPER_OPTIONS),
-    "joint, shared kernel": {"start_kernel": "shared"},
+    "joint, isotropic start heads": {"start_rule": "joint", "start_kernel": "isotropic"},
+    "joint, shared kernel": {"start_rule": "joint", "start_kernel": "shared"},
 }
 """cpmp start rules scored, as fit options of :meth:`ConcurrentSequencer.fit`."""
 

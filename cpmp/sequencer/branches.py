@@ -53,6 +53,11 @@ MIN_SPREAD = 0.01
 L2 = 1e-4
 """The L2 penalty on the weights, per example (features in training ranges)."""
 _NEWTON_STEPS = 50
+START_POWER = 0.5
+"""The start weighs features by the square root of their :func:`separability`: its examples
+are one first state per demonstration, so separability rests on a handful of states, and the
+softer weighting keeps every separating feature in play when each separates only some of the
+starts (in the simulator box width decides one strategy and depth the other two)."""
 MIN_ENTRY = 0.05
 """The least demonstrated entry :func:`entry_scales` divides by (a factor of at most 20)."""
 
@@ -92,18 +97,18 @@ class LinearChoice(NamedTuple):
 
 
 def learn_choice(
-    states: np.ndarray, y: np.ndarray, k: int, feature_range: np.ndarray
+    states: np.ndarray, y: np.ndarray, k: int, feature_range: np.ndarray, power: float = 1.0
 ) -> LinearChoice:
     """Fit the choice among ``k`` classes from examples ``states (n, d)`` of classes ``y (n,)``.
 
     Features are put in units of their training range ``feature_range (d,)`` (range 0: left
-    out), weighted by how well each separates the classes (:func:`separability`), and a
-    multinomial logistic regression (:func:`fit_softmax`) is fitted on them.
+    out), weighted by how well each separates the classes (:func:`separability` to the power
+    ``power``), and a multinomial logistic regression (:func:`fit_softmax`) is fitted on them.
     """
     r = np.asarray(feature_range, dtype=np.float64)
     scale = np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
     z = np.asarray(states, dtype=np.float64) * scale
-    weight = separability(z, y, k)
+    weight = separability(z, y, k) ** power
     z = z * weight
     center = z.mean(axis=0)
     weights, bias = fit_softmax(z - center, y, k)
@@ -203,7 +208,8 @@ class StartChoice:
             return cls(combinations, counts, None)
         y = np.array([classes.index(c) for c in keys])
         states = np.stack([np.asarray(d.features[0], dtype=np.float64) for d in demos])
-        return cls(combinations, counts, learn_choice(states, y, len(classes), feature_range))
+        model = learn_choice(states, y, len(classes), feature_range, START_POWER)
+        return cls(combinations, counts, model)
 
     def probabilities(self, x: np.ndarray) -> np.ndarray:
         """The probability of each of :attr:`combinations` at the first features ``x (..., d)``."""
