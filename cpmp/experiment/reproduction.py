@@ -199,6 +199,7 @@ def reproduce(
                 episode=f"{label}episode_{i:03d}",
                 geoms=sim.geoms(),
                 metadata={"box_width": box.width, "box_depth": box.depth},
+                threshold=seq.config.threshold,
             )
             callback = EpisodeLogger(recorder, batch.episodes[i], references, axes)
         paths.append(rrd)

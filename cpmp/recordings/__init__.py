@@ -28,6 +28,14 @@ entity path                            content
 ``transition/<variable>/<target>``     ``Scalars``: transition probability to ``target``
                                        from the active MP; NaN while ``target`` is not a
                                        successor of the active MP (the line breaks)
+``threshold``                          ``Scalars`` at the first and the last tick: the
+                                       switching rule's threshold (static grey
+                                       ``SeriesLines`` ``"threshold 0.65"``), drawn in
+                                       every p(switch) plot
+``marks/<variable>/<kind>``            ``Scalars`` at each switch, recovery (at its p) and
+                                       hold (at the held target's p, at its first note)
+                                       of ``variable`` (static ``SeriesPoints``: a marker
+                                       and colour per kind), drawn in its p(switch) plots
 ``active/<variable>``                  ``TextLog`` ``"  0.44 s  <variable>: <mp>"`` and
                                        ``StateChange`` ``<mp>`` when the active MP changes
 ``active/<variable>/index``            ``Scalars`` per tick: index of the active MP in
@@ -69,7 +77,10 @@ the 3D scene above the ``status`` document (the ``start`` document and the start
 beside it); a tab per feature group (:func:`group_features`: box, each hand, goal distances,
 touch, ... from the feature names, at most 8 series each), a plot as wide as the column; a tab
 per control variable with its φ (= exit), entry and transition probabilities, an MP in one
-colour in all three and named by φ's legend only; the legends in the plots' top-left corner;
+colour in all three and named by φ's legend only; above the feature tabs, a grid of one small
+p(switch) plot per variable (every variable at once, without a click); every p(switch) plot
+with the threshold line and the variable's event marks; the legends in the plots' top-left
+corner, left of the curves (a plot with a legend starts its time axis before t = 0);
 the active MPs as lanes of a state timeline; the events log (start, transitions, notes,
 outcome) in a monospace font, each event starting with its time. Every view lists the entity
 paths it shows (rerun 0.41 matches no wildcard in the middle of a path). An episode that ended
@@ -80,8 +91,8 @@ row. :func:`read_views` lists the views.
 Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
 ``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
 ``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
-probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s] and
-``count``), ``cpmp.Outcome:{outcome,reason}`` and
+probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s], ``count``,
+``ended_by`` and ``then``), ``cpmp.Outcome:{outcome,reason}`` and
 ``cpmp.Start:{rule,chosen,options}`` (strings; ``chosen`` and ``options`` as JSON); their time
 is the ``time`` timeline of the row. The episode name is the recording
 name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,

@@ -101,6 +101,7 @@ def record_demo_rrd(
         episode=demo.name or Path(path).stem,
         geoms=sim.geoms(),
         metadata=metadata,
+        threshold=None,  # a replay has no switching rule: its switches are p = 1
     )
     logger = _DemoLogger(recorder, label_switches(demo))
     try:

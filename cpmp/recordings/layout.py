@@ -54,6 +54,31 @@ LEGEND_CORNER = "LeftTop"
 """Where the legend of a plot with one sits (rerun's default, bottom right, covers the ends of
 the φ curves)."""
 
+LEGEND_SPACE_NARROW = 0.35
+"""Share of a narrow plot's width (a variable's tab: three plots side by side) left empty
+before t = 0 for its legend: rerun 0.41 places a legend only inside a plot, in a corner, so a
+plot with a legend starts its time axis early and the legend (in :data:`LEGEND_CORNER`) sits
+left of the curves (:func:`legend_time_axis`; y-axis headroom above 1 was tried first: the
+legend of four MPs needs half a tab plot's height at 1920×1080)."""
+LEGEND_SPACE_WIDE = 0.12
+"""The same for a plot the column's width (a feature panel)."""
+
+THRESHOLD_ENTITY = "threshold"
+"""Scalar series of the switching rule's threshold, drawn as a grey line in every p plot."""
+THRESHOLD_COLOR = (90, 90, 90)
+
+MARKS_ENTITY = "marks"
+"""Origin of the event marks: ``marks/<variable>/<kind>``, one point at the event's p."""
+MARK_STYLES: dict[str, tuple[tuple[int, int, int], str]] = {
+    "switch": ((0, 0, 0), "Diamond"),
+    "recovery": ((204, 85, 0), "Cross"),
+    "hold": ((110, 110, 110), "Down"),
+}
+"""Event kind -> (colour, marker shape) of its marks on the p(switch) plots."""
+MARK_SIZE = 5.0
+OVERVIEW_NAME = "p(switch), every variable"
+"""Name of the grid of every variable's p(switch) plot (small multiples, no clicking)."""
+
 EVENT_WIDTH = 78
 """Characters per line of the events log, its time included (:func:`event_lines`). rerun 0.41
 shows the first line of a multi-line text log entry only, so a long event is logged as
@@ -173,6 +198,19 @@ def start_text(decision: StartDecision) -> str:
             tail += f"; next best {others[0].score:.2f}: {runner_up}"
         return f"{head} ({tail})"
     return f"start (independent rule, each variable's best initial MP): {chosen}"
+
+
+def start_table(decision: StartDecision) -> list[str]:
+    """Every option of a start decision with its score, best first, the chosen one marked.
+
+    ``["   -0.12  left_pos=reach_edge, right_pos=idle  (chosen)", "   -2.31  ..."]``.
+    """
+    lines = []
+    for option in sorted(decision.options, key=lambda o: -o.score):
+        chosen = all(decision.chosen.get(v) == mp for v, mp in option.combination.items())
+        mark = "  (chosen)" if chosen else ""
+        lines.append(f"{option.score:8.2f}  {_combination_text(option.combination)}{mark}")
+    return lines
 
 
 def _combination_text(combination: Mapping[str, str], only: set[str] | None = None) -> str:
@@ -484,6 +522,9 @@ def blueprint(
     start: bool = False,
     start_focus: bool = False,
     events: Sequence[str] = EVENT_ORDER,
+    threshold: bool = False,
+    marks: Mapping[str, Sequence[str]] | None = None,
+    duration: float | None = None,
 ) -> Any:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
@@ -495,10 +536,17 @@ def blueprint(
     probabilities (one legend, φ's: an MP has its colour in all three) | the events log the
     column's height (monospace, its rows :data:`EVENT_WIDTH` characters at most). Every view's
     contents are the logged entity paths themselves (rerun 0.41 matches no wildcard in the
-    middle of a path). ``start_focus`` (an episode that ended at its first tick, e.g. a wrong
-    start, where the plots would hold one point): the start decision and its plot take the
-    middle column instead, the lanes go above the events log. The time panel starts collapsed
-    (one row), the blueprint and selection panels too.
+    middle of a path). Between the lanes and the feature tabs, :data:`OVERVIEW_NAME`: a grid
+    with a small p(switch) plot per variable (no legend; the variable's tab has it), so the
+    variable whose switch never came shows without a click. Every p plot draws the rule's
+    threshold (:data:`THRESHOLD_ENTITY`) and the variable's event marks
+    (:data:`MARKS_ENTITY`). With the episode's ``duration``, a plot with a legend starts its
+    time axis before t = 0 (:func:`legend_time_axis`), so the legend sits left of the curves.
+    ``start_focus`` (an episode that
+    ended at its first tick, e.g. a wrong start, where the plots would hold one point): the
+    start decision and its plot take the middle column instead, the lanes go above the
+    events log. The time panel starts collapsed (one row), the blueprint and selection panels
+    too.
 
     Args:
         feature_groups: panel name -> feature names.
@@ -506,6 +554,9 @@ def blueprint(
         start: whether a start decision was logged (:data:`START_ENTITY`).
         start_focus: lay out the start decision instead of the time series.
         events: the event entities logged (of :data:`EVENT_ORDER`), listed by the events log.
+        threshold: whether the threshold series was logged.
+        marks: variable -> the event kinds (of :data:`MARK_STYLES`) marked for it.
+        duration: the episode's last time [s] (``None``: the viewer's default time axes).
 
     Returns:
         The blueprint.
@@ -516,13 +567,31 @@ def blueprint(
             contents=[f"+ {entity('features', name)}" for name in members],
             name=group,
             plot_legend=rrb.PlotLegend(LEGEND_CORNER),
+            axis_x=legend_time_axis(duration, LEGEND_SPACE_WIDE),
         )
         for group, members in feature_groups.items()
     ] or [rrb.TimeSeriesView(origin="features", name="features")]
+    extra = {
+        var: ([THRESHOLD_ENTITY] if threshold else [])
+        + [entity(MARKS_ENTITY, var, kind) for kind in (marks or {}).get(var, ())]
+        for var in series
+    }
     variable_tabs = [
-        _variable_views(var, logged)
+        _variable_views(var, logged, extra[var], duration)
         for var, logged in series.items()
         if logged.progress or logged.targets
+    ]
+    overview = [
+        rrb.TimeSeriesView(
+            origin=entity("transition", var),
+            contents=[f"+ {entity('transition', var, mp)}" for mp in logged.targets]
+            + [f"+ {path}" for path in extra[var]],
+            name=var,
+            axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+            plot_legend=rrb.PlotLegend(LEGEND_CORNER, visible=False),
+        )
+        for var, logged in series.items()
+        if logged.targets
     ]
     start_doc = rrb.TextDocumentView(origin=START_ENTITY, name="start")
     start_plot = rrb.Spatial2DView(origin=START_BOXES_ENTITY, name="start map")
@@ -550,10 +619,18 @@ def blueprint(
         if start:
             lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
         left = rrb.Vertical(scene, lower_left, row_shares=[1, 1])
-        parts: list[Any] = [lanes, rrb.Tabs(*feature_views, name="features", active_tab=0)]
+        parts: list[Any] = [lanes]
+        shares = [3.0]
+        if overview:
+            columns = min(len(overview), 3)
+            parts.append(rrb.Grid(*overview, grid_columns=columns, name=OVERVIEW_NAME))
+            shares.append(2.0 * math.ceil(len(overview) / columns))
+        parts.append(rrb.Tabs(*feature_views, name="features", active_tab=0))
+        shares.append(3.0)
         if variable_tabs:
             parts.append(rrb.Tabs(*variable_tabs, name="probabilities"))
-        middle = rrb.Vertical(*parts, row_shares=[3, 3, 4][: len(parts)])
+            shares.append(4.0)
+        middle = rrb.Vertical(*parts, row_shares=shares)
         right = logs
     return rrb.Blueprint(
         rrb.Horizontal(left, middle, right, column_shares=[2, 4, 3]),
@@ -579,14 +656,38 @@ _MONOSPACE = rrb.TextLogFormat(monospace_body=True)
 event's continuation rows line up below its text."""
 
 
-def _variable_views(variable: str, logged: VariableSeries) -> Any:
+def legend_time_axis(duration: float | None, space: float) -> Any:
+    """A plot's time axis from before t = 0 to ``duration`` [s], room for its legend.
+
+    The first ``space`` of the plot's width is empty (before t = 0); ``None`` without a
+    positive ``duration`` (the viewer's default axis). The viewer can still zoom and pan.
+    """
+    if duration is None or not duration > 0:
+        return None
+    before = duration * space / (1.0 - space)
+    return rrb.TimeAxis(
+        view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seconds=-before),
+            end=rrb.TimeRangeBoundary.absolute(seconds=duration),
+        )
+    )
+
+
+def _variable_views(
+    variable: str,
+    logged: VariableSeries,
+    extra: Sequence[str] = (),
+    duration: float | None = None,
+) -> Any:
     """One variable's tab: φ (= exit), entry (1 - φ) and the transition probabilities.
 
-    Only φ shows a legend (entry and the transitions use its colours); without φ logged, the
-    transitions show theirs.
+    Only φ shows a legend (entry and the transitions use its colours; its time axis starts
+    early to leave it room, :func:`legend_time_axis`); without φ logged, the transitions show
+    theirs. ``extra``: entity paths drawn in the transition plot besides (the threshold, the
+    event marks).
     """
     unit = rrb.ScalarAxis(range=(0.0, 1.0))
-    legend = rrb.PlotLegend(LEGEND_CORNER)
+    room = legend_time_axis(duration, LEGEND_SPACE_NARROW)
     views = []
     if logged.progress:
         views += [
@@ -595,7 +696,8 @@ def _variable_views(variable: str, logged: VariableSeries) -> Any:
                 contents=[f"+ {entity('progress', variable, mp, 'phi')}" for mp in logged.progress],
                 name="φ (exit)",
                 axis_y=unit,
-                plot_legend=legend,
+                axis_x=room,
+                plot_legend=rrb.PlotLegend(LEGEND_CORNER),
             ),
             rrb.TimeSeriesView(
                 origin=entity("progress", variable),
@@ -608,14 +710,17 @@ def _variable_views(variable: str, logged: VariableSeries) -> Any:
             ),
         ]
     if logged.targets:
+        legend = not logged.progress
         views.append(
             rrb.TimeSeriesView(
                 origin=entity("transition", variable),
-                contents=[f"+ {entity('transition', variable, mp)}" for mp in logged.targets],
+                contents=[f"+ {entity('transition', variable, mp)}" for mp in logged.targets]
+                + [f"+ {path}" for path in extra],
                 name="p(switch to)",
                 axis_y=unit,
+                axis_x=room if legend else None,
                 # φ's legend names the colours (an MP keeps its colour in the three panels)
-                plot_legend=rrb.PlotLegend(LEGEND_CORNER, visible=not logged.progress),
+                plot_legend=rrb.PlotLegend(LEGEND_CORNER, visible=legend),
             )
         )
     return rrb.Horizontal(*views, name=variable)

@@ -25,7 +25,9 @@ from cpmp.recordings.layout import (
     PROPERTY_NAME,
     START_ARCHETYPE,
     TRANSITION_ARCHETYPE,
+    hold_text,
     outcome_text,
+    start_table,
     start_text,
     transition_text,
 )
@@ -57,6 +59,9 @@ class RecordingSummary:
     leading ``/`` and without recording properties. ``metadata``: the recorder's ``metadata``.
     ``feature_groups``: plot panel -> feature names (empty for files written before panels).
     ``start``: the start decision logged (``None`` if none), with its options and scores.
+    ``note_texts``: each of ``notes`` as the events log shows it (a hold with how long it was
+    held and what ended it: ``"...; held 0.63 s, until left_fingers switched to relax at
+    9.91 s"``).
     """
 
     episodes: list[str]
@@ -70,6 +75,7 @@ class RecordingSummary:
     notes: list[SequencerNote] = field(default_factory=list)
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
     start: StartDecision | None = None
+    note_texts: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields.
@@ -145,7 +151,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     ticks: dict[int, set[int]] = {index: set() for index in range(len(stores))}
     entity_paths: set[str] = set()
     transitions: list[TransitionEvent] = []
-    notes: list[SequencerNote] = []
+    notes: list[tuple[SequencerNote, str]] = []
     outcomes: list[tuple[float, int, str, str]] = []
     start: StartDecision | None = None
     duration = 0.0
@@ -198,17 +204,20 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         if f"{NOTE_ARCHETYPE}:kind" in columns:
             cells = {
                 name: batch.column(f"{NOTE_ARCHETYPE}:{name}").to_pylist()
-                for name in ("kind", "variable", "text")
+                if f"{NOTE_ARCHETYPE}:{name}" in columns
+                else [None] * len(times)
+                for name in ("kind", "variable", "text", "until", "count", "ended_by", "then")
             }
             for row, t in enumerate(times):
                 if _first(cells["kind"][row]) is not None:
+                    note = SequencerNote(
+                        t,
+                        str(_first(cells["kind"][row])),
+                        str(_first(cells["variable"][row]) or ""),
+                        str(_first(cells["text"][row]) or ""),
+                    )
                     notes.append(
-                        SequencerNote(
-                            t,
-                            str(_first(cells["kind"][row])),
-                            str(_first(cells["variable"][row]) or ""),
-                            str(_first(cells["text"][row]) or ""),
-                        )
+                        (note, _note_text(note, {k: _first(v[row]) for k, v in cells.items()}))
                     )
         if f"{START_ARCHETYPE}:rule" in columns:
             cells = {
@@ -238,7 +247,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                     outcomes.append((t, len(outcomes), str(outcome), str(reason or "")))
 
     transitions.sort(key=lambda event: event.t)
-    notes.sort(key=lambda note: note.t)
+    notes.sort(key=lambda pair: pair[0].t)
     last_outcome = max(outcomes, default=None)
     episodes = [
         names.get(index, f"{store.application_id}/{store.recording_id}")
@@ -253,10 +262,32 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         n_ticks=sum(len(values) for values in ticks.values()),
         entity_paths=sorted(entity_paths),
         metadata=metadata,
-        notes=notes,
+        notes=[note for note, _ in notes],
         feature_groups=feature_groups,
         start=start,
+        note_texts=[text for _, text in notes],
     )
+
+
+def _note_text(note: SequencerNote, cells: dict[str, Any]) -> str:
+    """A note's text as the events log shows it: a hold's with how long it was held.
+
+    ``cells``: the note record's ``until`` [s], ``count``, ``ended_by`` and ``then`` (a hold
+    logged when it ended; ``None`` for other notes). A file written before ``ended_by`` was
+    recorded gets the duration and the end time.
+    """
+    until, count = cells.get("until"), cells.get("count")
+    if note.kind != "hold" or until is None:
+        return note.text
+    ended_by = cells.get("ended_by")
+    if ended_by in ("switch", "hold", "end"):
+        then = str(cells.get("then") or "")
+        return hold_text(
+            note.text, note.t, float(until), ended_by, int(count or 1), note.variable, then
+        )
+    noted = f" (noted {count} times)" if count and count > 1 else ""
+    held = max(float(until) - note.t, 0.0)
+    return f"{note.text}; held {held:.2f} s, until {float(until):.2f} s{noted}"
 
 
 def read_views(path: str | os.PathLike[str]) -> list[ViewInfo]:
@@ -341,6 +372,8 @@ def format_summary(summary: RecordingSummary) -> str:
         lines.append(f"feature panels: {panels}")
     if summary.start is not None:
         lines.append(f"t={summary.start.t:8.3f} s  {start_text(summary.start)}")
+        lines.append(f"  start options ({len(summary.start.options)}, by score, best first):")
+        lines += [f"  {line}" for line in start_table(summary.start)]
     lines.append(f"transitions ({len(summary.transitions)}):")
     lines += [
         f"  t={e.t:8.3f} s  "
@@ -349,7 +382,11 @@ def format_summary(summary: RecordingSummary) -> str:
     ]
     if summary.notes:
         lines.append(f"notes ({len(summary.notes)}):")
-        lines += [f"  t={n.t:8.3f} s  {n.kind}: {n.text}" for n in summary.notes]
+        texts = summary.note_texts or [n.text for n in summary.notes]
+        lines += [
+            f"  t={n.t:8.3f} s  {n.kind}: {text}"
+            for n, text in zip(summary.notes, texts, strict=True)
+        ]
     if summary.outcome is None:
         lines.append("outcome: none recorded")
     else:

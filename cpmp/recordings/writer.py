@@ -19,11 +19,15 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from cpmp.config.sequencer import SequencerConfig
 from cpmp.errors import ConfigError, CpmpError, DataError
 from cpmp.io import atomic_path
 from cpmp.recordings.columns import ColumnBuffer
 from cpmp.recordings.layout import (
     EVENT_ORDER,
+    MARK_SIZE,
+    MARK_STYLES,
+    MARKS_ENTITY,
     NOTE_ARCHETYPE,
     OUTCOME_ARCHETYPE,
     PROPERTY_NAME,
@@ -31,6 +35,8 @@ from cpmp.recordings.layout import (
     START_BOXES_ENTITY,
     START_ENTITY,
     STATUS_ENTITY,
+    THRESHOLD_COLOR,
+    THRESHOLD_ENTITY,
     TRANSITION_ARCHETYPE,
     WARN_COLOR,
     HoldEnd,
@@ -104,6 +110,9 @@ class EpisodeRecorder:
         feature_groups: panel name -> feature names, one time-series panel each; features in
             no group go to ``other``. Default:
             :func:`~cpmp.recordings.group_features` of ``feature_names``.
+        threshold: the switching rule's threshold (the sequencer config's ``threshold``),
+            drawn as a line in every p(switch) plot (``threshold`` series, from the first tick
+            to the last); ``None``: no line.
     """
 
     def __init__(
@@ -118,6 +127,7 @@ class EpisodeRecorder:
         metadata: Mapping[str, Any] | None = None,
         flush_every: int = 5000,
         feature_groups: Mapping[str, Sequence[str]] | None = None,
+        threshold: float | None = SequencerConfig.threshold,
     ) -> None:
         self.path = Path(path)
         self.feature_names = [str(name) for name in feature_names]
@@ -131,6 +141,9 @@ class EpisodeRecorder:
                 )
         if flush_every < 1:
             raise ConfigError(f"flush_every must be >= 1, got {flush_every}")
+        if threshold is not None and not math.isfinite(threshold):
+            raise ConfigError(f"threshold must be a finite number or None, got {threshold}")
+        self.threshold = None if threshold is None else float(threshold)
         self.feature_groups = (
             group_features(self.feature_names)
             if feature_groups is None
@@ -154,6 +167,8 @@ class EpisodeRecorder:
         self._events: set[str] = set()
         self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._targets: dict[str, set[str]] = {v: set() for v in self.mp_names}
+        self._last_p: dict[str, dict[str, float]] = {}
+        self._marks: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._n_ticks = 0
         self._buffered_ticks = 0
         self._last_t = -math.inf
@@ -187,6 +202,14 @@ class EpisodeRecorder:
             for path, name in zip(self._feature_paths, self.feature_names, strict=True):
                 group, m = place[name]
                 self._columns.name_series(path, series_label(group, name), series_color(m))
+            if self.threshold is not None:
+                self._rec.log(
+                    THRESHOLD_ENTITY,
+                    rr.SeriesLines(
+                        names=[f"threshold {self.threshold:g}"], colors=[THRESHOLD_COLOR]
+                    ),
+                    static=True,
+                )
             for geom in parsed_geoms:
                 self._log_geom(geom)
         except BaseException:
@@ -317,8 +340,10 @@ class EpisodeRecorder:
             self._progress_mps[variable].update(phis)
         for variable, targets in transitions.items():
             self._targets[variable].update(targets)
+            self._last_p[variable] = targets
         if tick == 0:
             self._start_features = dict(zip(self.feature_names, values.tolist(), strict=True))
+            self._log_threshold(t, tick)
         changed = False
         for variable, mp in active.items():
             if self._active.get(variable) != mp:
@@ -344,6 +369,30 @@ class EpisodeRecorder:
         self._buffered_ticks += 1
         if self._buffered_ticks >= self.flush_every:
             self._flush_buffers()
+
+    def _log_threshold(self, t: float, tick: int) -> None:
+        """One point of the threshold line at ``t`` [s] (the first and the last tick's)."""
+        if self.threshold is not None:
+            self._set_event_time(t, tick)
+            self._rec.log(THRESHOLD_ENTITY, self._rr.Scalars(self.threshold))
+
+    def _log_mark(self, variable: str, kind: str, t: float, p: float | None) -> None:
+        """Mark a ``kind`` event of ``variable`` at ``t`` [s] on its p plots, at height ``p``.
+
+        No mark for a kind without a style (:data:`MARK_STYLES`) or a non-finite ``p``.
+        """
+        if kind not in MARK_STYLES or p is None or not math.isfinite(p):
+            return
+        path = entity(MARKS_ENTITY, variable, kind)
+        if kind not in self._marks[variable]:
+            self._marks[variable].add(kind)
+            color, marker = MARK_STYLES[kind]
+            points = self._rr.SeriesPoints(
+                names=[kind], colors=[color], markers=[marker], marker_sizes=[MARK_SIZE]
+            )
+            self._rec.log(path, points, static=True)
+        self._set_event_time(t)
+        self._rec.log(path, self._rr.Scalars(float(p)))
 
     def _flush_buffers(self) -> None:
         self._columns.send()
@@ -381,6 +430,7 @@ class EpisodeRecorder:
         if variable in self._holds:
             self._end_hold(variable, t, "switch", target)
         level = "WARN" if kind == "recovery" else "INFO"
+        self._log_mark(variable, str(kind), t, probability)
         self._events.add("events/transitions")
         self._log_event("events/transitions", t, text, level, record)
         self._log_event(entity("events", "transitions", variable), t, text, level)
@@ -415,6 +465,9 @@ class EpisodeRecorder:
             if current is not None:
                 self._end_hold(variable, t, "hold", held)
             self._holds[variable] = _Hold(t, self._n_ticks - 1, held, str(text))
+            # at the held target's p of the last tick, else on the threshold line
+            p = self._last_p.get(variable, {}).get(held, self.threshold)
+            self._log_mark(variable, "hold", t, p)
             self._events.add("events/notes")
         else:
             record = self._rr.DynamicArchetype(
@@ -432,7 +485,8 @@ class EpisodeRecorder:
         """Log ``variable``'s open hold, at its first note, now that it ended at ``end`` [s].
 
         Its ``cpmp.Note`` record has the sequencer's first text and, besides, ``held`` (the
-        MP held back), ``until`` [s] and ``count`` (times noted).
+        MP held back), ``until`` [s], ``count`` (times noted), ``ended_by`` and ``then`` (what
+        ended it, :func:`~cpmp.recordings.layout.hold_text`).
         """
         hold = self._holds.pop(variable)
         record = self._rr.DynamicArchetype(
@@ -444,6 +498,8 @@ class EpisodeRecorder:
                 "held": hold.held,
                 "until": float(end),
                 "count": hold.count,
+                "ended_by": ended_by,
+                "then": then,
             },
         )
         text = hold_text(hold.text, hold.t, end, ended_by, hold.count, variable, then)
@@ -567,6 +623,8 @@ class EpisodeRecorder:
             return self.path
         try:
             self._end_holds(self._last_t if math.isfinite(self._last_t) else 0.0)
+            if self._n_ticks > 1:
+                self._log_threshold(self._last_t, self._n_ticks - 1)
             self._flush_buffers()
             self._rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
             self._rec.flush()
@@ -598,6 +656,9 @@ class EpisodeRecorder:
             start=started,
             start_focus=started and self._n_ticks <= 1,
             events=sorted(self._events, key=EVENT_ORDER.index),
+            threshold=self.threshold is not None and self._n_ticks > 0,
+            marks={v: [k for k in MARK_STYLES if k in kinds] for v, kinds in self._marks.items()},
+            duration=self._last_t if self._n_ticks > 1 else None,
         )
 
     def abort(self) -> None:
