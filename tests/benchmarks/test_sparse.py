@@ -35,8 +35,9 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     for kind in ("default", "sparse"):
         assert set(row[kind]) >= {"fit_s", "supports", "supports_all", "mae", "complete"}
         assert set(row[kind]) >= {"predictor_ms", "floor_ms", "batch_ms", "step_ms"}
-        # the graph nodes' supports (a tick's) and all of them, with the start heads'
-        assert row[kind]["supports"] < row[kind]["supports_all"]
+        # the graph nodes' supports (a tick's) and all of them: the same, as the default
+        # learned start fits no start heads
+        assert row[kind]["supports"] == row[kind]["supports_all"]
         assert 0 <= row[kind]["complete"] <= 4 and 0 < row[kind]["mae"] < 1
     assert row["sparse"]["supports"] <= 0.25 * row["default"]["supports"]
     assert row["sparse"]["supports_all"] <= 0.25 * row["default"]["supports_all"]

@@ -91,17 +91,20 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
 
 def test_paper_and_cpmp_klr_are_told_apart_in_log_and_report(tmp_path, demo_file, caplog):
     """``predictor=klr_path`` and ``predictor=klr`` are both kind ``klr``: the train log and
-    evaluation.md name the feature weighting, and the log counts start heads apart from the
-    graphs' nodes (6 nodes in the synthetic task)."""
+    evaluation.md name the feature weighting, and the log counts start heads (fitted with
+    ``start_kernel=isotropic``) apart from the graphs' nodes (6 nodes in the synthetic task)."""
     data = f"data.path={demo_file}"
-    for preset, weighting in (("klr_path", "path"), ("klr", "none")):
+    for preset, weighting, heads in (("klr_path", "path", False), ("klr", "none", True)):
         run = tmp_path / preset
         run.mkdir()
+        overrides = [data, f"predictor={preset}"]
+        overrides += ["sequencer.start_kernel=isotropic"] if heads else []
         with caplog.at_level(logging.INFO, logger="cpmp"):
-            checkpoint = train_from_file(compose_cfg("train", [data, f"predictor={preset}"]), run)
+            checkpoint = train_from_file(compose_cfg("train", overrides), run)
         fitted = [r.getMessage() for r in caplog.records if r.getMessage().startswith("fitted")]
-        assert fitted[-1].startswith(f"fitted klr ({weighting} weighting) on 6 nodes + ")
-        assert "start heads" in fitted[-1]
+        nodes = f"fitted klr ({weighting} weighting) on 6 nodes"
+        assert fitted[-1].startswith(nodes + (" + " if heads else " in "))
+        assert ("start heads" in fitted[-1]) == heads
         cfg = compose_cfg("evaluate", [data, f"checkpoint={checkpoint}"])
         evaluate_checkpoint(cfg, run)
         assert f"`klr` (feature weighting `{weighting}`" in (run / "evaluation.md").read_text()
