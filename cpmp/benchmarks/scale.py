@@ -36,8 +36,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from cpmp.errors import ConfigError, CpmpError
-from cpmp.io import atomic_write_text
+from cpmp.benchmarks.cli import given_options, run_settings_benchmark
+from cpmp.errors import ConfigError
 
 WORLDS = ("two_point", "relay")
 """The worlds measured by default."""
@@ -360,20 +360,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     names = ("worlds", "sizes", "seed", "held_out", "episodes", "timeout", "pythonpath")
-    options = {
-        name: tuple(v) if isinstance(v, list) else v
-        for name in names
-        if (v := getattr(args, name)) is not None
-    }
-    try:
-        settings = ScaleSettings.quick(**options) if args.quick else ScaleSettings(**options)
-        result = run_scale_benchmark(settings, lambda line: print(line, file=sys.stderr))
-    except CpmpError as err:
-        print(f"bench_scale: error: {err}", file=sys.stderr)
-        return 2
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
-    print(markdown(result), end="")
-    print(f"wrote {out}")
-    return 0
+    return run_settings_benchmark(
+        "bench_scale",
+        args,
+        ScaleSettings,
+        given_options(args, names),
+        run_scale_benchmark,
+        markdown,
+    )
