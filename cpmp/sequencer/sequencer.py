@@ -134,10 +134,9 @@ class ConcurrentSequencer:
             self.learned_branches
             if self.config.branch == "learned"
             else BranchChoices({}, self.learned_branches.start)
-            # the paper's rule (branch=none) reads the plain entry probability
         )
-        """The choices the transition rule uses (no branch or stay choice with ``branch=none``;
-        the start is read with ``start_rule=learned``)."""
+        """The choices the transition rule uses: with ``branch=none`` (the paper's) no branch
+        or stay choice and no entry scaling; the start is read with ``start_rule=learned``."""
         self.transition_model = TransitionModel(
             self.graphs,
             self.nodes,
