@@ -285,7 +285,8 @@ def load_checkpoint(
     one (written before cpmp stored checksums) loads, with a logged warning that it was not
     verified. Then its ``"format"`` entry must be ``spec.fmt`` (else
     :class:`CheckpointFormatError` carrying the format found) and its ``"version"`` one of
-    ``spec.versions``; ``rebuild(payload, version)`` builds the model, and what it raises
+    ``spec.versions`` (an older one is refused as a format too old, to be re-fitted: cpmp does
+    not upgrade checkpoints); ``rebuild(payload, version)`` builds the model, and what it raises
     (:data:`REBUILD_ERRORS`) is reported as a damaged checkpoint.
 
     Args:
@@ -309,6 +310,16 @@ def load_checkpoint(
     version = payload.get("version")
     if version not in spec.versions:
         known = " and ".join(str(v) for v in sorted(spec.versions))
+        if (
+            isinstance(version, int)
+            and not isinstance(version, bool)
+            and version < min(spec.versions)
+        ):
+            raise CpmpFileError(
+                f"{path} is a {spec.name} checkpoint of version {version}, a format too old for "
+                f"this cpmp (it reads version{'s' if len(spec.versions) > 1 else ''} {known}); "
+                "re-fit the model and save it again"
+            )
         raise CpmpFileError(
             f"{path} has {spec.name} checkpoint version {version}; this cpmp reads "
             f"version{'s' if len(spec.versions) > 1 else ''} {known}"

@@ -140,6 +140,13 @@ def test_checkpoint_version_and_damage_are_file_errors(tmp_path):
         _load(path)
     with pytest.raises(CpmpFileError, match=r"reads version 1$"):
         _load(path, versions=(1,))
+    old = save_checkpoint(tmp_path / "old.pt", {"format": "fmt-x", "version": 1, "value": 1})
+    with pytest.raises(
+        CpmpFileError,
+        match=r"old.pt is a x model checkpoint of version 1, a format too old for this cpmp "
+        r"\(it reads version 2\); re-fit the model and save it again$",
+    ):
+        _load(old, versions=(2,))
     damaged = save_checkpoint(tmp_path / "d.pt", {"format": "fmt-x", "version": 2})
     with pytest.raises(
         CpmpFileError, match=r"damaged x model checkpoint .*\(KeyError: 'value'\); R$"

@@ -125,7 +125,7 @@ def bench_main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--scaling-demos", type=_ints, help="demo counts (3,6,12,25,50)")
     parser.add_argument("--scaling-features", type=_ints, help="feature counts (24,64,128,256)")
-    parser.add_argument("--gradient-epochs", type=int, help="cap on mlp/klr_sparse epochs")
+    parser.add_argument("--gradient-epochs", type=int, help="cap on mlp epochs")
     parser.add_argument("--lbfgs", action="store_true", help="also time solver=lbfgs (slow)")
     parser.add_argument("--threads", type=int, help="torch and BLAS threads (1)")
     args = parser.parse_args(argv)

@@ -132,14 +132,12 @@ def bench_ticks(
 def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
     """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations.
 
-    As :func:`bench_sequencer`: fit time, epochs run, loss, step cost. ``klr_sparse`` runs its
-    Adam-trained variant (``method: l1``; its default is solved by Newton and LBFGS).
+    As :func:`bench_sequencer`: fit time, epochs run, loss, step cost.
     """
     demos = two_point_demos(settings.gradient_demos, seed=settings.seed)
     epochs = settings.gradient_epochs
     options = {
         kind: ({} if epochs is None else {"epochs": epochs})
-        | ({"method": "l1"} if kind == "klr_sparse" else {})
         for kind in settings.gradient_predictors
     }
     return bench_sequencer(

@@ -55,7 +55,7 @@ class BenchSettings:
     scaling_features: list[int] = field(default_factory=lambda: [24, 64, 128, 256])
     scaling_ticks: int = 100
     gradient_demos: int = 6
-    gradient_predictors: list[str] = field(default_factory=lambda: ["mlp", "klr_sparse"])
+    gradient_predictors: list[str] = field(default_factory=lambda: ["mlp"])
     gradient_epochs: int | None = None
     lbfgs: bool = False
     threads: int = 1

@@ -26,7 +26,7 @@ TARGET_REAL_TIME_FACTOR = 10.0
 loop."""
 
 LEARNED_POLICY: dict[str, Any] = {"predictor": FitConfig().predictor}
-"""The main job's default sequencer (``predictor=klr_path sequencer=coupled``, the defaults
+"""The main job's default sequencer (``predictor=klr sequencer=coupled``, the defaults
 of :class:`~cpmp.config.FitConfig`; tested) as
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` options."""
 

@@ -22,7 +22,7 @@ Sections (module in brackets):
   and features grow (synthetic relay task, features padded with constant columns), with a
   log-log plot.
 * ``gradient`` (:mod:`~cpmp.benchmarks.sequencer`): the Adam-trained predictors
-  (``mlp``, ``klr_sparse``'s ``l1`` variant) on small data: fit time and epochs run.
+  (``mlp``) on small data: fit time and epochs run.
 
 The machine facts, ``bench.md`` and the plot: :mod:`~cpmp.benchmarks.report`; the
 command lines of every ``scripts/bench*.py``: :mod:`~cpmp.benchmarks.cli`.

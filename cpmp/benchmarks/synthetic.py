@@ -71,11 +71,11 @@ POLICIES: dict[str, Make] = {
     "recovery=false": _sequencer(recovery=False),
 }
 """The policies by name: the world's scripted policy, the paper's method
-(``predictor=klr sequencer=paper``), the behaviour-cloning switcher (``sequencer=bc``), the
+(``predictor=paper sequencer=paper``), the behaviour-cloning switcher (``sequencer=bc``), the
 goal-nearest baseline, cpmp's defaults (``ConcurrentSequencer.fit(demos)``), ``klr_sparse``
 with the default rule, and single options of the defaults switched off."""
 TABLE = ("scripted", "paper", "bc", "goal_nearest", "defaults", "klr_sparse")
-"""The policies of the README's worlds table (the default)."""
+"""The policies of the worlds table in docs/results.md (the default)."""
 
 
 @dataclass(frozen=True)

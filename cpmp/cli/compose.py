@@ -27,6 +27,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from cpmp.compare.settings import register_compare
 from cpmp.config.paths import CONF_PACKAGE, conf_dir
+from cpmp.config.predictors import REMOVED_OPTIONS
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.experiment.config import register_configs
 
@@ -114,6 +115,10 @@ def _composition_error(
     if key:
         name = key.group(1)
         line = next((o.input_line for o in overrides if o.key_or_group == name), name)
+        group, _, leaf = name.partition(".")
+        removed = [r[leaf] for r in REMOVED_OPTIONS.values() if leaf in r]
+        if group == "predictor" and removed:
+            return ConfigError(f"{line}: removed option {name}: {removed[0]}; drop it")
         others = [o.input_line for o in overrides if "." not in o.key_or_group]
         close = _close_key(name, config_name, others, config_dir)
         if close is not None:  # a misspelt key: adding it with + would only fail later

@@ -135,8 +135,8 @@ class StatsSettings:
 def _claims() -> list[ClaimSettings]:
     """The paper's two claims, each a pair of rows that differ in that one respect."""
     return [
-        ClaimSettings("soft-label BCE vs clipped regression", "klr_path", "regression_clip"),
-        ClaimSettings("path-length progress (eq. 1) vs elapsed time", "klr_path", "time_phase"),
+        ClaimSettings("soft-label BCE vs clipped regression", "klr", "regression_clip"),
+        ClaimSettings("path-length progress (eq. 1) vs elapsed time", "klr", "time_phase"),
     ]
 
 

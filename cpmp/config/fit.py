@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cpmp.config.predictors import (
+    REMOVED_OPTIONS,
     PredictorConfig,
     predictor_config,
     predictor_config_class,
@@ -99,6 +100,8 @@ class FitConfig:
         routed: dict[str, dict[str, Any]] = {part: {} for part in names}
         for key, value in options.items():
             part = next((p for p, valid in names.items() if key in valid), None)
+            if part is None and key in REMOVED_OPTIONS.get(predictor, {}):
+                part = "predictor"  # predictor_config names it as removed
             if part is None:
                 valid = sorted(set().union(*names.values()))
                 raise ConfigError(

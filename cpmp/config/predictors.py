@@ -125,8 +125,9 @@ demonstrations: 0.023); 0.999 took four times as long to fit as 0.995."""
 class KLRConfig(PredictorConfig):
     """Options of ``klr`` / ``klr_full``.
 
-    The defaults are cpmp's (``predictor=klr_path``); the paper's ``predictor=klr`` sets
-    ``feature_weighting: none`` and ``feature_scaling: none``.
+    The defaults are cpmp's (``predictor=klr`` on the command line, ``"klr"`` in Python); the
+    paper's kernel, ``predictor=paper``, sets ``feature_weighting: none``,
+    ``feature_scaling: none`` and ``path_noise: none``.
 
     Attributes:
         gamma: RBF kernel parameter γ in ``exp(-γ ||s - x||²)`` (the paper's "kernel width 4.0").
@@ -195,42 +196,48 @@ class KLRConfig(PredictorConfig):
             )
 
 
-SPARSITY_METHODS = ("forward", "l1")
-"""Values of :attr:`SparseKLRConfig.method`."""
+REMOVED_OPTIONS: dict[str, dict[str, str]] = {
+    "klr_sparse": dict.fromkeys(
+        (
+            "method",
+            "candidate_scale",
+            "min_candidates",
+            "l1",
+            "learn_positions",
+            "learn_lengthscales",
+            "epochs",
+            "lr",
+            "prune_tol",
+            "refit",
+        ),
+        "klr_sparse's L1-penalised variant (method: l1) was removed; klr_sparse always follows "
+        "the sparsity path, which these options do not tune",
+    ),
+}
+"""Options a predictor kind no longer has, with why: :func:`predictor_config` names them as
+removed rather than unknown."""
 
 
 @dataclass
 class SparseKLRConfig(KLRConfig):
     """Options of ``klr_sparse`` (on top of :class:`KLRConfig`, whose defaults it shares).
 
-    ``klr_sparse`` starts from cpmp's default model (``klr_path``: the same RBF kernel,
-    path feature weighting, global scaling and denoised labels) and learns which of the fixed
-    rule's support points of the graph nodes to keep. With ``method: forward`` (the default)
-    it follows a *sparsity path*: greedy forward selection over all graph nodes (each added
-    support is the candidate, of any node, with the largest estimated loss decrease; Newton
-    re-fits along the way, :mod:`cpmp.predictors.selection`), recorded at support totals that
-    are fractions (*levels*) of the graph nodes' fixed-rule count, once per kernel width in
-    ``gamma_scales``. The level and width of least held-out progress MAE are kept (then the
-    loss, then fewer supports, break ties). The validation data are the fit's (held-out
-    demonstrations; the main job's test split, ``trainer.val_fraction``, or ``validation=`` of
-    :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any, ``holdout_fraction`` of
-    each node's activations (seeded by the fit's seed) is held out to choose, and the chosen
-    level and width are then selected again on every activation. The start heads are not on
-    the path: sparsified as one-class fits they chose the wrong initial node in 4-19 of 20
-    episodes (two_point, relay). They are fitted on the fixed rule's supports and then
-    *distilled* (``start_share``): a quarter of their supports, chosen to reproduce the fitted
-    head's logits where the start rule reads them.
-
-    The kept supports are then *refined* (``refine_iter`` > 0, the default): their positions,
-    one kernel-weight factor per node and feature, the weights and the bias are optimised
-    together by LBFGS on the training loss (inducing points, :mod:`cpmp.predictors.inducing`),
-    on every training activation, each support anchored to its path point
-    (``refine_anchor``); the trainer's convex solver then solves the weights on every sample.
-    A subset of the rule's fixed points leaves gaps the default kernel was not made to bridge;
-    moved supports close them (held-out MAE at a quarter of the supports, two_point / relay /
-    simulator with 3 demonstrations of seed 0: 0.053 / 0.059 / 0.040 kept in place, 0.026 /
-    0.037 / 0.035 refined, against the default model's 0.028 / 0.035 / 0.030;
-    ``scripts/bench_sparse.py``).
+    ``klr_sparse`` starts from cpmp's default model (``klr``) and learns which of the fixed
+    rule's support points of the graph nodes to keep. It follows a *sparsity path*: greedy
+    forward selection over all graph nodes (:mod:`cpmp.predictors.selection`), recorded at
+    support totals that are fractions (*levels*) of the graph nodes' fixed-rule count, once per
+    kernel width in ``gamma_scales``. The level and width of least held-out progress MAE are
+    kept (then the loss, then fewer supports, break ties). The validation data are the fit's
+    (held-out demonstrations: the main job's test split, ``trainer.val_fraction``, or
+    ``validation=`` of :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any,
+    ``holdout_fraction`` of each node's activations (seeded by the fit's seed) is held out to
+    choose, and the chosen level and width are then selected again on every activation. The
+    start heads are not on the path: they are fitted on the fixed rule's supports and then
+    *distilled* to ``start_share`` of them. The kept supports are then *refined* (inducing
+    points, :mod:`cpmp.predictors.inducing`): positions, one kernel-weight factor per node and
+    feature, weights and bias optimised together by LBFGS on the training loss, each support
+    anchored to its path point; the convex solver then solves the weights on every sample.
+    Why each piece is there, measured: docs/benchmarks.md and docs/history.md.
 
     The fit summary reports the path: ``sparsity_path`` (one record per width and level:
     ``level``, ``gamma_scale``, ``n_support``, ``train_loss``, ``val_loss``, ``val_mae``,
@@ -239,67 +246,38 @@ class SparseKLRConfig(KLRConfig):
     nodes' fixed-rule count), ``refine`` (the loss before and after, the evaluations spent),
     ``start_distillation`` (``max_logit_error``), ``n_support_graph`` and ``n_support_start``.
 
-    To fit at a given support count (an ablation axis), set ``level``: the graph nodes then
-    have ``floor(level * n_support_rule)`` supports (at least one per node); the width is
-    still chosen on the validation data, and the path up to that level is still reported.
-
-    ``method: l1`` is the earlier variant, kept for comparison: a generous candidate set, an
-    L1 penalty trained by Adam, pruning and a convex re-fit (the options from
-    ``candidate_scale`` on); it keeps more supports than the fixed rule.
-
     Attributes:
-        method: ``forward`` (the sparsity path) or ``l1``.
         level: ``None`` (default: choose the level on the validation data) or the share of
-            the fixed rule's support count to keep, in (0, 1].
-        path_levels: the levels at which the path is recorded and scored, each in (0, 1].
-        gamma_scales: kernel widths tried along the path, as factors of ``gamma`` (1: the
-            default kernel; 0.25: twice as wide); each is a path of its own. Default: the
-            default kernel only. A wider kernel wins on validation loss at a quarter of the
-            supports (simulator, 6 demos: held-out MAE 0.0215 against 0.0237) but loses the
-            closed loop: its smoother φ stays below the switching threshold (12 of 20 boxes
-            deadlocked, 4 complete; with the default kernel 13 complete, the default model 15).
-        holdout_fraction: without validation data, the share of each node's activations
-            (of nodes with at least two) held out to choose the level and width, in (0, 1).
-        refine_iter: LBFGS iterations of the refinement at most (0: keep the fixed rule's
-            positions and the default kernel, the path's model as it is).
-        refine_samples: training samples per node, at most, on which the refinement's loss
-            is computed (every k-th; the weights are then re-solved on every sample).
-        refine_anchor: weight ``λ`` of ``λ Σ ||u - u₀||²`` in the refinement's loss, which
-            pulls each moved support back to its point on the demonstrated path (``u``: the
-            positions in kernel widths); 0: free, a large value: kept in place. Free supports
-            fit the demonstrations' ramps closest but drift from the activations' ends, where
-            the closed loop needs φ high: on the simulator (6 demos, seed 0) 9 of 20 boxes
-            complete free, 14 at 0.01, 15 kept in place (the default model: 15), while kept in
-            place two_point's held-out MAE at 3 demos is 1.14x the default's (0.95x at 0.01).
+            the fixed rule's support count to keep, in (0, 1]: the graph nodes then have
+            ``floor(level * n_support_rule)`` supports (at least one per node); the width is
+            still chosen on the validation data, and the path up to that level is reported.
+        path_levels: the levels at which the path is recorded and scored, each in (0, 1]
+            (default 1/16, 1/8, 3/16, 1/4).
+        gamma_scales: kernel widths tried along the path, as factors of ``gamma`` (> 0; 1: the
+            default kernel; 0.25: twice as wide); each is a path of its own. Default: (1,),
+            the default kernel only (a wider kernel's smoother φ can stay below the switching
+            threshold).
+        holdout_fraction: without validation data, the share of each node's activations (of
+            nodes with at least two) held out to choose the level and width, in (0, 1)
+            (default 0.25).
+        refine_iter: LBFGS iterations of the refinement at most (default 60; 0: keep the fixed
+            rule's positions and the default kernel, the path's model as it is).
+        refine_samples: training samples per node, at most, on which the refinement's loss is
+            computed (every k-th; default 128; the weights are then re-solved on every sample).
+        refine_anchor: weight ``λ`` of ``λ Σ ||u - u₀||²`` in the refinement's loss (``u``: the
+            positions in kernel widths), which pulls each moved support back to its point on
+            the demonstrated path, where the closed loop needs φ high at the activations' ends;
+            default 0.01; 0: free; a large value: kept in place.
         start_share: the share of each start head's fixed-rule supports kept after its fit
-            (``floor(start_share * n)``, at least one; 1: all, no distillation). They are
+            (``floor(start_share * n)``, at least one; default 0.25; 1: all, no distillation),
             chosen by orthogonal matching pursuit to reproduce the fitted head's logits on its
-            variable's start region (the training samples of all its start heads with
-            progress label <= 0.25), weights and bias least squares there; the fit summary
-            reports the largest logit error (``start_distillation``). Keeping instead the
-            points nearest the activations' starts (the first quarter of each path) started
-            as well as the default on the synthetic worlds but wrongly for 10 of 20 simulator
-            boxes against the default's 5 (3 demonstrations, seed 0), 7.5-9 boxes fewer
-            complete per D: there the start decision rests on the heads' later points too.
-            Distilled, the simulator's starts and completions are those of the full heads
-            (seeds 0-1, D = 3 / 6 / 9) and the bank holds 0.21-0.25x the default's supports.
-        l2: as in :class:`KLRConfig`, and the same default: the start heads are fitted on
-            the fixed rule's supports, and their one-class fits choose the initial node only at
-            ``klr``'s penalty (at 1e-6, relay with 6 demos started wrongly in 20 of 20
-            episodes).
-        candidate_scale: ``l1``: candidates per unit path length (pruned after training).
-        min_candidates: ``l1``: minimum candidates per activation.
-        l1: ``l1``: weight of the sparsity penalty ``l1 * mean|w|`` per node.
-        learn_positions: ``l1``: also move the support points.
-        learn_lengthscales: ``l1``: learn one length-scale per node and feature (ARD).
-        epochs: ``l1``: Adam steps (full batch) at most; the trainer's early stopping
-            usually ends the sparsity phase sooner.
-        lr: ``l1``: Adam learning rate.
-        prune_tol: ``l1``: prune supports with ``|w| < prune_tol * max|w|`` of their node.
-        refit: ``l1``: re-fit the surviving weights to convergence after pruning.
+            variable's start region (the training samples of all its start heads with progress
+            label <= 0.25), weights and bias least squares there; the fit summary reports the
+            largest logit error (``start_distillation``).
+        l2: as in :class:`KLRConfig`, and the same default (the start heads are fitted on the
+            fixed rule's supports, and their one-class fits need ``klr``'s penalty).
     """
 
-    method: str = "forward"
     level: float | None = None
     path_levels: tuple[float, ...] = (0.0625, 0.125, 0.1875, 0.25)
     gamma_scales: tuple[float, ...] = (1.0,)
@@ -308,26 +286,12 @@ class SparseKLRConfig(KLRConfig):
     refine_samples: int = 128
     refine_anchor: float = 0.01
     start_share: float = 0.25
-    candidate_scale: float = 8.0
-    min_candidates: int = 8
-    l1: float = 1e-2
-    learn_positions: bool = False
-    learn_lengthscales: bool = False
-    epochs: int = 400
-    lr: float = 0.1
-    prune_tol: float = 0.02
-    refit: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self._integer("min_candidates", "epochs", "refine_iter", "refine_samples")
-        self._positive("candidate_scale", "min_candidates", "epochs", "lr", "refine_samples")
-        self._non_negative("l1", "prune_tol", "refine_iter", "refine_anchor")
-        if self.method not in SPARSITY_METHODS:
-            raise ConfigError(
-                f"predictor option method must be one of {', '.join(SPARSITY_METHODS)}, "
-                f"got {self.method!r}"
-            )
+        self._integer("refine_iter", "refine_samples")
+        self._positive("refine_samples")
+        self._non_negative("refine_iter", "refine_anchor")
         if self.level is not None:
             self.level = self._share("level", self.level)
         self.path_levels = self._shares("path_levels")
@@ -337,11 +301,6 @@ class SparseKLRConfig(KLRConfig):
         if not 0.0 < fraction < 1.0:
             raise ConfigError(
                 f"predictor option holdout_fraction must be in (0, 1), got {fraction!r}"
-            )
-        if self.method == "forward" and (self.learn_positions or self.learn_lengthscales):
-            raise ConfigError(
-                "predictor options learn_positions and learn_lengthscales need method=l1 "
-                "(the forward path keeps the fixed rule's positions and kernel)"
             )
 
     def _share(self, name: str, value: Any, upper: float | None = 1.0) -> float:
@@ -500,9 +459,22 @@ def predictor_option_names(kind: str) -> list[str]:
 
 
 def predictor_config(kind: str, **options: Any) -> PredictorConfig:
-    """Validated options of predictor ``kind``; unknown options raise :class:`ConfigError`."""
+    """Validated options of predictor ``kind``.
+
+    Raises:
+        ConfigError: an unknown option, or one the kind no longer has
+            (:data:`REMOVED_OPTIONS`, named as removed), or a bad value.
+    """
     cls = predictor_config_class(kind)
     valid = predictor_option_names(kind)
+    removed = REMOVED_OPTIONS.get(kind, {})
+    gone = sorted(set(options) & set(removed))
+    if gone:
+        reasons = "; ".join(dict.fromkeys(removed[name] for name in gone))
+        raise ConfigError(
+            f"removed option(s) {', '.join(gone)} for predictor {kind!r}: {reasons}; drop "
+            f"them (valid options: {', '.join(valid)})"
+        )
     unknown = sorted(set(options) - set(valid))
     if unknown:
         raise ConfigError(

@@ -193,8 +193,8 @@ def _model_entry(seq: Any) -> dict[str, Any]:
 def predictor_description(model: dict[str, Any]) -> str:
     """How the reports name a learned sequencer's predictor: its kind and feature weighting.
 
-    ``klr`` with ``path`` weighting is the ``predictor=klr_path`` preset (cpmp's default),
-    with ``none`` the paper's ``predictor=klr``; both are kind ``klr``, so the weighting is
+    ``klr`` with ``path`` weighting is ``predictor=klr`` (cpmp's default), with ``none`` the
+    paper's kernel ``predictor=paper``; both are kind ``klr``, so the weighting is
     always named.
 
     Args:

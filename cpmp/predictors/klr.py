@@ -4,8 +4,7 @@
                ``max(min_support, ceil(support_scale * path length))`` (the paper's choice).
 ``klr_full``   every training sample is a support point (the standard, overfitting-prone KLR).
 ``klr_sparse`` learned sparsity on the default model: the supports a sparsity path keeps
-               (greedy forward selection, level chosen on validation data), or
-               (``method: l1``) L1-penalised weights on a generous candidate set, pruned.
+               (greedy forward selection, level chosen on validation data).
 
 All three share one batched kernel evaluation over padded support sets ``(K, S, d)``.
 """
@@ -363,7 +362,7 @@ class KLRPredictor(ProgressPredictor):
 
         The bank is repacked to the most kept supports per node; the biases, the kernel
         weights and the kept supports' order are unchanged, so each node's logit loses exactly
-        the terms of the supports dropped. ``klr_sparse`` prunes and distils with it; a
+        the terms of the supports dropped. ``klr_sparse`` distils its start heads with it; a
         benchmark can strip a bank to one support per node to time a tick's fixed cost.
 
         Raises:
@@ -506,7 +505,6 @@ class KLRPredictor(ProgressPredictor):
         self,
         data: list[NodeData],
         kernels: list[torch.Tensor],
-        l1: float = 0.0,
         rows: list[torch.Tensor] | None = None,
     ) -> torch.Tensor:
         """Sum over nodes of the penalised soft-label loss given each node's kernel matrix.
@@ -515,11 +513,10 @@ class KLRPredictor(ProgressPredictor):
             data: every node's training data.
             kernels: per node the kernel ``(P_i, S)`` of its samples (``(b_i, S)``: of the
                 mini-batch's rows when ``rows`` is given).
-            l1: weight of the ``l1 · mean |w|`` term per node (0: none).
             rows: per node the mini-batch's rows ``(b_i,)`` (``None``: every sample).
 
         Returns:
-            Σ over nodes of the mean soft BCE (eq. 5) + ``½ l2 ||w||²`` (+ the L1 term).
+            Σ over nodes of the mean soft BCE (eq. 5) + ``½ l2 ||w||²``.
         """
         total = torch.zeros((), dtype=self.dtype_, device=self.weight.device)
         for i, (node, kern) in enumerate(zip(data, kernels, strict=True)):
@@ -527,14 +524,12 @@ class KLRPredictor(ProgressPredictor):
             target = node.target if rows is None else node.target[rows[i]]
             total = total + soft_bce(kern @ w + self.bias[i], target)
             total = total + 0.5 * self.config.l2 * (w * w).sum()
-            if l1 > 0.0:
-                total = total + l1 * w.abs().sum() / self.support_mask[i].sum().clamp_min(1)
         return total
 
     def solve_convex(
         self, data: list[NodeData], solver: SolverOptions, kernels: list[torch.Tensor] | None = None
     ) -> list[NewtonInfo]:
-        """Newton solve of :meth:`_penalised_loss` (no L1) for weight and bias, kernel fixed.
+        """Newton solve of :meth:`_penalised_loss` for weight and bias, kernel fixed.
 
         Each node's kernel is evaluated in blocks (:meth:`blocked`,
         :func:`~cpmp.predictors.newton.newton_solve_blocks`); a node held in one block is
@@ -689,12 +684,10 @@ class _Split:
 class SparseKLRPredictor(KLRPredictor):
     """``klr_sparse``: the default model with the supports a sparsity path keeps.
 
-    ``method: forward`` (default): the fixed rule's supports are the candidates; greedy
-    forward selection (:func:`cpmp.predictors.selection.forward_selection_path`) records a
-    path per kernel width, the validation data choose its level and width, and the
-    trainer's convex solver solves the kept supports. ``method: l1``: L1-penalised weights
-    on a generous candidate set (Adam), pruned and re-fitted. See
-    :class:`~cpmp.config.SparseKLRConfig`.
+    The fixed rule's supports are the candidates; greedy forward selection
+    (:func:`cpmp.predictors.selection.forward_selection_path`) records a path per kernel
+    width, the validation data choose its level and width, and the trainer's convex solver
+    solves the kept supports. See :class:`~cpmp.config.SparseKLRConfig`.
     """
 
     config: SparseKLRConfig
@@ -710,18 +703,13 @@ class SparseKLRPredictor(KLRPredictor):
         n_support: int = 1,
     ) -> None:
         super().__init__(node_keys, n_features, config, n_support)
-        l1 = config.method == "l1"
+        # set by the refinement and the width choice, not by the trainer
         self.log_feature_scale = nn.Parameter(
-            torch.zeros(self.n_nodes, n_features, dtype=self.dtype_),
-            requires_grad=l1 and config.learn_lengthscales,
+            torch.zeros(self.n_nodes, n_features, dtype=self.dtype_), requires_grad=False
         )
-        self.support = nn.Parameter(
-            self.support.clone(), requires_grad=l1 and config.learn_positions
-        )
-        self.refit_info: list[NewtonInfo] = []
-        """Per-node outcome of the last Newton re-fit (``l1``; empty before one)."""
+        self.support = nn.Parameter(self.support.clone(), requires_grad=False)
         self.sparsity_path: list[SparsityLevel] = []
-        """The path of the last fit (``forward``; empty before one)."""
+        """The path of the last fit (empty before one)."""
         self.sparsity_validation = "none"
         """Where the path's held-out data came from: ``validation``, ``held-out activations``
         or ``none``."""
@@ -734,45 +722,27 @@ class SparseKLRPredictor(KLRPredictor):
         """The last refinement's loss before and after and its evaluations (empty: none)."""
         self._validation: list[NodeData] | None = None
 
-    @property
-    def convex(self) -> bool:  # type: ignore[override]
-        """``forward`` is solved by Newton after its path; ``l1``'s sparsity phase by Adam."""
-        return self.config.method == "forward"
-
     def feature_weights(self) -> torch.Tensor:
         """Per-node, per-feature kernel weights ``(K, d)``.
 
-        γ (times the chosen width factor) times the path weights, times the learned scales
-        (``l1`` with ``learn_lengthscales``; 1 otherwise).
+        γ (times the chosen width factor) times the path weights, times the refinement's
+        per-node, per-feature scales.
         """
         return self.gamma * self.feature_scale * torch.exp(self.log_feature_scale)
 
-    def _support_rule(self) -> tuple[float, int, int | None]:
-        if self.config.method == "forward":
-            return super()._support_rule()
-        return self.config.candidate_scale, self.config.min_candidates, None
-
     def _assign_support(self, support: torch.Tensor) -> None:
         del self.support
-        learn = self.config.method == "l1" and self.config.learn_positions
-        self.support = nn.Parameter(support, requires_grad=learn)
-
-    def _learned_kernel(self) -> bool:
-        return self.config.method == "l1" and (
-            self.config.learn_positions or self.config.learn_lengthscales
-        )
+        self.support = nn.Parameter(support, requires_grad=False)
 
     # ------------------------------------------------------------------ the sparsity path
     def set_validation(self, validation: list[NodeData] | None) -> None:
-        """Keep the fit's held-out data for choosing the level (``forward``)."""
+        """Keep the fit's held-out data for choosing the level."""
         self._validation = validation
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
-        """Place the candidates; ``forward``: run the path and keep the chosen supports."""
+        """Place the candidates, run the path and keep the chosen supports."""
         super().initialize(data, generator)
         validation, self._validation = self._validation, None
-        if self.config.method != "forward":
-            return
         with torch.no_grad():
             self._select(data, validation, generator)
 
@@ -1000,7 +970,7 @@ class SparseKLRPredictor(KLRPredictor):
         """The sparsity path as text: one line per point, the chosen one marked."""
         chosen = next((p for p in self.sparsity_path if p.chosen), None)
         if chosen is None:
-            return "klr_sparse: no sparsity path (method l1)"
+            return "klr_sparse: no sparsity path (not fitted)"
         lines = [
             f"klr_sparse kept {chosen.n_support} of the fixed rule's {self.n_support_rule} "
             f"supports (level {chosen.level:g}, gamma x {chosen.gamma_scale:g}), chosen on "
@@ -1027,49 +997,14 @@ class SparseKLRPredictor(KLRPredictor):
             )
         return "\n".join(lines)
 
-    # ------------------------------------------------------------------ training and l1
-    def training_loss(
-        self, data: list[NodeData], rows: list[torch.Tensor] | None = None
-    ) -> torch.Tensor:
-        """``forward``: the KLR loss; ``l1``: with the L1 term (a learned kernel recomputed)."""
-        if self.config.method == "forward":
-            return super().training_loss(data, rows)
-        if self._learned_kernel():
-            self._cache = None
-            kernels = [
-                self.node_kernel(i, node.x if rows is None else node.x[rows[i]])
-                for i, node in enumerate(data)
-            ]
-        else:
-            kernels = _rows_of(self.node_kernels(data), rows)
-        return self._penalised_loss(data, kernels, self.config.l1, rows)
-
+    # ------------------------------------------------------------------ the start heads
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
-        """``forward``: distil the start heads; ``l1``: prune, compact, optionally re-fit.
+        """Distil the start heads (with ``start_share`` < 1; :meth:`_distil_start_heads`).
 
-        ``forward`` chose its graph nodes' supports before the solve; with ``start_share`` < 1
-        its start heads are distilled now (:meth:`_distil_start_heads`). ``l1`` prunes the
-        near-zero supports and re-fits the weights of the others (``refit``).
-
-        Args:
-            data: every node's training data.
-            solver: how ``l1``'s convex re-fit is solved (default: Newton).
+        The graph nodes' supports were chosen before the solve.
         """
-        if self.config.method == "forward":
-            if self.config.start_share < 1.0:
-                self._distil_start_heads(data)
-            return
-        with torch.no_grad():
-            w = (self.weight * self.support_mask).abs()
-            keep = (w >= self.config.prune_tol * w.max(dim=1, keepdim=True).values) & (w > 0)
-            keep &= self.support_mask
-            empty = keep.sum(1) == 0
-            if empty.any():
-                keep[empty] = self.support_mask[empty] & (w[empty] == w[empty].max(1, True).values)
-        self.keep_supports(keep)
-        self.log_feature_scale.requires_grad_(False)
-        if self.config.refit:
-            self._refit(data, solver or SolverOptions())
+        if self.config.start_share < 1.0:
+            self._distil_start_heads(data)
 
     def _distil_start_heads(self, data: list[NodeData]) -> None:
         """Replace each fitted start head by ``start_share`` of its supports.
@@ -1115,36 +1050,10 @@ class SparseKLRPredictor(KLRPredictor):
         self.start_distillation = {"max_logit_error": max(errors)}
         log.info("%s", self.describe_path().splitlines()[-1])
 
-    def _refit(self, data: list[NodeData], solver: SolverOptions) -> None:
-        """Convex re-fit of weights and bias on the surviving (fixed) supports.
-
-        Without the L1 shrinkage: Newton, or LBFGS with ``solver.method == "lbfgs"``.
-        """
-        kernels = self.node_kernels(data)
-        if solver.method == "newton":
-            self.refit_info = self.solve_convex(data, solver, kernels)
-            return
-        params = [self.weight] + ([self.bias] if self.config.bias else [])
-        opt = torch.optim.LBFGS(
-            params,
-            max_iter=self.config.max_iter,
-            line_search_fn="strong_wolfe",
-            tolerance_grad=1e-9,
-            tolerance_change=1e-12,
-        )
-
-        def closure() -> torch.Tensor:
-            opt.zero_grad()
-            total = self._penalised_loss(data, kernels)
-            total.backward()
-            return total
-
-        opt.step(closure)
-
     def summary(self) -> dict[str, Any]:
-        """The kernel bank's facts, the sparsity path and which kernel parts were learned.
+        """The kernel bank's facts and the sparsity path.
 
-        ``forward``: ``sparsity_path`` (one dict per :class:`SparsityLevel`),
+        ``sparsity_path`` (one dict per :class:`SparsityLevel`),
         ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``,
         ``n_support_rule`` (the graph nodes') and, after a refinement, ``refine``
         (``loss_start``, ``loss``, ``evaluations``), after a distillation of the start heads
@@ -1152,9 +1061,6 @@ class SparseKLRPredictor(KLRPredictor):
         a control tick evaluates) and ``n_support_start`` (the start heads').
         """
         out = super().summary()
-        out["sparsity_method"] = self.config.method
-        out["learn_positions"] = self.config.learn_positions
-        out["learn_lengthscales"] = self.config.learn_lengthscales
         if self.sparsity_path:
             chosen = next(p for p in self.sparsity_path if p.chosen)
             out["sparsity_path"] = [dataclasses.asdict(p) for p in self.sparsity_path]

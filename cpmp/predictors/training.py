@@ -318,7 +318,7 @@ def fit_predictor(
 def _predictor_name(predictor: ProgressPredictor) -> str:
     """The predictor's kind and, where it has one, its feature weighting (``klr (path weighting)``).
 
-    ``predictor=klr_path`` and the paper's ``predictor=klr`` are both kind ``klr``; the
+    ``predictor=klr`` and the paper's ``predictor=paper`` are both kind ``klr``; the
     weighting tells them apart.
     """
     weighting = getattr(predictor.config, "feature_weighting", None)

@@ -85,11 +85,11 @@ def test_find_job_dirs_in_natural_order_skipping_failed_and_hidden(sweep):
 
 
 def test_read_overrides_parses_values(tmp_path):
-    overrides = ["predictor=klr_sparse", "predictor.l1=1e-3", "+experiment.seeds=[0,1]"]
+    overrides = ["predictor=klr_sparse", "predictor.level=0.125", "+experiment.seeds=[0,1]"]
     job = make_job(tmp_path, "0", overrides, None)
     assert read_overrides(job) == {
         "predictor": "klr_sparse",
-        "predictor.l1": 1e-3,
+        "predictor.level": 0.125,
         "experiment.seeds": "[0,1]",
     }
     assert read_overrides(tmp_path / "nowhere") == {}

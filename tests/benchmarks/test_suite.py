@@ -201,5 +201,5 @@ def test_bench_smallest_form_writes_every_section(tmp_path, capsys):
     assert scaling["demos"][0]["n_support_total"] < scaling["demos"][1]["n_support_total"]
 
     gradient = result["sections"]["gradient"]["predictors"]
-    assert set(gradient) == {"mlp", "klr_sparse"}
+    assert set(gradient) == {"mlp"}
     assert all(1 <= row["epochs"] <= row["max_epochs"] == 3 for row in gradient.values())

@@ -54,8 +54,8 @@ def error_line(proc: subprocess.CompletedProcess) -> str:
 # ``{file}`` stands for an existing file. All of them fail in check_command (light imports).
 LIGHT_CASES = [
     # an unknown option of a config group
-    ("experiment", ["predictor=svm"], ["predictor=svm", "klr_path"]),
-    ("train", ["predictor=svm"], ["predictor=svm", "klr_path"]),
+    ("experiment", ["predictor=svm"], ["predictor=svm", "klr_sparse", "paper"]),
+    ("train", ["predictor=svm"], ["predictor=svm", "klr_sparse", "paper"]),
     ("evaluate", ["data=nope"], ["data=nope", "default"]),
     ("collect", ["task=defalt"], ["task=defalt", "did you mean task=default"]),
     ("aggregate", ["hydra/launcher=nope"], ["hydra/launcher=nope", "joblib"]),
@@ -80,6 +80,12 @@ LIGHT_CASES = [
         ["nokey_at_all=1", "to add a new key write +nokey_at_all=1"],
     ),
     ("experiment", ["experiment.n_boxs=3"], ["experiment.n_boxs", "'experiment.n_boxes'"]),
+    # an option that was removed is named so, not offered to be added with '+'
+    (
+        "experiment",
+        ["predictor=klr_sparse", "predictor.method=l1"],
+        ["predictor.method=l1: removed option predictor.method", "(method: l1) was removed"],
+    ),
     ("train", ["data.pth=x.h5"], ["data.pth=x.h5", "'data.path'"]),
     ("evaluate", ["checkpont=m.pt"], ["checkpont=m.pt", "'checkpoint'"]),
     ("collect", ["n_demo=3"], ["n_demo=3", "'n_demos'"]),

@@ -47,8 +47,8 @@ def without_timings(row: dict[str, Any]) -> dict[str, Any]:
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory, script_in_background):
     """``experiment=compare_tiny`` as ``scripts/compare.py`` (two worker processes) and, at
-    the same time, a serial in-process run of its ``klr`` rows (the sweep's 2.0 is klr's own
-    fit). Yields both run dirs and the script's stdout."""
+    the same time, a serial in-process run of its ``paper`` rows (the sweep's 2.0 is the paper
+    row's own fit). Yields both run dirs and the script's stdout."""
     base = tmp_path_factory.mktemp("compare")
     script, serial = base / "script", base / "serial"
     serial.mkdir()
@@ -58,7 +58,7 @@ def tiny(tmp_path_factory, script_in_background):
             [
                 "experiment=compare_tiny",
                 "experiment.workers=1",
-                "compare.predictors=[klr]",
+                "compare.predictors=[paper]",
                 "compare.baselines=[]",
                 "compare.sweep.support_scale=[2.0]",
             ]
@@ -74,7 +74,7 @@ def rows_of(run_dir: Path) -> list[dict[str, Any]]:
 def test_tiny_compare_writes_every_number_with_its_interval(tiny):
     script, _, stdout = tiny
     assert stdout.strip().splitlines()[-1] == str(script / "compare.json")
-    assert "[12/12]" in stdout  # 4 simulator fits (the sweep's 2.0 is klr's) + 8 two-point
+    assert "[12/12]" in stdout  # 4 simulator fits (the sweep's 2.0 is paper's) + 8 two-point
     for name in OUTPUT_FILES:
         assert (script / name).is_file(), name
         if name.endswith(".png"):
@@ -83,12 +83,12 @@ def test_tiny_compare_writes_every_number_with_its_interval(tiny):
     assert [w["name"] for w in result["worlds"]] == ["sim", "two_point"]
     keys = {(r["world"], r["name"], r["D"]) for r in result["rows"]}
     assert keys == {
+        ("sim", "paper", 3),
         ("sim", "klr", 3),
-        ("sim", "klr_path", 3),
         ("sim", "goal_nearest", 3),
-        ("sim", "klr support_scale=1", 3),
-        ("sim", "klr support_scale=2", 3),
-        *{("two_point", name, d) for name in ("klr", "klr_path") for d in (2, 4)},
+        ("sim", "paper support_scale=1", 3),
+        ("sim", "paper support_scale=2", 3),
+        *{("two_point", name, d) for name in ("paper", "klr") for d in (2, 4)},
     }
     for row in result["rows"]:
         assert row["errors"] == []
@@ -111,18 +111,18 @@ def test_tiny_compare_writes_every_number_with_its_interval(tiny):
     assert all(r["episodes"] == 6 and r["seeds"] == [0, 1] for r in two_point)
     sweep = {r["value"]: r for r in result["rows"] if r["group"] == "support_sweep"}
     assert sweep[1.0]["supports"]["estimate"] < sweep[2.0]["supports"]["estimate"]
-    default = next(r for r in result["rows"] if r["group"] == "predictors" and r["name"] == "klr")
+    default = next(r for r in result["rows"] if r["group"] == "predictors" and r["name"] == "paper")
     assert without_timings(default) == without_timings(sweep[2.0])  # one shared fit
-    # pairs: 3 in the simulator (klr, klr_path, goal_nearest), 1 per D in two_point
+    # pairs: 3 in the simulator (paper, klr, goal_nearest), 1 per D in two_point
     pairs = {(p["world"], p["D"], p["a"], p["b"]) for p in result["pairs"]}
-    assert len(pairs) == 5 and ("two_point", 4, "klr", "klr_path") in pairs
+    assert len(pairs) == 5 and ("two_point", 4, "paper", "klr") in pairs
     for pair in result["pairs"]:
         for key in (*RATES, "mae"):
             assert pair[key]["significant"] in (True, False)
             assert 0 < pair[key]["p"] <= 1
     assert result["claims"] == []  # the tiny rows hold neither claim's pair
     table = (script / "compare.md").read_text()
-    for text in ("`klr_path`", "`goal_nearest`", "paper, Table I", "Support-count axis", " [", "−"):
+    for text in ("`paper`", "`goal_nearest`", "paper, Table I", "Support-count axis", " [", "−"):
         assert text in table
     timings = json.loads((script / "timings.json").read_text())
     assert timings["workers"] == 2 and len(timings["jobs"]) == 12
@@ -135,24 +135,24 @@ def test_numbers_do_not_depend_on_the_worker_count(tiny):
     script, serial, _ = tiny
     both = {(r["world"], r["name"], r["D"]): r for r in rows_of(script)}
     alone = rows_of(serial)
-    assert len(alone) == 4  # sim: klr, its sweep point; two_point: klr at D = 2, 4
+    assert len(alone) == 4  # sim: paper, its sweep point; two_point: paper at D = 2, 4
     for row in alone:
         assert without_timings(row) == without_timings(both[(row["world"], row["name"], row["D"])])
 
 
 def test_row_mae_is_the_fitted_models_error_on_the_held_out_demos(tiny):
-    """The simulator's ``klr`` row's MAE is that of ``klr`` fitted here on the balanced D = 3
+    """The simulator's ``paper`` row's MAE is that of ``paper`` fitted here on the balanced D = 3
     subset of the run's own training split and scored on its test split (both read back from
     ``sim/seed_0/demos.h5``): the row fits on the right demos and scores on the held-out
     ones."""
     script, _, _ = tiny
-    (row,) = [r for r in rows_of(script) if r["world"] == "sim" and r["name"] == "klr"]
+    (row,) = [r for r in rows_of(script) if r["world"] == "sim" and r["name"] == "paper"]
     path = script / "sim" / "seed_0" / "demos.h5"
     train, test = (load_demonstrations(path, split=s) for s in ("train", "test"))
     cfg = compose_cfg(["experiment=compare_tiny"])
     trainer = {**to_dict(cfg.trainer), "progress_bar": False}
-    klr = to_dict(compose_cfg(["experiment=compare_tiny", "predictor=klr"]).predictor)
-    seq = fit_sequencer(balanced_subset(train, 3), klr, cfg.sequencer, trainer, seed=0)
+    paper = to_dict(compose_cfg(["experiment=compare_tiny", "predictor=paper"]).predictor)
+    seq = fit_sequencer(balanced_subset(train, 3), paper, cfg.sequencer, trainer, seed=0)
     expected = progress_errors(activation_progress(seq, test))["mae"]
     # the file keeps the features as collected; rel 1e-9 leaves room for summation order only
     assert row["mae"]["estimate"] == pytest.approx(expected, rel=1e-9)

@@ -67,8 +67,8 @@ def test_fits_are_shared_once_and_keyed_by_world():
         loaded = json.loads(key)
         assert (fit.seed, fit.d, fit.spec.world) == (loaded["seed"], loaded["D"], loaded["world"])
     # the same predictor in two worlds is two fits
-    sim = next(s for s in specs if s.world == "sim" and s.predictor == "klr_path")
-    settle = next(s for s in specs if s.world == "settle0" and s.predictor == "klr_path")
+    sim = next(s for s in specs if s.world == "sim" and s.predictor == "klr")
+    settle = next(s for s in specs if s.world == "settle0" and s.predictor == "klr")
     assert sim.fit_key(0, 3) != settle.fit_key(0, 3)
 
 
@@ -76,13 +76,13 @@ def test_a_series_adds_its_values_and_its_own_default():
     _, specs = specs_of(
         [
             "experiment=compare_tiny",
-            "+compare.sweep.series=[{predictor: klr_path, option: l2, values: [0.01, 0.1]}]",
+            "+compare.sweep.series=[{predictor: klr, option: l2, values: [0.01, 0.1]}]",
         ]
     )
-    series = [s for s in specs if s.group == "support_sweep" and s.predictor == "klr_path"]
+    series = [s for s in specs if s.group == "support_sweep" and s.predictor == "klr"]
     assert [(s.option, s.value) for s in series] == [("l2", 0.01), ("l2", 0.1), ("l2", None)]
     assert series[0].predictor_cfg["l2"] == 0.01
-    assert series[2].predictor_cfg == group_options("predictor")["klr_path"]
+    assert series[2].predictor_cfg == group_options("predictor")["klr"]
     assert series[2].point() == "l2=default"
 
 
@@ -94,7 +94,7 @@ def test_a_series_adds_its_values_and_its_own_default():
         (["compare.baselines=[coupled]"], "not a sequencer option of kind 'goal_nearest'"),
         (["compare.sweep.predictor=mlp"], "support_scale"),
         (["+compare.sweep.series=[{predictor: mlp, option: level, values: [1]}]"], "'level'"),
-        (["compare.claims=[{name: x, a: klr_path, b: nope}]"], "compare.claims"),
+        (["compare.claims=[{name: x, a: klr, b: nope}]"], "compare.claims"),
     ],
 )
 def test_bad_row_options_fail_before_any_work(overrides, message):

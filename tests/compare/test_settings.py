@@ -31,8 +31,8 @@ def test_the_shipped_comparison_resolves_its_worlds():
     assert {w.world for w in synthetic} >= {"two_point", "relay", "paced_relay"}
     assert all(w.episodes * len(w.seeds) >= 200 for w in synthetic)  # per row and D
     assert {(c.a, c.b) for c in job.compare.claims} == {
-        ("klr_path", "regression_clip"),
-        ("klr_path", "time_phase"),
+        ("klr", "regression_clip"),
+        ("klr", "time_phase"),
     }
 
 
@@ -43,7 +43,7 @@ def test_a_world_takes_the_experiments_numbers_where_it_names_none():
     assert sim.episodes == job.settings.n_boxes and sim.baselines == ("goal_nearest",)
     assert two_point.seeds == (0, 1) and two_point.train_sizes == (2, 4)
     assert two_point.feature_noise == 0.0 and two_point.baselines == ()
-    assert two_point.predictors == ["klr", "klr_path"]  # compare.predictors
+    assert two_point.predictors == ["paper", "klr"]  # compare.predictors
 
 
 def test_defaults_are_one_simulated_world_and_the_papers_claims():

@@ -20,7 +20,7 @@ from cpmp.errors import ConfigError
         ("klr", "weight_floor", float("-inf")),
         ("mlp", "lr", float("nan")),
         ("mlp", "epochs", 10.5),
-        ("klr_sparse", "l1", float("inf")),
+        ("klr_sparse", "refine_anchor", float("inf")),
     ],
 )
 def test_non_finite_or_fractional_predictor_options_are_config_errors(kind, option, value):

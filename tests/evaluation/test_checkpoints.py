@@ -11,7 +11,7 @@ import torch
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.errors import CpmpFileError
 from cpmp.evaluation.checkpoints import load_sequencer
-from cpmp.io import CHECKSUM_KEY, payload_digest
+from cpmp.io import CHECKSUM_KEY, payload_digest, save_checkpoint
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 
@@ -71,6 +71,16 @@ def test_intact_checkpoint_still_loads(payload, tmp_path, fitted_klr, test_demos
     torch.save(payload, path)
     x = test_demos[0].features[:5]
     assert np.array_equal(ConcurrentSequencer.load(path).progress(x), fitted_klr.progress(x))
+
+
+def test_a_version_1_checkpoint_is_refused_as_too_old(payload, tmp_path):
+    """Version 1 files (before the switching rules, coupling and recovery) are not upgraded."""
+    path = tmp_path / "v1.pt"
+    old = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    save_checkpoint(path, {**old, "version": 1})
+    for load in (ConcurrentSequencer.load, load_sequencer):
+        with pytest.raises(CpmpFileError, match=r"version 1, a format too old .* re-fit the model"):
+            load(path)
 
 
 def test_load_sequencer_refuses_other_files_by_name(tmp_path, train_demos):

@@ -69,7 +69,7 @@ def compose_cfg(config_name: str, overrides: list[str] | None = None, hydra: boo
 
 
 # config files that are variants of a predictor kind rather than a kind of their own
-VARIANTS = {"klr_path": "klr"}
+VARIANTS = {"paper": "klr"}
 
 
 def test_every_predictor_kind_has_a_config_file():
@@ -85,9 +85,20 @@ def test_predictor_options_compose_and_validate(name):
     validate_common(cfg)
 
 
-def test_klr_path_variant_sets_path_weighting():
-    kind, opts = predictor_options(compose_cfg("experiment", ["predictor=klr_path"]).predictor)
-    assert (kind, opts["feature_weighting"]) == ("klr", "path")
+@pytest.mark.parametrize("kind", sorted(PREDICTORS))
+def test_a_kinds_config_file_is_that_kinds_python_defaults(kind):
+    """``predictor=<kind>`` on the command line means ``predictor="<kind>"`` in Python."""
+    got_kind, opts = predictor_options(compose_cfg("experiment", [f"predictor={kind}"]).predictor)
+    assert got_kind == kind
+    assert opts == dataclasses.asdict(predictor_config(kind))
+
+
+def test_paper_variant_is_the_papers_kernel():
+    kind, opts = predictor_options(compose_cfg("experiment", ["predictor=paper"]).predictor)
+    assert kind == "klr"
+    paper = {k: opts[k] for k in ("feature_weighting", "feature_scaling", "path_noise")}
+    assert paper == {"feature_weighting": "none", "feature_scaling": "none", "path_noise": "none"}
+    assert opts == dataclasses.asdict(predictor_config("klr", **paper))
 
 
 @pytest.mark.parametrize("name", options("experiment"))
@@ -118,7 +129,7 @@ def test_sequencer_configs_mean_what_they_say():
 
 
 def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
-    """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=klr sequencer=paper``;
+    """``fit(demos, predictor="klr", **PAPER_OPTIONS)`` is ``predictor=paper sequencer=paper``;
     ``fit(demos)`` with no options is the main job's default configuration."""
 
     seq_keys = set(SequencerConfig.__dataclass_fields__)
@@ -141,7 +152,7 @@ def test_paper_options_are_the_paper_configs_and_fit_defaults_the_main_job():
         )
 
     got, want = resolved(
-        compose_cfg("experiment", ["predictor=klr", "sequencer=paper"]), PAPER_OPTIONS
+        compose_cfg("experiment", ["predictor=paper", "sequencer=paper"]), PAPER_OPTIONS
     )
     assert got == want
     assert "predictor" not in PAPER_OPTIONS
@@ -549,13 +560,12 @@ def test_script_with_bad_value_exits_2_with_one_error_line(tmp_path, run_script)
     assert not (run_dir / "report.json").exists()
 
 
-@pytest.mark.parametrize("predictor", ["mlp", "klr_sparse"])
-def test_fit_sequencer_with_the_default_trainer_config(predictor):
+def test_fit_sequencer_with_the_default_trainer_config():
     """The trainer's ``lr`` (null by default) and an Adam predictor's own ``lr`` must not clash;
     a trainer ``lr`` that is set overrides the predictor's."""
 
     demos = make_demonstrations(2, seed=0)
-    overrides = [f"predictor={predictor}", "logger=none", "trainer.max_epochs=2"]
+    overrides = ["predictor=mlp", "logger=none", "trainer.max_epochs=2"]
     cfg = compose_cfg("train", overrides)
     seq = fit_sequencer(demos, cfg.predictor, None, cfg.trainer)
     assert seq.predictor.config.lr == cfg.predictor.lr

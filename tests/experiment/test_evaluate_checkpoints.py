@@ -22,8 +22,9 @@ from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 PREDICTORS = sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml"))
-FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.epochs=20"]}
-"""Gradient fits cut short: the test is about loading and evaluating, not about their fit."""
+FAST = {"mlp": ["predictor.epochs=20"], "klr_sparse": ["predictor.refine_iter=5"]}
+"""Fits cut short (mlp's epochs, klr_sparse's refinement): the test is about loading and
+evaluating, not about their fit."""
 KINDS = [(name, [f"predictor={name}", *FAST.get(name, [])]) for name in PREDICTORS] + [
     ("goal_nearest", ["sequencer=goal_nearest"]),
     ("bc", ["sequencer=bc"]),
@@ -90,11 +91,11 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
 
 
 def test_paper_and_cpmp_klr_are_told_apart_in_log_and_report(tmp_path, demo_file, caplog):
-    """``predictor=klr_path`` and ``predictor=klr`` are both kind ``klr``: the train log and
+    """``predictor=klr`` and ``predictor=paper`` are both kind ``klr``: the train log and
     evaluation.md name the feature weighting, and the log counts start heads (fitted with
     ``start_kernel=isotropic``) apart from the graphs' nodes (6 nodes in the synthetic task)."""
     data = f"data.path={demo_file}"
-    for preset, weighting, heads in (("klr_path", "path", False), ("klr", "none", True)):
+    for preset, weighting, heads in (("klr", "path", False), ("paper", "none", True)):
         run = tmp_path / preset
         run.mkdir()
         overrides = [data, f"predictor={preset}"]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from cpmp.config import predictor_config
+from cpmp.config import FitConfig, predictor_config
 from cpmp.errors import ConfigError
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.sequencer.sequencer import ConcurrentSequencer
@@ -177,7 +177,6 @@ def test_summary_describes_the_path(validated):
 @pytest.mark.parametrize(
     ("option", "value"),
     [
-        ("method", "lasso"),
         ("level", 0.0),
         ("level", 1.5),
         ("level", float("nan")),
@@ -188,8 +187,6 @@ def test_summary_describes_the_path(validated):
         ("gamma_scales", [float("inf")]),
         ("holdout_fraction", 0.0),
         ("holdout_fraction", 1.0),
-        ("l1", float("inf")),
-        ("learn_positions", True),
         ("refine_iter", -1),
         ("refine_iter", 2.5),
         ("refine_samples", 0),
@@ -208,24 +205,21 @@ def test_defaults_are_the_default_models():
     sparse, default = predictor_config("klr_sparse"), predictor_config("klr")
     for name in ("gamma", "feature_weighting", "feature_scaling", "path_noise", "support_scale"):
         assert getattr(sparse, name) == getattr(default, name), name
-    assert sparse.method == "forward" and sparse.level is None
+    assert sparse.level is None
 
 
-# ------------------------------------------------------------------------- method: l1
-def test_l1_method_prunes_candidates(fit_on_train):
-    dense = fit_on_train("klr_sparse", method="l1", l1=0.0, prune_tol=0.0)
-    sparse = fit_on_train("klr_sparse", method="l1", l1=0.05)
-    assert dense.fit_summary["solver"] == "adam" and "sparsity_path" not in dense.fit_summary
-    assert sparse.fit_summary["n_support_total"] < 0.7 * dense.fit_summary["n_support_total"]
-
-
-def test_l1_method_learns_positions_and_lengthscales(fit_on_train, test_demos):
-    seq = fit_on_train(
-        "klr_sparse", method="l1", learn_positions=True, learn_lengthscales=True, epochs=150
-    )
-    scales = seq.predictor.log_feature_scale.detach()
-    assert scales.abs().max() > 1e-3  # the length-scales actually moved
-    assert progress_errors(activation_progress(seq, test_demos))["mae"] < MAE_BOUND
+@pytest.mark.parametrize("option", ["method", "l1", "learn_positions", "epochs", "refit"])
+def test_the_removed_l1_variants_options_are_named_as_removed(option):
+    """``method: l1`` and its options are gone: a config that still sets one is told so."""
+    with pytest.raises(
+        ConfigError,
+        match=rf"removed option\(s\) {option} for predictor 'klr_sparse': klr_sparse's "
+        r"L1-penalised variant \(method: l1\) was removed.*drop them",
+    ):
+        predictor_config("klr_sparse", **{option: 1})
+    # ConcurrentSequencer.fit's keyword form routes it to the predictor, which says so too
+    with pytest.raises(ConfigError, match=rf"removed option\(s\) {option} for predictor"):
+        FitConfig.from_options("klr_sparse", **{option: 1})
 
 
 def test_forward_model_round_trips_through_a_checkpoint(validated, tmp_path, test_demos):

@@ -72,34 +72,6 @@ def test_gradient_vanishes_at_the_newton_solution(klr_fits):
     assert seq.fit_summary["newton_grad_max"] <= 1e-10
 
 
-def test_newton_refit_of_sparse_klr_matches_lbfgs(train_demos):
-    fits = {
-        solver: ConcurrentSequencer.fit(
-            train_demos,
-            "klr_sparse",
-            seed=0,
-            logger=None,
-            epochs=30,
-            solver=solver,
-            method="l1",
-            l2=1e-4,  # the L1 variant of klr_sparse, at klr's L2 weight
-        )
-        for solver in ("newton", "lbfgs")
-    }
-    newton, lbfgs = fits["newton"], fits["lbfgs"]
-    assert newton.fit_summary["solver"] == "adam"  # the L1 phase stays on Adam
-    assert newton.fit_summary["support_counts"] == lbfgs.fit_summary["support_counts"]
-    assert newton.predictor.refit_info and all(i.converged for i in newton.predictor.refit_info)
-    # the re-fit objective: the penalised loss without the L1 term, on the kept supports
-    refit_loss = {}
-    for solver, seq in fits.items():
-        data = node_training_data(seq.graphs, seq.predictor)
-        with torch.no_grad():
-            refit_loss[solver] = float(seq.predictor._penalised_loss(data, seq.predictor._cache))
-    assert refit_loss["newton"] == pytest.approx(refit_loss["lbfgs"], rel=1e-6)
-    assert refit_loss["newton"] <= refit_loss["lbfgs"] + 1e-12
-
-
 def test_random_problem_gradient_is_zero_and_weights_respected():
     gen = torch.Generator().manual_seed(0)
     x = torch.rand(60, 2, generator=gen, dtype=torch.float64)

@@ -77,7 +77,7 @@ def test_packed_logits_equal_padded_kernel(fitted, test_demos, kind):
 
 
 def test_packed_cache_follows_parameter_changes(fit_on_train, test_demos):
-    seq = fit_on_train("klr_sparse", method="l1", learn_lengthscales=True, epochs=20)
+    seq = fit_on_train("klr_sparse")  # refined: moved supports, per-node feature scales
     model = seq.predictor
     z = torch.as_tensor(test_demos[0].features[:5])
     before = seq.progress(z.numpy())
