@@ -10,13 +10,19 @@ import pytest
 
 from cpmp.errors import DataError
 from cpmp.records import (
+    CAUSE_REASONS,
     NOTE_KINDS,
     SWITCH_KINDS,
+    Divergence,
+    PendingSwitch,
     RecoveryCounts,
     SequencerNote,
     TickInfo,
     TransitionEvent,
     count_recoveries,
+    divergence,
+    episode_cause,
+    pending_switch,
 )
 
 
@@ -62,3 +68,76 @@ def test_a_recovery_is_right_when_the_demonstrator_made_that_switch() -> None:
     ]
     assert count_recoveries(events, expected) == RecoveryCounts(right=1, wrong=2)
     assert count_recoveries([], expected) == (0, 0)
+
+
+def test_divergence_finds_a_wrong_switch_first_then_the_first_missing_one() -> None:
+    expected = {"u": ["A", "B", "C"], "w": ["X", "Y"]}
+    assert divergence({"u": ["A", "B"], "w": ["X"]}, expected) == Divergence("u", 2, "B", "C", "")
+    assert divergence({"u": ["A", "B", "C"], "w": ["X"]}, expected) == Divergence(
+        "w", 1, "X", "Y", ""
+    )
+    # a wrong switch of w comes before u's missing one; one switch too many is wrong too
+    assert divergence({"u": ["A"], "w": ["X", "Z"]}, expected) == Divergence("w", 1, "X", "Y", "Z")
+    assert divergence({"u": ["A", "B", "C", "A"], "w": ["X", "Y"]}, expected) == Divergence(
+        "u", 3, "C", "", "A"
+    )
+    assert divergence(expected, expected) is None
+    assert divergence({"u": ["B"], "w": ["X"]}, expected) is None  # a wrong start
+
+
+def test_pending_switch_from_sequences_alone_and_its_words() -> None:
+    expected = {"u": ["A", "B", "C"], "w": ["X", "Y"]}
+    cause = pending_switch({"u": ["A", "B"], "w": ["X", "Y"]}, expected)
+    assert (cause.variable, cause.current, cause.expected, cause.reason) == (
+        "u",
+        "B",
+        "C",
+        "unknown",
+    )
+    assert math.isnan(cause.best_p) and "u B -> C never fired" in cause.describe()
+    events = [TransitionEvent(1.5, "w", "X", "Z")]
+    wrong = pending_switch({"u": ["A"], "w": ["X", "Z"]}, expected, events)
+    assert (wrong.reason, wrong.fired, wrong.at) == ("wrong_transition", "Z", 1.5)
+    assert "w X -> Z fired at 1.50 s instead of -> Y" in wrong.describe()
+    done = pending_switch(expected, expected)
+    assert done.reason == "task_unfinished" and done.variable == ""
+    assert pending_switch({"u": ["C"], "w": ["X"]}, expected) is None
+
+
+def test_episode_cause_asks_a_policy_that_explains_itself() -> None:
+    expected = {"u": ["A", "B"]}
+    told = PendingSwitch("u", "A", "B", "below_threshold", best_p=0.3, best_t=1.0)
+
+    class Explains:
+        def explain(self, want):
+            assert want == expected
+            return told
+
+    class Batch:
+        def explain(self, index, want):
+            return told if index == 2 else None
+
+    assert episode_cause(Explains(), {"u": ["A"]}, expected) is told
+    assert episode_cause(Batch(), {"u": ["A"]}, expected, index=2) is told
+    # nothing explained (or no explain at all): what the sequences say
+    assert episode_cause(Batch(), {"u": ["A"]}, expected, index=0).reason == "unknown"
+    assert episode_cause(object(), {"u": ["A"]}, expected).reason == "unknown"
+
+
+def test_pending_switch_round_trips_and_refuses_an_unknown_reason() -> None:
+    cause = PendingSwitch(
+        "v", "lower", "home", "still_improving", 0.926, 7.16, 0.9, 0.65, detail="note"
+    )
+    data = cause.to_dict()
+    assert data["at"] is None and data["best_p"] == 0.926  # nan as None: JSON-ready
+    back = PendingSwitch.from_dict(data)
+    assert back.describe() == cause.describe() and math.isnan(back.at)
+    assert (
+        cause.describe() == "v lower -> home never fired: p reached 0.926 at 7.16 s, above 0.65 "
+        "but still rising (note)"
+    )
+    assert set(CAUSE_REASONS) >= {"below_threshold", "held", "given_up", "not_a_successor"}
+    with pytest.raises(DataError, match="reason is one of"):
+        PendingSwitch("v", "a", "b", "slow")
+    with pytest.raises(DataError, match="not a pending switch"):
+        PendingSwitch.from_dict({"variable": "v"})

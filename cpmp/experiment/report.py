@@ -127,6 +127,11 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
             "holds",
         ):
             rep[key], _ = mean_std([r["reproduction"].get(key) for r in rows])
+        causes: dict[str, int] = {}
+        for r in rows:
+            for reason, count in (r["reproduction"].get("causes") or {}).items():
+                causes[reason] = causes.get(reason, 0) + count
+        rep["causes"] = dict(sorted(causes.items(), key=lambda kv: (-kv[1], kv[0])))
         rep["n_boxes"] = settings.n_boxes
         rep["paper"] = PAPER_TABLE_I.get(d)
         reproduction[d] = rep
@@ -188,7 +193,7 @@ def experiment_files(job: ExperimentJob) -> dict[str, str]:
     """What the main job writes besides its figures: file (pattern) -> what it holds."""
     files: dict[str, str] = {
         "report.json": "all numbers, per seed too",
-        "episodes.json": "every reproduction episode: box, strategy, outcome, reason",
+        "episodes.json": "per episode: box_size_m [m], strategy, outcome, reason, cause",
         "timings.json": "wall time of the run and of every stage, summed over seeds",
         "seed_<s>/demos.h5": "collected demonstrations with mask/train and mask/test",
         "seed_<s>/model_D<d>.pt": "trained sequencer checkpoints",
@@ -347,6 +352,17 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "per seed (mean).",
         "",
     ]
+    causes = [
+        f"D = {d}: " + ", ".join(f"{reason} {n}" for reason, n in row["causes"].items())
+        for d, row in report["reproduction"].items()
+        if row.get("causes")
+    ]
+    if causes:
+        lines += [
+            "Causes of the incomplete episodes, all seeds (the switch that never came and why; "
+            "each episode's in `episodes.json`): " + "; ".join(causes) + ".",
+            "",
+        ]
     if baseline:
         lines += [
             "## Progress estimate (nearest-sample lookup, not used to switch)",

@@ -37,7 +37,8 @@ class EpisodeRecord:
     """One reproduction episode, summarised for the report.
 
     Attributes:
-        box: (width, depth) [m] of the box.
+        box_size_m: the box's (width, depth) [m] (``episodes.json``: ``box_size_m``; a
+            recording's metadata: ``box_width_m``, ``box_depth_m``).
         correct: the box's correct strategy.
         chosen: the strategy the sequencer started with (``other`` if none).
         outcome: how the episode ended.
@@ -51,9 +52,11 @@ class EpisodeRecord:
         give_ups: stalls the sequencer gave up on (0 or 1).
         holds: switches the sequencer held back.
         rrd: the episode's recording, if kept.
+        cause: an incomplete (or diverged) episode's missing switch
+            (:meth:`cpmp.records.PendingSwitch.to_dict`), ``None`` otherwise.
     """
 
-    box: tuple[float, float]
+    box_size_m: tuple[float, float]
     correct: str
     chosen: str
     outcome: Outcome
@@ -67,27 +70,43 @@ class EpisodeRecord:
     give_ups: int = 0
     holds: int = 0
     rrd: str | None = None
+    cause: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a dict (``episodes.json``)."""
         return dict(self.__dict__)
 
 
-START_AXES = ("box_width", "box_depth")
-"""The features a recording compares an episode's start with the training starts in: the box
-size decides the strategy (:func:`cpmp.sim.correct_strategy`)."""
+START_AXES = ("box_width_m", "box_depth_m")
+"""What a recording compares an episode's start with the training starts in: the box's width
+and depth [m] (the size decides the strategy, :func:`cpmp.sim.correct_strategy`; the sequencer's
+``box_width`` and ``box_depth`` features are these scaled to the task's size ranges)."""
 
 
 def start_references(demos: Sequence[Demonstration]) -> list[StartReference]:
-    """The starts of ``demos``: each one's initial MPs and features at its first sample."""
+    """The starts of ``demos``: initial MPs, features at the first sample, box size [m].
+
+    The box size (:data:`START_AXES`) comes from a demonstration's metadata (``box_width``,
+    ``box_depth``), where it has them.
+    """
     return [
         StartReference(
             demo.name or f"demo {i}",
-            {v: str(labels[0]) for v, labels in sorted(demo.labels.items())},
-            dict(zip(demo.feature_names or [], demo.features[0].tolist(), strict=True)),
+            initial_mps(demo),
+            dict(zip(demo.feature_names or [], demo.features[0].tolist(), strict=True))
+            | {
+                axis: float(demo.metadata[key])
+                for axis, key in zip(START_AXES, ("box_width", "box_depth"), strict=True)
+                if key in (demo.metadata or {})
+            },
         )
         for i, demo in enumerate(demos)
     ]
+
+
+def initial_mps(demo: Demonstration) -> dict[str, str]:
+    """Each variable's first MP in ``demo`` (the start a run of its box is judged against)."""
+    return {v: str(labels[0]) for v, labels in sorted(demo.labels.items())}
 
 
 class EpisodeLogger:
@@ -103,7 +122,9 @@ class EpisodeLogger:
         seq: the sequencer episode driving the episode (its start decision, events and notes
             are logged).
         references: the training demonstrations' starts.
-        axes: the features to compare the starts in.
+        axes: what to compare the starts in (features or keys of ``values``).
+        correct: the initial MPs the demonstrator uses for the episode's box.
+        values: the episode's value of each axis that is not a feature.
     """
 
     def __init__(
@@ -112,11 +133,16 @@ class EpisodeLogger:
         seq: Any,
         references: Sequence[StartReference] = (),
         axes: Sequence[str] = (),
+        *,
+        correct: Mapping[str, str] | None = None,
+        values: Mapping[str, float] | None = None,
     ) -> None:
         self.recorder = recorder
         self.seq = seq
         self.references = list(references)
         self.axes = list(axes)
+        self.correct = None if correct is None else dict(correct)
+        self.values = dict(values or {})
         self._started = False
         self._n_events = 0
         self._n_notes = 0
@@ -134,7 +160,9 @@ class EpisodeLogger:
         )
         decision = getattr(self.seq, "start_decision", None)
         if not self._started and decision is not None:
-            self.recorder.log_start(decision, self.references, self.axes)
+            self.recorder.log_start(
+                decision, self.references, self.axes, correct=self.correct, values=self.values
+            )
         self._started = True
         # Notes first: a hold noted at the tick its variable switched (to another successor)
         # ended with that switch.
@@ -181,7 +209,7 @@ def reproduce(
         record_dir.mkdir(parents=True, exist_ok=True)
     batch = seq.batched(len(boxes))
     references = start_references(train)
-    axes = [a for a in START_AXES if a in seq.feature_names]
+    axes = [a for a in START_AXES if references and all(a in r.values for r in references)]
     paths: list[Path | None] = []
     recorders: list[Any] = []
     callbacks: list[EpisodeLogger | None] = []
@@ -198,10 +226,17 @@ def reproduce(
                 mp_names={v: g.ordered_nodes() for v, g in seq.graphs.items()},
                 episode=f"{label}episode_{i:03d}",
                 geoms=sim.geoms(),
-                metadata={"box_width": box.width, "box_depth": box.depth},
+                metadata={"box_width_m": box.width, "box_depth_m": box.depth},
                 threshold=seq.config.threshold,
             )
-            callback = EpisodeLogger(recorder, batch.episodes[i], references, axes)
+            callback = EpisodeLogger(
+                recorder,
+                batch.episodes[i],
+                references,
+                axes,
+                correct=initial_mps(expected[i]),
+                values=dict(zip(START_AXES, (box.width, box.depth), strict=True)),
+            )
         paths.append(rrd)
         recorders.append(recorder)
         callbacks.append(callback)
@@ -231,7 +266,9 @@ def reproduce(
             recorder.abort()  # nothing to look at: keep the disk for the failures
             rrd = None
         elif recorder is not None:
-            recorder.log_outcome(result.duration, result.outcome, result.reason, success=complete)
+            recorder.log_outcome(
+                result.duration, result.outcome, result.reason, success=complete, cause=result.cause
+            )
             recorder.close()
         distances: list[float] = []
         continuous: list[float] = []
@@ -243,7 +280,7 @@ def reproduce(
                 continuous += switch_distances(result.transitions, demo, v, columns) or []
         out.append(
             EpisodeRecord(
-                box=(box.width, box.depth),
+                box_size_m=(box.width, box.depth),
                 correct=correct_strategy(box, task),
                 chosen=classify_start(result.initial, signatures),
                 outcome=result.outcome,
@@ -257,6 +294,7 @@ def reproduce(
                 give_ups=sum(n.kind == "give_up" for n in episode.notes),
                 holds=sum(n.kind == "hold" for n in episode.notes),
                 rrd=str(rrd) if rrd else None,
+                cause=result.cause.to_dict() if result.cause is not None else None,
             )
         )
         log.info("%sepisode %d: %s (%s)", label, i, result.outcome, result.reason)
@@ -282,7 +320,8 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """Table I for one set of episodes: the W/I/C counts and the switch-state distances.
 
     Diverged episodes are counted apart and also in I; the distance mean/std is over all
-    complete episodes.
+    complete episodes; ``causes``: the incomplete episodes per cause
+    (:data:`~cpmp.records.CauseReason`).
     """
     counts = {k: 0 for k in ("W", "I", "C", "diverged")}
     for e in episodes:
@@ -311,4 +350,15 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
         "recoveries_wrong": sum(e.recoveries_wrong for e in episodes),
         "give_ups": sum(e.give_ups for e in episodes),
         "holds": sum(e.holds for e in episodes),
+        "causes": cause_counts(episodes),
     }
+
+
+def cause_counts(episodes: Sequence[EpisodeRecord]) -> dict[str, int]:
+    """The incomplete (and diverged) episodes per cause reason, most frequent first."""
+    counts: dict[str, int] = {}
+    for e in episodes:
+        if e.outcome in ("incomplete", "diverged"):
+            reason = str((e.cause or {}).get("reason", "none"))
+            counts[reason] = counts.get(reason, 0) + 1
+    return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))

@@ -50,7 +50,9 @@ entity path                            content
                                        start against the training starts, the features
 ``start/boxes/training``, ``/episode`` ``Points2D``: the training starts (colour: their
                                        initial MPs) and this episode's start in two
-                                       features (:meth:`EpisodeRecorder.log_start`)
+                                       axes (:meth:`EpisodeRecorder.log_start`); beside
+                                       them ``/axes``, ``/tick_values``, ``/axis_titles``,
+                                       ``/key``, and the names on anchors of their own
 ``events/start``                       ``TextLog`` ``"  0.00 s  start (joint rule, ...)"``
                                        plus the machine-readable ``cpmp.Start`` record
 ``events/transitions``                 ``TextLog`` ``"  0.44 s  left_pos: approach -> grasp
@@ -64,7 +66,9 @@ entity path                            content
                                        to relax at 9.91 s (noted 3 times)"``)
 ``events/outcome``                     ``TextLog`` ``" 10.75 s  outcome: <outcome>
                                        (<reason>)"`` at the episode end (level ``WARN`` for
-                                       a failure) plus the ``cpmp.Outcome`` record
+                                       a failure) plus the ``cpmp.Outcome`` record; an
+                                       incomplete episode's cause also as ``"cause: <edge>
+                                       never fired: ..."`` when its ``p`` was best
 =====================================  ===================================================
 
 An event's text longer than :data:`EVENT_WIDTH` characters continues on indented rows of
@@ -84,15 +88,16 @@ corner, left of the curves (a plot with a legend starts its time axis before t =
 the active MPs as lanes of a state timeline; the events log (start, transitions, notes,
 outcome) in a monospace font, each event starting with its time. Every view lists the entity
 paths it shows (rerun 0.41 matches no wildcard in the middle of a path). An episode that ended
-at its first tick (a wrong start) puts the start decision and the start map in the middle
-instead of the plots. The blueprint and selection panels start collapsed, the time panel as one
-row. :func:`read_views` lists the views.
+at its first tick (a wrong start) puts the start decision in the middle instead of the plots
+and the start map on the right. The blueprint and selection panels start collapsed, the time
+panel as one row. :func:`read_views` lists the views.
 
 Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
 ``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
 ``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
 probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s], ``count``,
-``ended_by`` and ``then``), ``cpmp.Outcome:{outcome,reason}`` and
+``ended_by`` and ``then``), ``cpmp.Outcome:{outcome,reason,cause}`` (``cause``: the
+:class:`~cpmp.records.PendingSwitch` as JSON, if any) and
 ``cpmp.Start:{rule,chosen,options}`` (strings; ``chosen`` and ``options`` as JSON); their time
 is the ``time`` timeline of the row. The episode name is the recording
 name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,

@@ -186,10 +186,11 @@ def start_text(decision: StartDecision) -> str:
     """
     ranked = sorted(decision.options, key=lambda o: -o.score)
     chosen = _combination_text(decision.chosen)
-    if decision.rule == "joint":
+    if decision.rule != "independent":
         differ = _differing([o.combination for o in decision.options]) or None
         chosen = _combination_text(decision.chosen, differ)
-        head = f"start (joint rule, {len(decision.options)} demonstrated starts): {chosen}"
+        count = len(decision.options)
+        head = f"start ({decision.rule} rule, {count} demonstrated starts): {chosen}"
         best = ranked[0].score if ranked else math.nan
         others = [o for o in ranked if o.combination != decision.chosen]
         tail = f"log p {best:.2f}"
@@ -238,11 +239,60 @@ def series_label(group: str, name: str) -> str:
     return rest[1:] if len(rest) > 1 and rest[0] in "._-/ " else name
 
 
+PALETTE_NAMES: tuple[str, ...] = (
+    "blue",
+    "orange",
+    "green",
+    "red",
+    "purple",
+    "brown",
+    "pink",
+    "grey",
+    "olive",
+    "cyan",
+)
+"""The colour of each :data:`PALETTE` entry in words (the start map's colour key)."""
+
+
+def _matches(combination: Mapping[str, str], partial: Mapping[str, str]) -> bool:
+    """Whether ``combination`` agrees with every variable ``partial`` names."""
+    return all(combination.get(v) == mp for v, mp in partial.items())
+
+
+def start_labels(
+    decision: StartDecision, references: Sequence[StartReference] = ()
+) -> list[dict[str, str]]:
+    """The demonstrated starts by number: start ``k`` (from 1) is ``result[k - 1]``.
+
+    The joint rule's options ranked by score come first, then any training start that is none
+    of them; the start map colours a training start by this number (:data:`PALETTE`).
+    """
+    combos: list[dict[str, str]] = []
+    if decision.rule != "independent":
+        combos = [dict(o.combination) for o in sorted(decision.options, key=lambda o: -o.score)]
+    for ref in references:
+        if ref.combination not in combos:
+            combos.append(dict(ref.combination))
+    return combos
+
+
+def _start_number(combos: Sequence[Mapping[str, str]], combination: Mapping[str, str]) -> str:
+    """``"2"`` for the start ``combination`` is, ``"–"`` for none."""
+    for k, combo in enumerate(combos, start=1):
+        if _matches(combo, combination) and _matches(combination, combo):
+            return str(k)
+    return "–"
+
+
 def start_markdown(
     decision: StartDecision,
     features: Mapping[str, float],
     references: Sequence[StartReference],
     axes: Sequence[str],
+    *,
+    correct: Mapping[str, str] | None = None,
+    values: Mapping[str, float] | None = None,
+    colours: bool = False,
 ) -> str:
     """The start-decision document: the starts weighed with their scores, the state decided on.
 
@@ -250,22 +300,69 @@ def start_markdown(
         decision: the sequencer's start decision.
         features: feature name -> value at the start (empty if unknown).
         references: the training demonstrations' starts (may be empty).
-        axes: the features the training starts are compared on (columns of their table).
+        axes: what the training starts are compared on (columns of their table): features, or
+            keys of ``values`` and of every reference's ``values``; a unit belongs in the name
+            (``box_width_m``).
+        correct: the initial MPs the demonstrator uses for this episode (some or all
+            variables), or ``None`` if unknown: the start it names is marked ``correct``.
+        values: the episode's value of each axis that is not a feature.
+        colours: whether the start map colours the starts (a ``map colour`` row names them).
 
     Returns:
-        Markdown: the rule and the options ranked by score (the chosen one marked), the
-        episode's values of ``axes`` against each training start (nearest first), and every
-        feature at the start, grouped as the feature panels are.
+        Markdown: the rule and the starts, one column each (score, chosen, correct, map colour,
+        each differing variable's MP), the episode's ``axes`` against each training start
+        (nearest first) and every feature at the start, grouped as the feature panels are.
     """
     lines = [f"**start decision** at t = {decision.t:.2f} s, rule `{decision.rule}`", ""]
-    if decision.rule == "joint":
+    combos = start_labels(decision, references)
+    differ = _differing(combos) if decision.rule != "independent" else None
+    if decision.rule != "independent":
+        scores = {_start_number(combos, o.combination): o.score for o in decision.options}
+        numbers = [str(k) for k in range(1, len(combos) + 1)]
+        chosen = _start_number(combos, decision.chosen)
+        right = [k for k in numbers if correct and _matches(combos[int(k) - 1], correct)]
+        if correct and chosen not in right:
+            wanted = ", ".join(right) if right else "none of these"
+            lines += [
+                f"**Wrong start**: the demonstrator starts this box with "
+                f"{_combination_text(correct, differ or None)} (start {wanted}); start "
+                f"{chosen} was chosen.",
+                "",
+            ]
+        score = (
+            "log-probability of the learned start choice"
+            if decision.rule == "learned"
+            else "Σ log(1 − φ) of the start heads (0: every MP surely at its beginning)"
+        )
         lines += [
-            "Demonstrated initial combinations, scored by Σ log(1 − φ) of their start heads "
-            "(0: every MP surely at its beginning):",
+            f"Demonstrated starts; score: {score}.",
             "",
-            "| | score | initial MPs |",
-            "|---|---|---|",
+            "| start | " + " | ".join(numbers) + " |",
+            "|---|" + "---|" * len(numbers),
+            "| score | "
+            + " | ".join(f"{scores[k]:.2f}" if k in scores else "–" for k in numbers)
+            + " |",
+            "| chosen | " + " | ".join("**chosen**" if k == chosen else "" for k in numbers) + " |",
         ]
+        if correct:
+            lines.append(
+                "| correct | "
+                + " | ".join("**correct**" if k in right else "" for k in numbers)
+                + " |"
+            )
+        if colours:
+            lines.append(
+                "| map colour | "
+                + " | ".join(PALETTE_NAMES[(int(k) - 1) % len(PALETTE)] for k in numbers)
+                + " |"
+            )
+        for variable in sorted(differ or ()):
+            lines.append(
+                f"| {variable} | " + " | ".join(c.get(variable, "–") for c in combos) + " |"
+            )
+        same = {v: mp for v, mp in decision.chosen.items() if v not in (differ or ())}
+        if same:
+            lines += ["", f"The same in every start: {_combination_text(same)}."]
     else:
         lines += [
             "Each variable's initial MPs, scored by log(1 − φ) of their start heads:",
@@ -273,52 +370,186 @@ def start_markdown(
             "| | score | initial MP |",
             "|---|---|---|",
         ]
-    combos = [o.combination for o in decision.options] + [r.combination for r in references]
-    differ = _differing(combos) if decision.rule == "joint" else None
-    for option in sorted(decision.options, key=lambda o: -o.score):
-        chosen = all(decision.chosen.get(v) == mp for v, mp in option.combination.items())
-        mark = "**chosen**" if chosen else ""
-        text = _combination_text(option.combination, differ)
-        lines.append(f"| {mark} | {option.score:.2f} | {text} |")
-    same = {v: mp for v, mp in decision.chosen.items() if differ is not None and v not in differ}
-    if same:
-        lines += ["", f"The same in every start: {_combination_text(same)}."]
-    shown = [a for a in axes if a in features]
+        for option in sorted(decision.options, key=lambda o: -o.score):
+            mark = "**chosen**" if _matches(decision.chosen, option.combination) else ""
+            lines.append(
+                f"| {mark} | {option.score:.2f} | {_combination_text(option.combination)} |"
+            )
+        if correct:
+            lines += ["", f"The demonstrator starts this box with {_combination_text(correct)}."]
+    here = {**features, **(values or {})}
+    shown = [a for a in axes if a in here]
     if references and shown:
-        here = np.array([features[a] for a in shown])
+        point = np.array([here[a] for a in shown])
         scale = np.ptp([[r.values[a] for a in shown] for r in references], axis=0)
         scale = np.where(scale > 0, scale, 1.0)
 
         def distance(ref: StartReference) -> float:
             there = np.array([ref.values[a] for a in shown])
-            return float(np.linalg.norm((there - here) / scale))
+            return float(np.linalg.norm((there - point) / scale))
 
         lines += [
             "",
-            "This episode's start against the training starts (distance in units of the "
-            "training range of each column; the start map plots the first two columns, "
-            f"x {shown[0]}, y {shown[-1]} downwards):",
+            "This episode against the training starts (dist.: distance in training ranges):",
             "",
-            "| start | " + " | ".join(shown) + " | distance | initial MPs |",
+            "| | " + " | ".join(shown) + " | dist. | start |",
             "|---|" + "---|" * (len(shown) + 2),
-            "| **this episode** | "
-            + " | ".join(f"{features[a]:.3f}" for a in shown)
-            + f" | 0 | {_combination_text(decision.chosen, differ)} |",
+            "| **episode** | "
+            + " | ".join(f"{here[a]:.3f}" for a in shown)
+            + f" | 0 | {_start_number(combos, decision.chosen)} |",
         ]
         for ref in sorted(references, key=distance):
-            values = " | ".join(f"{ref.values[a]:.3f}" for a in shown)
+            row = " | ".join(f"{ref.values[a]:.3f}" for a in shown)
             lines.append(
-                f"| {ref.name} | {values} | {distance(ref):.2f} | "
-                f"{_combination_text(ref.combination, differ)} |"
+                f"| {ref.name} | {row} | {distance(ref):.2f} | "
+                f"{_start_number(combos, ref.combination)} |"
             )
     if features:
-        lines += ["", "Features at the start:", ""]
+        lines += ["", "Features at the start (as the sequencer sees them):", ""]
         groups = group_features(list(features))
         lines += [
             f"- **{group}**: " + ", ".join(f"{n} {features[n]:.3f}" for n in members)
             for group, members in groups.items()
         ]
     return "\n".join(lines)
+
+
+def _ticks(lo: float, hi: float) -> np.ndarray:
+    """Round tick values (1, 2 or 5 times a power of ten apart) inside ``[lo, hi]``: 3 to 6."""
+    span = max(hi - lo, 1e-9)
+    for step in sorted(m * 10.0**e for e in range(-6, 7) for m in (1, 2, 5)):
+        ticks = np.arange(math.ceil(lo / step), math.floor(hi / step) + 1) * step
+        if len(ticks) <= 6:
+            return np.round(ticks, 10)
+    return np.array([lo, lo + span])  # pragma: no cover (a span over 1e7)
+
+
+class StartMap(NamedTuple):
+    """What the start map draws and the part of the plane to show.
+
+    Attributes:
+        entities: ``(entity path, archetype)`` pairs, paths under :data:`START_BOXES_ENTITY`.
+        x_range: the view's x range (``axes[0]``, with the tick values, the key and margins).
+        y_range: the view's y range (downwards: ``-axes[1]``, with the titles and margins).
+    """
+
+    entities: list[tuple[str, Any]]
+    x_range: tuple[float, float]
+    y_range: tuple[float, float]
+
+
+def start_map(
+    references: Sequence[StartReference],
+    axes: Sequence[str],
+    here: Sequence[float] | None,
+    combos: Sequence[Mapping[str, str]],
+) -> StartMap:
+    """What :data:`START_BOXES_ENTITY` draws: the starts as dots in two axes, with a frame.
+
+    ``x`` is ``axes[0]`` to the right, ``y`` is ``axes[1]`` upwards (the view's y runs down, so
+    the points are logged at ``-y``). A training start is coloured by its start number in
+    ``combos`` (:func:`start_labels`; :data:`PALETTE`), this episode is the larger black dot.
+    The names sit below their dots, on transparent anchors of their own, so that no label
+    covers a dot; the frame has tick values, axis titles (the axis names, whose units they
+    carry) and a colour key right of its top corner.
+
+    Args:
+        references: the training starts (each with both ``axes`` in its values).
+        axes: the two axis names.
+        here: this episode's values in ``axes``, or ``None``.
+        combos: the numbered starts.
+
+    Returns:
+        The entities to log and the view's bounds (so that the map fills its view).
+    """
+    train = np.array([[ref.values[a] for a in axes[:2]] for ref in references], dtype=float)
+    points = train if here is None else np.vstack([train, [list(here)[:2]]])
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    span = float(np.max(hi - lo)) or max(float(np.max(np.abs(points))), 1.0) * 0.1
+    # room below and left of the starts for their names above the axes
+    lo, hi = lo - 0.25 * span, hi + 0.15 * span
+    radius = 0.03 * span
+    # from a dot's centre to its label's anchor: the viewer centres a label on its anchor,
+    # about 20 px tall, so the anchor sits a dot's radius and half a label below the dot
+    gap = radius + 0.07 * span
+    ink = (70, 70, 70)
+
+    def flip(xy: np.ndarray) -> np.ndarray:
+        return np.column_stack([xy[:, 0], -xy[:, 1]])
+
+    def labels(xy: np.ndarray, texts: Sequence[str], colors: Any = ink) -> Any:
+        # a label takes its point's colour: the anchor is a dot too small to see
+        anchors = flip(xy) + np.array([0.0, gap])
+        return rr.Points2D(anchors, radii=1e-4 * span, colors=colors, labels=list(texts))
+
+    def number(combination: Mapping[str, str]) -> int:
+        return next(k for k, c in enumerate(combos) if dict(c) == dict(combination))
+
+    base = START_BOXES_ENTITY.split("/")
+    out: list[tuple[str, Any]] = [
+        (
+            entity(*base, "training"),
+            rr.Points2D(
+                flip(train),
+                radii=radius,
+                colors=[series_color(number(ref.combination)) for ref in references],
+            ),
+        ),
+        (
+            entity(*base, "training_names"),
+            labels(
+                train,
+                [ref.name for ref in references],
+                [series_color(number(ref.combination)) for ref in references],
+            ),
+        ),
+    ]
+    if here is not None:
+        mine = np.array([list(here)[:2]], dtype=float)
+        out += [
+            (
+                entity(*base, "episode"),
+                rr.Points2D(flip(mine), radii=1.6 * radius, colors=[(0, 0, 0)]),
+            ),
+            (
+                entity(*base, "episode_name"),
+                labels(mine - np.array([0.0, 0.6 * radius]), ["this episode"], (0, 0, 0)),
+            ),
+        ]
+    x_ticks, y_ticks = _ticks(lo[0], hi[0]), _ticks(lo[1], hi[1])
+    tick = 0.6 * radius
+    frame = [[[lo[0], -lo[1]], [hi[0], -lo[1]]], [[lo[0], -lo[1]], [lo[0], -hi[1]]]]
+    frame += [[[x, -lo[1]], [x, -lo[1] + tick]] for x in x_ticks]
+    frame += [[[lo[0], -y], [lo[0] - tick, -y]] for y in y_ticks]
+    out.append((entity(*base, "axes"), rr.LineStrips2D(frame, colors=[(90, 90, 90)])))
+    tick_xy = [[x, lo[1] - tick] for x in x_ticks] + [
+        [lo[0] - 0.1 * span, y + gap] for y in y_ticks
+    ]
+    tick_text = [f"{x:g}" for x in x_ticks] + [f"{y:g}" for y in y_ticks]
+    out.append((entity(*base, "tick_values"), labels(np.array(tick_xy), tick_text)))
+    titles = np.array([[hi[0], lo[1] - 0.12 * span], [lo[0] + 0.15 * span, hi[1] + 0.25 * span]])
+    out.append((entity(*base, "axis_titles"), labels(titles, [f"{axes[0]} →", f"↑ {axes[1]}"])))
+    # the key stands right of the frame, where no start is
+    keys = np.array([[hi[0] + 0.35 * span, hi[1] - k * 0.4 * span] for k in range(len(combos))])
+    out += [
+        (
+            entity(*base, "key"),
+            rr.Points2D(
+                flip(keys), radii=radius, colors=[series_color(k) for k in range(len(combos))]
+            ),
+        ),
+        (
+            entity(*base, "key_names"),
+            labels(
+                keys,
+                [f"start {k + 1}" for k in range(len(combos))],
+                [series_color(k) for k in range(len(combos))],
+            ),
+        ),
+    ]
+    x_range = (float(lo[0] - 0.3 * span), float(hi[0] + 0.65 * span))
+    y_range = (float(-hi[1] - 0.4 * span), float(-lo[1] + 0.45 * span))
+    return StartMap(out, x_range, y_range)
 
 
 def outcome_text(outcome: str, reason: str) -> str:
@@ -525,6 +756,7 @@ def blueprint(
     threshold: bool = False,
     marks: Mapping[str, Sequence[str]] | None = None,
     duration: float | None = None,
+    start_bounds: tuple[tuple[float, float], tuple[float, float]] | None = None,
 ) -> Any:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
@@ -544,9 +776,9 @@ def blueprint(
     time axis before t = 0 (:func:`legend_time_axis`), so the legend sits left of the curves.
     ``start_focus`` (an episode that
     ended at its first tick, e.g. a wrong start, where the plots would hold one point): the
-    start decision and its plot take the middle column instead, the lanes go above the
-    events log. The time panel starts collapsed (one row), the blueprint and selection panels
-    too.
+    start decision takes the middle column instead, its map goes between the lanes and the
+    events log on the right. The time panel starts collapsed (one row), the blueprint and
+    selection panels too.
 
     Args:
         feature_groups: panel name -> feature names.
@@ -557,6 +789,8 @@ def blueprint(
         threshold: whether the threshold series was logged.
         marks: variable -> the event kinds (of :data:`MARK_STYLES`) marked for it.
         duration: the episode's last time [s] (``None``: the viewer's default time axes).
+        start_bounds: the start map's (x range, y range) (:class:`StartMap`; ``None``: the
+            viewer's default, which leaves most of the view empty).
 
     Returns:
         The blueprint.
@@ -594,7 +828,13 @@ def blueprint(
         if logged.targets
     ]
     start_doc = rrb.TextDocumentView(origin=START_ENTITY, name="start")
-    start_plot = rrb.Spatial2DView(origin=START_BOXES_ENTITY, name="start map")
+    start_plot = rrb.Spatial2DView(
+        origin=START_BOXES_ENTITY,
+        name="start map",
+        visual_bounds=None
+        if start_bounds is None
+        else rrb.VisualBounds2D(x_range=start_bounds[0], y_range=start_bounds[1]),
+    )
     status = rrb.TextDocumentView(origin=STATUS_ENTITY, name="status")
     lanes = rrb.StateTimelineView(origin="active", name="active MPs")
     logs = rrb.Tabs(
@@ -612,13 +852,14 @@ def blueprint(
     scene = rrb.Spatial3DView(origin="world", name="scene")
     if start_focus and start:
         left = rrb.Vertical(scene, status, row_shares=[1, 1])
-        middle = rrb.Vertical(start_doc, start_plot, row_shares=[3, 2])
-        right = rrb.Vertical(lanes, logs, row_shares=[2, 3])
+        middle = start_doc  # the whole column: every feature at the start without scrolling
+        right = rrb.Vertical(lanes, start_plot, logs, row_shares=[3, 3, 2])
     else:
         lower_left: Any = status
         if start:
             lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
-        left = rrb.Vertical(scene, lower_left, row_shares=[1, 1])
+        # the start document's tab shows its tables and the features' heading unscrolled
+        left = rrb.Vertical(scene, lower_left, row_shares=[2, 3] if start else [1, 1])
         parts: list[Any] = [lanes]
         shares = [3.0]
         if overview:
@@ -773,7 +1014,10 @@ def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
     """Geom ``index`` of the recorder's ``geoms``, validated and completed with its defaults.
 
     The result has ``body``, ``name``, ``type``, ``size`` (list), ``pos`` (3,) [m], ``quat``
-    (4,) wxyz and ``rgba`` (4,) uint8.
+    (4,) wxyz and ``rgba`` (4,) uint8. A missing or empty name becomes ``geom_<index>``: an
+    empty one would log the geom at ``world/<body>`` itself, where its pose in the body frame
+    and the body's pose in the world then fight over one transform (the robot was drawn in
+    pieces, each link shifted along itself, before this).
     """
     where = f"geoms[{index}]"
     kind = geom.get("type")
@@ -792,13 +1036,40 @@ def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
     rgba = _as_vector(geom.get("rgba", _DEFAULT_RGBA), 4, f"{where} rgba", ConfigError)
     return {
         "body": str(geom["body"]),
-        "name": str(geom.get("name", f"geom_{index}")),
+        "name": str(geom.get("name") or f"geom_{index}"),
         "type": kind,
         "size": size.tolist(),
         "pos": pos,
         "quat": quat,
         "rgba": np.round(np.clip(rgba, 0.0, 1.0) * 255).astype(np.uint8),
     }
+
+
+def parse_geoms(geoms: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Every geom of the recorder's ``geoms`` through :func:`parse_geom`, each at its own path.
+
+    Args:
+        geoms: geom descriptions (``body``, ``type``, ``size``, optional ``name``, ``pos``,
+            ``quat``, ``rgba``).
+
+    Returns:
+        The parsed geoms, in order.
+
+    Raises:
+        ConfigError: a malformed geom, or two geoms of one body with the same name (they would
+            be logged at one entity path, one hiding the other).
+    """
+    parsed = [parse_geom(i, geom) for i, geom in enumerate(geoms)]
+    seen: dict[tuple[str, str], int] = {}
+    for i, geom in enumerate(parsed):
+        key = (geom["body"], geom["name"])
+        if key in seen:
+            raise ConfigError(
+                f"geoms[{i}] and geoms[{seen[key]}] are both named {geom['name']!r} on body "
+                f"{geom['body']!r}: give each geom of a body its own name"
+            )
+        seen[key] = i
+    return parsed
 
 
 def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:

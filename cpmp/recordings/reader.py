@@ -31,7 +31,13 @@ from cpmp.recordings.layout import (
     start_text,
     transition_text,
 )
-from cpmp.records import SequencerNote, StartDecision, StartOption, TransitionEvent
+from cpmp.records import (
+    PendingSwitch,
+    SequencerNote,
+    StartDecision,
+    StartOption,
+    TransitionEvent,
+)
 
 
 class ViewInfo(NamedTuple):
@@ -76,6 +82,7 @@ class RecordingSummary:
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
     start: StartDecision | None = None
     note_texts: list[str] = field(default_factory=list)
+    cause: PendingSwitch | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields.
@@ -89,6 +96,7 @@ class RecordingSummary:
         ]
         if self.start is not None:
             data["start"]["options"] = [o._asdict() for o in self.start.options]
+        data["cause"] = self.cause.to_dict() if self.cause is not None else None
         return data
 
 
@@ -152,7 +160,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     entity_paths: set[str] = set()
     transitions: list[TransitionEvent] = []
     notes: list[tuple[SequencerNote, str]] = []
-    outcomes: list[tuple[float, int, str, str]] = []
+    outcomes: list[tuple[float, int, str, str, PendingSwitch | None]] = []
     start: StartDecision | None = None
     duration = 0.0
     for index, _store, entity_path, batch in batches:
@@ -235,16 +243,19 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                     )
         if f"{OUTCOME_ARCHETYPE}:outcome" in columns:
             outcome_column = batch.column(f"{OUTCOME_ARCHETYPE}:outcome").to_pylist()
-            reason_column = (
-                batch.column(f"{OUTCOME_ARCHETYPE}:reason").to_pylist()
-                if f"{OUTCOME_ARCHETYPE}:reason" in columns
+            reason_column, cause_column = (
+                batch.column(f"{OUTCOME_ARCHETYPE}:{name}").to_pylist()
+                if f"{OUTCOME_ARCHETYPE}:{name}" in columns
                 else [None] * len(times)
+                for name in ("reason", "cause")
             )
             for row, t in enumerate(times):
                 outcome = _first(outcome_column[row])
                 if outcome is not None:
                     reason = _first(reason_column[row])
-                    outcomes.append((t, len(outcomes), str(outcome), str(reason or "")))
+                    cause = _first(cause_column[row])
+                    found = PendingSwitch.from_dict(json.loads(cause)) if cause else None
+                    outcomes.append((t, len(outcomes), str(outcome), str(reason or ""), found))
 
     transitions.sort(key=lambda event: event.t)
     notes.sort(key=lambda pair: pair[0].t)
@@ -258,6 +269,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         transitions=transitions,
         outcome=last_outcome[2] if last_outcome else None,
         reason=last_outcome[3] if last_outcome else None,
+        cause=last_outcome[4] if last_outcome else None,
         duration=duration,
         n_ticks=sum(len(values) for values in ticks.values()),
         entity_paths=sorted(entity_paths),
@@ -391,7 +403,19 @@ def format_summary(summary: RecordingSummary) -> str:
         lines.append("outcome: none recorded")
     else:
         lines.append(outcome_text(summary.outcome, summary.reason or ""))
+    if summary.cause is not None:
+        lines += cause_lines(summary.cause)
     return "\n".join(lines)
+
+
+def cause_lines(cause: PendingSwitch) -> list[str]:
+    """An incomplete episode's cause as :func:`format_summary` prints it: words, then fields."""
+    fields = ", ".join(
+        f"{k}={'–' if v is None else (f'{v:.3f}' if isinstance(v, float) else v)}"
+        for k, v in cause.to_dict().items()
+        if v not in ("", None) or k in ("variable", "expected", "best_p")
+    )
+    return [f"cause: {cause.describe()}", f"  {fields}"]
 
 
 __all__ = [

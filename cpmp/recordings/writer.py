@@ -6,6 +6,7 @@ The layout is in :mod:`cpmp.recordings`; paths, texts, panels and blueprint in
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import os
@@ -32,7 +33,6 @@ from cpmp.recordings.layout import (
     OUTCOME_ARCHETYPE,
     PROPERTY_NAME,
     START_ARCHETYPE,
-    START_BOXES_ENTITY,
     START_ENTITY,
     STATUS_ENTITY,
     THRESHOLD_COLOR,
@@ -51,16 +51,18 @@ from cpmp.recordings.layout import (
     group_features,
     hold_text,
     outcome_text,
-    parse_geom,
+    parse_geoms,
     pose_rows,
     series_color,
     series_label,
+    start_labels,
+    start_map,
     start_markdown,
     start_text,
     status_markdown,
     transition_text,
 )
-from cpmp.records import StartDecision
+from cpmp.records import PendingSwitch, StartDecision
 from cpmp.sequencer.inputs import checked_time
 
 
@@ -151,7 +153,7 @@ class EpisodeRecorder:
         )
         self.episode = str(episode)
         self.flush_every = int(flush_every)
-        parsed_geoms = [parse_geom(i, geom) for i, geom in enumerate(geoms or [])]
+        parsed_geoms = parse_geoms(geoms or [])
 
         self._rr = rr
         self._feature_paths = tuple(entity("features", name) for name in self.feature_names)
@@ -163,6 +165,7 @@ class EpisodeRecorder:
         self._last_note = ""
         self._start_line = ""
         self._start_features: dict[str, float] = {}
+        self._start_bounds: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._holds: dict[str, _Hold] = {}
         self._events: set[str] = set()
         self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
@@ -170,6 +173,8 @@ class EpisodeRecorder:
         self._last_p: dict[str, dict[str, float]] = {}
         self._marks: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._n_ticks = 0
+        self._tick_times: list[float] = []
+        """Every tick's time [s], in order (an event logged later at an earlier time)."""
         self._buffered_ticks = 0
         self._last_t = -math.inf
         self._closed = False
@@ -366,6 +371,7 @@ class EpisodeRecorder:
 
         self._n_ticks += 1
         self._last_t = t
+        self._tick_times.append(t)
         self._buffered_ticks += 1
         if self._buffered_ticks >= self.flush_every:
             self._flush_buffers()
@@ -515,37 +521,49 @@ class EpisodeRecorder:
         decision: StartDecision,
         references: Sequence[StartReference] = (),
         axes: Sequence[str] = (),
+        *,
+        correct: Mapping[str, str] | None = None,
+        values: Mapping[str, float] | None = None,
     ) -> None:
         """Record how the initial MPs were chosen, at the decision's time.
 
         The decision (``events/start``: a line of the events log and the machine-readable
         ``cpmp.Start`` record) and the ``start`` document: the starts weighed with their
-        scores, this episode's features at its first tick against the training starts
-        ``references`` in the features ``axes``, and every feature at the start. With two
-        ``axes``, ``start/boxes`` plots the training starts (coloured by their initial
-        combination) and this episode's start (black) in those two features.
+        scores (the ``correct`` one marked), this episode's start against the training starts
+        ``references`` in ``axes``, and every feature at the start. With two ``axes``,
+        ``start/boxes`` maps the training starts (coloured by their initial combination) and
+        this episode's start (black) in those two, with tick values, axis titles and a colour
+        key (:func:`~cpmp.recordings.layout.start_map`).
 
         Args:
             decision: the sequencer's start decision (``SequencerEpisode.start_decision``).
             references: the training demonstrations' starts.
-            axes: feature names to compare the starts in.
+            axes: what to compare the starts in: features, or keys of ``values`` (the unit in
+                the name, e.g. ``box_width_m``); every reference's ``values`` holds each.
+            correct: the initial MPs the demonstrator uses for this episode (some or all
+                variables; ``None``: unknown).
+            values: this episode's value of each axis that is not a feature.
 
         Raises:
-            UnknownMPError: an MP of ``decision`` is not in ``mp_names``.
-            ConfigError: an axis is not a feature, or a reference lacks one.
+            UnknownMPError: an MP of ``decision`` or ``correct`` is not in ``mp_names``.
+            ConfigError: an axis is neither a feature nor in ``values``, or a reference lacks
+                one.
         """
         self._check_open()
         t = checked_time(decision.t)
         for option in decision.options:
             for variable, mp in option.combination.items():
                 check_mp(self.mp_names, variable, mp)
+        for variable, mp in (correct or {}).items():
+            check_mp(self.mp_names, variable, mp)
+        values = {str(k): float(v) for k, v in (values or {}).items()}
         axes = [str(a) for a in axes]
-        unknown = [a for a in axes if a not in self.feature_names]
+        unknown = [a for a in axes if a not in self.feature_names and a not in values]
         missing = [r.name for r in references if any(a not in r.values for a in axes)]
         if unknown or missing:
             raise ConfigError(
-                f"start axes must be features of every reference: unknown {unknown}, "
-                f"references without them {missing}"
+                f"start axes must be features or given values, and in every reference: "
+                f"unknown {unknown}, references without them {missing}"
             )
         record = self._rr.DynamicArchetype(
             START_ARCHETYPE,
@@ -561,61 +579,71 @@ class EpisodeRecorder:
         self._events.add("events/start")
         self._log_event("events/start", t, self._start_line, "INFO", record)
         self._set_event_time(t)
-        document = start_markdown(decision, self._start_features, references, axes)
+        mapped = len(axes) >= 2 and bool(references)
+        document = start_markdown(
+            decision,
+            self._start_features,
+            references,
+            axes,
+            correct=correct,
+            values=values,
+            colours=mapped,
+        )
         self._rec.log(START_ENTITY, self._rr.TextDocument(document, media_type="text/markdown"))
-        if len(axes) >= 2 and references:
-            self._log_start_points(references, axes[:2])
+        if mapped:
+            here = {**self._start_features, **values}
+            point = [here[a] for a in axes[:2]] if all(a in here for a in axes[:2]) else None
+            combos = start_labels(decision, references)
+            drawn = start_map(references, axes[:2], point, combos)
+            for path, archetype in drawn.entities:
+                self._rec.log(path, archetype)
+            self._start_bounds = (drawn.x_range, drawn.y_range)
         self._log_status(t)
 
-    def _log_start_points(self, references: Sequence[StartReference], axes: Sequence[str]) -> None:
-        """The training starts and this episode's start as 2D points in two features."""
-        combos: list[dict[str, str]] = []
-        for ref in references:
-            if ref.combination not in combos:
-                combos.append(ref.combination)
-        train = np.array([[ref.values[a] for a in axes] for ref in references], dtype=float)
-        spread = float(np.max(np.ptp(train, axis=0))) if len(train) > 1 else 0.0
-        radius = 0.025 * (spread if spread > 0 else max(float(np.max(np.abs(train))), 1.0))
-        self._rec.log(
-            entity(*START_BOXES_ENTITY.split("/"), "training"),
-            self._rr.Points2D(
-                train,
-                radii=radius,
-                colors=[series_color(combos.index(ref.combination)) for ref in references],
-                labels=[ref.name for ref in references],
-            ),
-        )
-        if self._start_features:
-            here = [[self._start_features[a] for a in axes]]
-            self._rec.log(
-                entity(*START_BOXES_ENTITY.split("/"), "episode"),
-                self._rr.Points2D(
-                    here, radii=1.6 * radius, colors=[(0, 0, 0)], labels=["this episode"]
-                ),
-            )
-
     def log_outcome(
-        self, t: float, outcome: str, reason: str = "", *, success: bool | None = None
+        self,
+        t: float,
+        outcome: str,
+        reason: str = "",
+        *,
+        success: bool | None = None,
+        cause: PendingSwitch | None = None,
     ) -> None:
         """Record the episode's outcome (e.g. ``"complete"``) at ``t`` [s], with a reason.
 
         ``success=False`` logs it at level ``WARN`` (drawn in the viewer's warning colour),
-        otherwise ``INFO``. The ``status`` document at ``t`` shows the outcome too.
+        otherwise ``INFO``. The ``status`` document at ``t`` shows the outcome too. ``cause``:
+        an incomplete episode's missing switch; its words end the outcome text (unless
+        ``reason`` holds them already), its fields ride along in the outcome record
+        (``cause``, JSON), and an event at the time its ``p`` was best (else at ``t``) names it.
         """
         self._check_open()
         t = checked_time(t)
         if not str(outcome):
             raise DataError("outcome must be a non-empty string")
-        text = outcome_text(str(outcome), str(reason))
-        record = self._rr.DynamicArchetype(
-            OUTCOME_ARCHETYPE, components={"outcome": str(outcome), "reason": str(reason)}
-        )
+        reason = str(reason)
+        components = {"outcome": str(outcome), "reason": reason}
         level = "WARN" if success is False else "INFO"
+        if cause is not None:
+            words = cause.describe()
+            if words not in reason:
+                reason = f"{reason}; {words}" if reason else words
+            components = {**components, "reason": reason, "cause": json.dumps(cause.to_dict())}
+            self._log_cause(t, cause, level)
+        text = outcome_text(str(outcome), reason)
+        record = self._rr.DynamicArchetype(OUTCOME_ARCHETYPE, components=components)
         self._end_holds(t)
         self._events.add("events/outcome")
         self._log_event("events/outcome", t, text, level, record)
         self._set_event_time(t)
         self._log_status(t, outcome=text)
+
+    def _log_cause(self, t: float, cause: PendingSwitch, level: str) -> None:
+        """The event naming ``cause`` at the time its ``p`` was best (else at ``t`` [s])."""
+        at = cause.best_t if math.isfinite(cause.best_t) and cause.best_t <= t else t
+        tick = max(bisect.bisect_right(self._tick_times, at + 1e-9) - 1, 0)
+        self._events.add("events/outcome")
+        self._log_event("events/outcome", at, f"cause: {cause.describe()}", level, None, tick)
 
     def close(self) -> Path:
         """Flush, finish the file and move it onto ``path``; returns ``path``. Idempotent."""
@@ -659,6 +687,7 @@ class EpisodeRecorder:
             threshold=self.threshold is not None and self._n_ticks > 0,
             marks={v: [k for k in MARK_STYLES if k in kinds] for v, kinds in self._marks.items()},
             duration=self._last_t if self._n_ticks > 1 else None,
+            start_bounds=self._start_bounds,
         )
 
     def abort(self) -> None:

@@ -13,6 +13,8 @@ ones before it):
 * ``glitches``: label glitches (``A A X A A``) repaired before the graphs are built;
 * ``model``: :class:`NodeIndex` and :class:`TransitionModel`, what an episode reads of a
   fitted sequencer;
+* ``watch``: :class:`ActivationWatch`, what an episode remembers of each pending switch
+  (best ``p`` and why it has not fired) to explain an incomplete episode;
 * ``episode``: :class:`SequencerEpisode`, the state machine of one episode;
 * ``batch``: :class:`BatchedSequencer`, N episodes with one predictor call per tick, and
   :class:`EpisodeBatch`, what every batched policy shares;

@@ -10,7 +10,7 @@ The goal-nearest baseline's batch, :class:`~cpmp.baselines.GoalNearestBatch`, is
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -18,7 +18,7 @@ import torch
 
 from cpmp.errors import ConfigError, CpmpError, DataError
 from cpmp.predictors import ProgressPredictor
-from cpmp.records import SequencerNote, TransitionEvent
+from cpmp.records import PendingSwitch, SequencerNote, TransitionEvent
 from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.inputs import checked_features
 from cpmp.sequencer.model import TransitionModel
@@ -217,6 +217,18 @@ class BatchedSequencer(EpisodeBatch):
         self._held = np.zeros((len(self.episodes), len(seq.feature_names)))
         """Each episode's last finite features (what a stateful predictor gets instead of
         non-finite ones)."""
+
+    def explain(self, index: int, expected: Mapping[str, Sequence[str]]) -> PendingSwitch | None:
+        """Why episode ``index`` has not run ``expected``: the switch that never came.
+
+        Args:
+            index: the episode.
+            expected: variable -> the MPs the demonstrator ran on its context.
+
+        Returns:
+            The cause (:meth:`SequencerEpisode.explain`), or ``None`` when there is none.
+        """
+        return self.episodes[index].explain(expected)
 
     def reset(self, t: Times, x: Features, live: LiveMask = None) -> list[dict[str, str]]:
         """Start the ``live`` episodes (default: all).

@@ -12,25 +12,29 @@ drives one episode, :class:`~cpmp.sequencer.batch.BatchedSequencer` many.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
 from cpmp.errors import DataError, NotFittedError
 from cpmp.records import (
+    PendingSwitch,
     SequencerNote,
     StartDecision,
     StartOption,
     SwitchKind,
     TickInfo,
     TransitionEvent,
+    divergence,
 )
 from cpmp.sequencer.branches import STAY
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
 from cpmp.sequencer.timing import MeasurementClock
+from cpmp.sequencer.watch import ActivationWatch
 
 
 class PhiCheck(NamedTuple):
@@ -157,6 +161,8 @@ class SequencerEpisode:
         self._plan: TransitionPlan | None = None
         self._tick: TickInfo | None = None
         self._pending: _PendingTick | None = None
+        self._watch: dict[str, list[ActivationWatch]] = {}
+        """Per variable, one watch per activation, the active one last (:meth:`explain`)."""
 
     @property
     def last_tick(self) -> TickInfo | None:
@@ -172,6 +178,44 @@ class SequencerEpisode:
             )
             self._pending = None
         return self._tick
+
+    def explain(self, expected: Mapping[str, Sequence[str]]) -> PendingSwitch | None:
+        """Why the episode has not run the demonstrator's MP sequences: the missing switch.
+
+        The first place the episode's sequences leave ``expected``
+        (:func:`~cpmp.records.divergence`): a wrong switch is named with the ``p`` its
+        demonstrated alternative reached; a switch still pending with the best ``p`` of its
+        edge since the MP became active, when, ``p`` now, and why the rule did not fire
+        (:class:`~cpmp.records.PendingSwitch`).
+
+        Args:
+            expected: variable -> the MPs the demonstrator ran on the same context.
+
+        Returns:
+            The cause, or ``None`` before :meth:`start`, after a wrong start, or when the
+            sequences equal ``expected``.
+        """
+        if not self._watch:
+            return None
+        sequences = {v: [w.current for w in watches] for v, watches in self._watch.items()}
+        found = divergence(sequences, expected)
+        if found is None:
+            return None
+        watch = self._watch[found.variable][found.index - 1]
+        if found.fired:
+            mine = [e for e in self.events if e.variable == found.variable]
+            at = mine[found.index - 1].t
+            return watch.pending(found.expected, self.gave_up, found.fired, at)
+        cause = watch.pending(found.expected, self.gave_up)
+        if cause.reason == "held" and not cause.detail:
+            notes = [
+                n.text
+                for n in self.notes
+                if n.kind == "hold" and n.variable == found.variable and n.t >= watch.since
+            ]
+            text = notes[-1] if notes else "held back by the coupling"
+            cause = replace(cause, detail=text)
+        return cause
 
     def start(self, t: float, x: np.ndarray, phi: np.ndarray) -> dict[str, str]:
         """Begin the episode: the start rule on every head's φ.
@@ -197,6 +241,7 @@ class SequencerEpisode:
         self.active = dict(self.start_decision.chosen)
         self.events = []
         self.notes = []
+        self._watch = {v: [self._new_watch(v, t)] for v in sorted(model.graphs)}
         for v, rule in self._rules.items():
             rule.reset()
             self._observe_entry(v, t, phi)
@@ -295,6 +340,7 @@ class SequencerEpisode:
         rows = []
         fired = False
         chosen_by: dict[str, str | None] = {}
+        above: set[str] = set()
         for v, current, names, columns, exit_column, unseen, checks, _, scale in plan:
             exit_p = phi[exit_column]
             p = [exit_p * min(1.0, (1.0 - phi[i]) * g) for i, g in zip(columns, scale, strict=True)]
@@ -306,6 +352,8 @@ class SequencerEpisode:
                         bad[successor] += 1
             rows.append(TickRow(v, current, names, p, bad))
             chosen_by[v] = self._branch_choice(v, current, names, unseen, state)
+            if self._watch[v][-1].see(t, m, p, stopped):
+                above.add(v)
         going: dict[str, str] = {}
         for plan_row, row in zip(plan, rows, strict=True):
             if stopped:
@@ -318,6 +366,8 @@ class SequencerEpisode:
             if chosen is not None:
                 allowed = [ok and s == chosen for ok, s in zip(allowed, names, strict=True)]
             k = self._rules[v].update(m, p, allowed)
+            if v in above:
+                self._watch[v][-1].gate(allowed, chosen)
             armed = self._armed.get(v)
             if armed is not None and (armed not in names or p[names.index(armed)] <= c.threshold):
                 self._armed.pop(v)
@@ -349,6 +399,7 @@ class SequencerEpisode:
                 if self._armed.get(v) != target:
                     self._armed[v] = target
                     self._note_joint(t, v, row.current, target, row.p[k], waits)
+                self._watch[v][-1].wait(target, "; ".join(f"{u}: {a} -> {b}" for u, a, b in waits))
                 held[v] = target
                 self._holding[v] = target
                 continue
@@ -595,6 +646,13 @@ class SequencerEpisode:
         )
         self.notes.append(SequencerNote(t, "hold", v, text))
 
+    def _new_watch(self, v: str, t: float) -> ActivationWatch:
+        """A watch of ``v``'s active MP, active from ``t`` [s] (:meth:`explain`)."""
+        c = self.model.config
+        current = self.active[v]
+        names = self.model.nodes.successors[(v, current)].names
+        return ActivationWatch(v, current, names, t, c.threshold, c.patience, c.min_improvement)
+
     def _observe_entry(self, v: str, m: float, phi: list[float] | np.ndarray) -> None:
         """Give ``v``'s rule the ``p`` of its new node's successors measured at ``m`` [s].
 
@@ -626,6 +684,7 @@ class SequencerEpisode:
         """
         self.events.append(TransitionEvent(t, v, self.active[v], target, p, state.copy(), kind))
         self.active[v] = target
+        self._watch[v].append(self._new_watch(v, t))
         self._armed.pop(v, None)
         self._rules[v].reset()
         self._observe_entry(v, m, phi)

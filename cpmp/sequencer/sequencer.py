@@ -38,7 +38,14 @@ from cpmp.errors import ConfigError
 from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import ProgressPredictor, predictor_from_spec
-from cpmp.records import ReplayResult, SequencerNote, StartDecision, TickInfo, TransitionEvent
+from cpmp.records import (
+    PendingSwitch,
+    ReplayResult,
+    SequencerNote,
+    StartDecision,
+    TickInfo,
+    TransitionEvent,
+)
 from cpmp.sequencer.batch import BatchedSequencer
 from cpmp.sequencer.branches import BranchChoices, StartChoice, entry_scales, stay_examples
 from cpmp.sequencer.episode import SequencerEpisode
@@ -56,11 +63,11 @@ CHECKPOINT_FORMAT = "cpmp-sequencer"
 CHECKPOINT_VERSION = 2
 CHECKPOINT = CheckpointSpec(
     CHECKPOINT_FORMAT,
-    (1, CHECKPOINT_VERSION),
+    (CHECKPOINT_VERSION,),
     "cpmp sequencer",
     "load a file written by ConcurrentSequencer.save, or retrain the model with scripts/train.py",
 )
-"""The sequencer's checkpoint kind (it still reads version 1 files)."""
+"""The sequencer's checkpoint kind."""
 
 PAPER_OPTIONS: dict[str, str | bool] = {
     "feature_weighting": "none",
@@ -76,7 +83,7 @@ PAPER_OPTIONS: dict[str, str | bool] = {
 }
 """Fit options that turn :meth:`ConcurrentSequencer.fit`'s defaults into the paper's method:
 ``ConcurrentSequencer.fit(demos, predictor="klr", **PAPER_OPTIONS)`` (the main job's
-``predictor=klr sequencer=paper``)."""
+``predictor=paper sequencer=paper``)."""
 
 
 class ConcurrentSequencer:
@@ -168,7 +175,7 @@ class ConcurrentSequencer:
 
         Args:
             demos: labelled demonstrations sharing feature names and control variables.
-            predictor: ``klr`` (paper), ``klr_full``, ``klr_sparse``, ``mlp`` or a baseline.
+            predictor: ``klr`` (default), ``klr_full``, ``klr_sparse``, ``mlp`` or a baseline.
             **options: predictor options (e.g. ``gamma``, ``support_scale``, ``min_support``,
                 ``l2``, ``feature_scaling``: the fields of its options class), sequencer
                 options (:class:`~cpmp.config.SequencerConfig`), trainer options
@@ -200,7 +207,7 @@ class ConcurrentSequencer:
         Args:
             demos: labelled demonstrations sharing feature names and control variables.
             config: predictor, rule, trainer and seed (``None``: cpmp's defaults, the main
-                job's ``predictor=klr_path sequencer=coupled``).
+                job's ``predictor=klr sequencer=coupled``).
             validation: the fit's held-out demonstrations (``None``: the trainer's
                 ``val_fraction`` of ``demos``, none by default): the progress MAE on them is
                 logged every epoch (``fit_summary["val_mae"]``) and Adam fits stop on their
@@ -420,6 +427,17 @@ class ConcurrentSequencer:
         """How the last :meth:`reset` chose the initial MPs, with every start's score."""
         return self._episode.start_decision
 
+    def explain(self, expected: Mapping[str, Sequence[str]]) -> PendingSwitch | None:
+        """Why the current episode has not run ``expected``: the switch that never came.
+
+        Args:
+            expected: variable -> the MPs the demonstrator ran on the same context.
+
+        Returns:
+            The cause (:meth:`SequencerEpisode.explain`), or ``None`` when there is none.
+        """
+        return self._episode.explain(expected)
+
     def replay(self, time: np.ndarray, features: np.ndarray) -> ReplayResult:
         """Run the sequencer open-loop over a recorded feature stream.
 
@@ -467,7 +485,7 @@ class ConcurrentSequencer:
 
     @classmethod
     def load(cls, path: str | Path) -> ConcurrentSequencer:
-        """Load a checkpoint written by :meth:`save` (this version's or version 1)."""
+        """Load a checkpoint written by :meth:`save`."""
         return load_checkpoint(path, CHECKPOINT, cls._from_payload)
 
     @classmethod
@@ -481,10 +499,6 @@ class ConcurrentSequencer:
         unknown = sorted(set(options) - {f.name for f in dataclasses.fields(SequencerConfig)})
         if unknown:
             raise ValueError(f"unknown sequencer options {unknown}")
-        if version == 1:
-            # Written before the switching rules, coupling and recovery existed: keep its
-            # behaviour (the plateau rule, graphs coupled through the features only).
-            options.update(switch_rule="plateau", coupling="none", recovery=False)
         if "branches" not in payload:
             # Written before branch choices and joint switches existed: keep its behaviour.
             options.setdefault("branch", "none")

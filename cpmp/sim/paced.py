@@ -70,6 +70,7 @@ def paced_sim(
                 correct_strategy(box, cfg),
                 r.duration,
                 r.reason,
+                r.cause,
             )
             for box, r in zip(test_boxes, results, strict=True)
         ]

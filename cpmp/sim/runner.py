@@ -17,7 +17,14 @@ import numpy as np
 from cpmp.config.task import TaskConfig, as_task_config
 from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import UnknownMPError
-from cpmp.records import BatchedPolicy, Policy, TickInfo, TransitionEvent
+from cpmp.records import (
+    BatchedPolicy,
+    PendingSwitch,
+    Policy,
+    TickInfo,
+    TransitionEvent,
+    episode_cause,
+)
 from cpmp.sim.collect import ROBOT_STREAM, make_pacer, record_demonstrations
 from cpmp.sim.policies import PolicyList, as_batched, per_episode
 from cpmp.sim.scene import Box, correct_strategy
@@ -45,7 +52,10 @@ class EpisodeResult:
     ``outcome``: how it ended (:data:`Outcome`), ``reason`` says why in words.
     ``transitions``: every MP switch the policy made, in order; the runner sees only the active
     MPs, so each has ``probability`` nan and ``kind`` ``switch``, and ``state`` is the feature
-    vector (d,) the policy switched on.
+    vector (d,) the policy switched on. ``cause``: for an ``incomplete`` or ``diverged``
+    episode, the demonstrated switch that never came (:class:`~cpmp.records.PendingSwitch`,
+    explained by a fitted sequencer, ``unknown`` why for other policies; its words end
+    ``reason``); ``None`` otherwise.
     """
 
     outcome: Outcome
@@ -58,6 +68,7 @@ class EpisodeResult:
     hands_home: bool
     expected: dict[str, list[str]] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
+    cause: PendingSwitch | None = None
 
 
 def _normalise(active: Mapping[str, str], variables: list[str]) -> dict[str, str]:
@@ -148,6 +159,8 @@ def run_episodes(
         _Rollout(i, box, cfg, demo, tick, on_result, (base, ROBOT_STREAM, i))
         for i, (box, demo, tick) in enumerate(zip(boxes, expected, callbacks, strict=True))
     ]
+    for run in runs:
+        run.explainer = _explainer(batch, run.index)
     x = np.stack([run.x for run in runs])
     start = time.perf_counter()
     initial = batch.reset(0.0, x)
@@ -184,6 +197,13 @@ def run_episodes(
     return [run.result for run in runs]
 
 
+def _explainer(batch: BatchedPolicy, index: int) -> tuple[object, int | None]:
+    """What explains episode ``index``'s missing switch: ``(policy, index in it or None)``."""
+    if isinstance(batch, PolicyList):
+        return batch.policies[index], None
+    return batch, index
+
+
 class _Rollout:
     """One episode of :func:`run_episodes`: its simulation, MP sequences and ending checks.
 
@@ -216,11 +236,19 @@ class _Rollout:
         self.last_switch = 0.0
         self.policy_time = 0.0
         self.result: EpisodeResult | None = None
+        self.explainer: tuple[object, int | None] = (None, None)
+        """The policy that explains a missing switch, and the episode's index in it."""
 
     def finish(self, outcome: Outcome, reason: str) -> None:
         """End the episode with ``outcome`` (the state of the simulation now)."""
         sim = self.sim
         ok = outcome != "diverged"
+        cause = None
+        if outcome in ("incomplete", "diverged"):
+            policy, index = self.explainer
+            cause = episode_cause(policy, self.sequences, self.want, index, self.transitions)
+            if cause is not None:
+                reason = f"{reason}; {cause.describe()}"
         self.result = EpisodeResult(
             outcome=outcome,
             reason=reason,
@@ -232,6 +260,7 @@ class _Rollout:
             hands_home=sim.hands_home() if ok else False,
             expected=self.want,
             timing=dict(sim.timing, policy=self.policy_time),
+            cause=cause,
         )
         if self.on_result is not None:
             self.on_result(self.index, self.result)

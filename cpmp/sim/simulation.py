@@ -354,7 +354,8 @@ class Simulation:
     def geoms(self) -> list[dict]:
         """Static description of the visual geoms (floor plane excluded).
 
-        Each dict: ``body`` (name), ``name``, ``type`` ('box' | 'capsule' | 'sphere' |
+        Each dict: ``body`` (name), ``name`` (MuJoCo's, or ``<type>_<geom id>`` for an unnamed
+        geom: unique per body), ``type`` ('box' | 'capsule' | 'sphere' |
         'cylinder'), ``size`` (MuJoCo convention: box half-extents (3,); capsule/cylinder
         (radius, half-length along local z); sphere (radius,)), ``pos`` (3,) and ``quat`` wxyz
         (4,) in the body frame, ``rgba`` (4,).
@@ -369,7 +370,8 @@ class Simulation:
             out.append(
                 {
                     "body": m.body(int(m.geom_bodyid[i])).name,
-                    "name": m.geom(i).name,
+                    # unnamed geoms (arm links, fingers) get their own entity path
+                    "name": m.geom(i).name or f"{kind}_{i}",
                     "type": kind,
                     "size": m.geom_size[i][:n_size].copy(),
                     "pos": m.geom_pos[i].copy(),

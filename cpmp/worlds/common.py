@@ -18,7 +18,7 @@ import numpy as np
 
 from cpmp.data import DemonstrationLog
 from cpmp.errors import ConfigError
-from cpmp.records import Policy
+from cpmp.records import PendingSwitch, Policy, episode_cause
 
 State = TypeVar("State")
 Episode = TypeVar("Episode")
@@ -28,6 +28,8 @@ Features = Callable[[State], np.ndarray]
 """The world's feature vector ``(d,)`` of a state."""
 EpisodeFeatures = Callable[[State, Episode], np.ndarray]
 """The world's feature vector ``(d,)`` of a state of an episode."""
+ExpectedSequences = Callable[[Episode], Mapping[str, Sequence[str]]]
+"""The demonstrator's MP sequences (variable -> MPs in order) of an episode."""
 
 
 class SteppedTask(Protocol[State, Episode]):
@@ -198,6 +200,9 @@ class PolicyRun(Generic[State]):
         initial: the policy's initial MPs.
         reached_goal: whether the goal state was reached.
         state: the state at the end.
+        cause: a run that did not reach the goal after the right start: its missing switch
+            (:func:`~cpmp.records.episode_cause`), where the caller gave the demonstrator's
+            sequences; ``None`` otherwise.
     """
 
     sequences: dict[str, list[str]]
@@ -205,6 +210,7 @@ class PolicyRun(Generic[State]):
     initial: dict[str, str]
     reached_goal: bool
     state: State
+    cause: PendingSwitch | None = None
 
 
 def run_policy(
@@ -214,6 +220,7 @@ def run_policy(
     features: Features[State],
     variables: Sequence[str],
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
+    expected: ExpectedSequences[Episode] | None = None,
 ) -> PolicyRun[State]:
     """Run ``policy`` closed-loop on ``episode``, one tick every ``dt``, until the goal or time.
 
@@ -225,6 +232,8 @@ def run_policy(
         variables: the control variables.
         observe: maps the true features ``(d,)`` to what the policy sees; default: the true
             features.
+        expected: the demonstrator's MP sequences of an episode: a run that misses the goal
+            gets its ``cause``.
 
     Returns:
         The run; it stops at the goal state or at ``max_time``.
@@ -242,7 +251,10 @@ def run_policy(
         active = dict(policy.step(t, see(features(state))))
         note_switches(seqs, active)
         reached = task.at_goal(state, episode)
-    return PolicyRun(seqs, t, initial, reached, state)
+    cause = None
+    if not reached and expected is not None:
+        cause = episode_cause(policy, seqs, expected(episode))
+    return PolicyRun(seqs, t, initial, reached, state, cause)
 
 
 def run_policies(
@@ -251,6 +263,7 @@ def run_policies(
     policy: Policy,
     features: EpisodeFeatures[State, Episode],
     variables: Sequence[str],
+    expected: ExpectedSequences[Episode] | None = None,
 ) -> list[PolicyRun[State]]:
     """Run ``policy`` closed-loop on every one of ``episodes``, as :func:`run_policy` does.
 
@@ -265,6 +278,7 @@ def run_policies(
         policy: the policy (a fresh ``reset`` per episode, or one batch of them).
         features: the world's features ``(d,)`` of a state of an episode.
         variables: the control variables.
+        expected: as in :func:`run_policy`.
 
     Returns:
         One run per episode, in order.
@@ -272,7 +286,8 @@ def run_policies(
     make_batch = getattr(policy, "batched", None)
     if make_batch is None or not episodes:
         return [
-            run_policy(task, e, policy, lambda s, e=e: features(s, e), variables) for e in episodes
+            run_policy(task, e, policy, lambda s, e=e: features(s, e), variables, None, expected)
+            for e in episodes
         ]
     n = len(episodes)
     batch = make_batch(n)
@@ -297,4 +312,13 @@ def run_policies(
             note_switches(seqs[i], active[i])
             reached[i] = task.at_goal(states[i], episodes[i])
             times[i] = t
-    return [PolicyRun(seqs[i], times[i], initial[i], bool(reached[i]), states[i]) for i in range(n)]
+    causes = [
+        episode_cause(batch, seqs[i], expected(episodes[i]), i)
+        if expected is not None and not reached[i]
+        else None
+        for i in range(n)
+    ]
+    return [
+        PolicyRun(seqs[i], times[i], initial[i], bool(reached[i]), states[i], causes[i])
+        for i in range(n)
+    ]

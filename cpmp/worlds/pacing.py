@@ -34,7 +34,7 @@ import numpy as np
 from cpmp.config.task import PAUSE_AT, Pacing
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.records import Policy
+from cpmp.records import PendingSwitch, Policy
 from cpmp.worlds.outcomes import Outcome
 
 
@@ -194,12 +194,15 @@ class EpisodeScore:
         strategy: the episode's strategy.
         time: when it ended [s].
         reason: why, in words (empty where the world gives none).
+        cause: an ``incomplete`` episode's missing switch (:class:`~cpmp.records.PendingSwitch`;
+            ``None`` otherwise).
     """
 
     outcome: Outcome
     strategy: str
     time: float
     reason: str = ""
+    cause: PendingSwitch | None = None
 
 
 Evaluate = Callable[[Policy, int, int], list[EpisodeScore]]

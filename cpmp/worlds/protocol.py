@@ -15,7 +15,8 @@ Scoring (:meth:`World.score`, :class:`WorldBase`): ``wrong_start`` when the poli
 MPs differ from the demonstrator's for the context, else ``complete`` when the run reached the
 goal (:meth:`WorldRun.complete`; for a ``strict`` world also running exactly the
 demonstrator's MP sequences of the same context, hidden events included), else
-``incomplete``.
+``incomplete``; an incomplete episode names its cause (:attr:`EpisodeRun.cause`: the
+demonstrated switch that never came and why, :func:`~cpmp.records.episode_cause`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing_extensions import override
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.records import Policy
+from cpmp.records import PendingSwitch, Policy, episode_cause
 from cpmp.worlds.common import SteppedTask, note_switches, positive_count, seeded_episodes
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
@@ -128,6 +129,9 @@ class EpisodeRun:
         sequences: variable -> the MPs it ran, in order.
         time: when the episode ended [s] (done, or the time limit).
         completed: whether the goal state was reached (also after a wrong start).
+        cause: an ``incomplete`` episode's missing switch against the demonstrator's MP
+            sequences of the context (:func:`~cpmp.records.episode_cause`: explained by a
+            fitted sequencer, ``unknown`` why for other policies); ``None`` otherwise.
     """
 
     outcome: Outcome
@@ -136,6 +140,7 @@ class EpisodeRun:
     sequences: dict[str, list[str]]
     time: float
     completed: bool
+    cause: PendingSwitch | None = None
 
 
 @dataclass
@@ -305,7 +310,15 @@ def run_episodes(
             over[i] = runs[i].done(active[i])
             times[i] = t
     return [
-        _episode(world, contexts[i], initial[i], seqs[i], times[i], runs[i].complete(active[i]))
+        _episode(
+            world,
+            contexts[i],
+            initial[i],
+            seqs[i],
+            times[i],
+            runs[i].complete(active[i]),
+            (batch, i),
+        )
         for i in range(n)
     ]
 
@@ -326,7 +339,7 @@ def _run_one(
         active = dict(policy.step(t, see(run.features())))
         note_switches(seqs, active)
         over = run.done(active)
-    return _episode(world, context, initial, seqs, t, run.complete(active))
+    return _episode(world, context, initial, seqs, t, run.complete(active), (policy, None))
 
 
 def _episode(
@@ -336,10 +349,29 @@ def _episode(
     sequences: dict[str, list[str]],
     time: float,
     completed: bool,
+    explainer: tuple[object, int | None] = (None, None),
 ) -> EpisodeRun:
-    """The scored :class:`EpisodeRun`."""
+    """The scored :class:`EpisodeRun`; an incomplete one with its cause.
+
+    ``explainer``: the policy that ran it and the episode's index in it (``None``: a single
+    policy), asked for the cause (:func:`~cpmp.records.episode_cause`).
+    """
     outcome = world.score(context, initial, sequences, completed)
-    return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed)
+    cause = None
+    if outcome == "incomplete":
+        policy, index = explainer
+        cause = episode_cause(policy, sequences, expected_sequences(world, context), index)
+    return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
+
+
+def expected_sequences(world: World, context: Any) -> dict[str, list[str]]:
+    """The demonstrator's MPs per variable in ``context`` (from its demonstration)."""
+    known = getattr(world, "expected_sequences", None)
+    if callable(known):
+        return dict(known(context))
+    from cpmp.data.demonstration import mp_sequences  # the demonstration only when scoring
+
+    return mp_sequences(world.demonstrate(context))
 
 
 def evaluate(

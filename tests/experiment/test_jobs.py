@@ -27,6 +27,7 @@ from cpmp.experiment.workers import default_workers
 from cpmp.recordings import read_recording, read_views
 from cpmp.recordings.demos import label_switches, record_demo_rrd
 from cpmp.recordings.layout import blueprint_paths
+from cpmp.records import CAUSE_REASONS, PendingSwitch
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, Simulation, TaskConfig
 from cpmp.worlds.two_point import make_demonstrations
@@ -161,8 +162,34 @@ def test_recordings_agree_with_episodes_json(tiny):
         summary = read_recording(episode["rrd"])
         assert summary.outcome == episode["outcome"]
         assert summary.reason == episode["reason"]
+        # one box, one unit: width and depth [m] in both
+        meta = summary.metadata
+        assert [meta["box_width_m"], meta["box_depth_m"]] == episode["box_size_m"]
         if episode["outcome"] != "wrong_start":
             assert summary.duration == pytest.approx(episode["duration"], abs=0.011)
+
+
+def test_every_incomplete_episode_names_its_cause(tiny):
+    """Issue #36: every incomplete episode of the run carries a named cause (variable,
+    expected MP, best p, reason) in ``episodes.json``, in its recording and its reason."""
+    episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
+    for episode in episodes:
+        cause = episode["cause"]
+        if episode["outcome"] in ("complete", "wrong_start"):
+            assert cause is None
+            continue
+        assert cause["reason"] in CAUSE_REASONS and cause["reason"] != "unknown"
+        if cause["reason"] != "task_unfinished":
+            assert cause["variable"] and cause["current"] and "best_p" in cause
+        if cause["reason"] in ("below_threshold", "still_improving", "held", "given_up"):
+            assert cause["expected"] and 0.0 <= cause["best_p"] <= 1.0
+        described = PendingSwitch.from_dict(cause).describe()
+        assert episode["reason"].endswith(described)
+        if episode["rrd"]:
+            assert read_recording(episode["rrd"]).cause == PendingSwitch.from_dict(cause)
+    report = json.loads(tiny["report_path"].read_text())
+    incomplete = [e for e in episodes if e["outcome"] in ("incomplete", "diverged")]
+    assert sum(report["reproduction"]["3"]["causes"].values()) == len(incomplete)
 
 
 def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):

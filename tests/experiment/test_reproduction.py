@@ -8,7 +8,7 @@ import numpy as np
 
 from cpmp.data import Demonstration
 from cpmp.experiment.collection import SeedData
-from cpmp.experiment.reproduction import reproduce_seed
+from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
 from cpmp.records import SequencerNote, TransitionEvent
 from cpmp.sim import Box, Simulation, TaskConfig
 from cpmp.sim.policies import PolicyList
@@ -79,6 +79,9 @@ def reach_features(task: TaskConfig, seed: int) -> np.ndarray:
     seq = ReachSequencer(names)
     (episode,) = reproduce_seed(seq, data, task, record="none")  # type: ignore[arg-type]
     assert episode.outcome == "incomplete" and "time-out" in episode.reason
+    # its only MPs are the demonstrator's: no switch was due, the task did not finish
+    assert episode.cause is not None and episode.cause["reason"] == "task_unfinished"
+    assert summarize_episodes([episode])["causes"] == {"task_unfinished": 1}
     return np.stack(seq.batches[0].episodes[0].seen)
 
 

@@ -25,7 +25,13 @@ from cpmp.recordings import (
     read_recording,
     read_views,
 )
-from cpmp.recordings.layout import EVENT_INDENT, WARN_COLOR, blueprint_paths, series_label
+from cpmp.recordings.layout import (
+    EVENT_INDENT,
+    WARN_COLOR,
+    blueprint_paths,
+    series_label,
+    start_map,
+)
 from cpmp.records import SequencerNote, StartDecision, StartOption, TickInfo, TransitionEvent
 from cpmp.worlds.two_point import make_demonstrations
 
@@ -153,10 +159,13 @@ def test_the_start_decision_and_its_scores_are_recorded(tmp_path):
     ]
     (document,) = _column(path, "start", "TextDocument:text")
     text = document[0]
-    assert "| **chosen** | -0.20 | a=a_go |" in text and "|  | -1.50 | a=a_wait |" in text
+    # one column per start, best first: the rows stay short in a narrow panel
+    assert "| start | 1 | 2 |" in text and "| score | -0.20 | -1.50 |" in text
+    assert "| chosen | **chosen** |  |" in text and "| a | a_go | a_wait |" in text
+    assert "| correct |" not in text and "Wrong start" not in text  # not known here
     assert "The same in every start: b=b_go." in text
-    # the episode's box against the training boxes, nearest first
-    assert text.index("| demo_0 | 0.200 | 0.200 | 0.35 | a=a_go |") < text.index("| demo_1 |")
+    # the episode's box against the training boxes, nearest first, by start number
+    assert text.index("| demo_0 | 0.200 | 0.200 | 0.35 | 1 |") < text.index("| demo_1 |")
     assert "start (joint rule, 2 demonstrated starts): a=a_go" in format_line(path)
     assert {"start/boxes/training", "start/boxes/episode"} <= set(summary.entity_paths)
     views = {v.name: v for v in read_views(path)}
@@ -379,3 +388,117 @@ def test_start_references_are_the_demonstrations_first_samples():
     for ref, demo in zip(refs, demos, strict=True):
         assert ref.combination == {v: str(demo.labels[v][0]) for v in demo.variables}
         assert list(ref.values.values()) == demo.features[0].tolist()
+
+
+def test_start_references_carry_the_box_size_in_metres():
+    """A demonstration whose metadata has its box adds the axes the start map is drawn in."""
+    demos = make_demonstrations(2, seed=0)
+    demos[0].metadata = {**(demos[0].metadata or {}), "box_width": 0.21, "box_depth": 0.13}
+    refs = start_references(demos)
+    assert (refs[0].values["box_width_m"], refs[0].values["box_depth_m"]) == (0.21, 0.13)
+    assert "box_width_m" not in refs[1].values
+
+
+def _wrong_start(path: Path) -> Path:
+    """A one-tick episode: start 1 chosen, the demonstrator's start 2, boxes in metres."""
+    decision = StartDecision(
+        0.0,
+        "joint",
+        [
+            StartOption({"a": "a_go", "b": "b_go"}, -0.2),
+            StartOption({"a": "a_wait", "b": "b_go"}, -1.5),
+        ],
+        {"a": "a_go", "b": "b_go"},
+    )
+    references = [
+        StartReference("demo_0", {"a": "a_go", "b": "b_go"}, {"w_m": 0.20, "d_m": 0.12}),
+        StartReference("demo_1", {"a": "a_wait", "b": "b_go"}, {"w_m": 0.26, "d_m": 0.20}),
+    ]
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        recorder.log_tick(0.0, [0.5, 0.2, 0, 0], {}, {"a": "a_go", "b": "b_go"})
+        recorder.log_start(
+            decision,
+            references,
+            ["w_m", "d_m"],
+            correct={"a": "a_wait"},
+            values={"w_m": 0.23, "d_m": 0.13},
+        )
+        recorder.log_outcome(0.0, "wrong_start", "a differs", success=False)
+    return path
+
+
+def test_a_wrong_start_marks_the_demonstrators_start(tmp_path):
+    """The outcome names some variables, the starts all: the document matches them for the
+    reader, in the starts' columns and in a sentence."""
+    (document,) = _column(_wrong_start(tmp_path / "w.rrd"), "start", "TextDocument:text")
+    text = document[0]
+    assert "| chosen | **chosen** |  |" in text and "| correct |  | **correct** |" in text
+    assert "**Wrong start**: the demonstrator starts this box with a=a_wait (start 2)" in text
+    assert "| map colour | blue | orange |" in text
+    # the box in metres, as given (not the features): w_m 0.23 against 0.20 and 0.26
+    assert "| **episode** | 0.230 | 0.130 | 0 | 1 |" in text
+    assert "| demo_0 | 0.200 | 0.120 |" in text
+
+
+def test_the_start_map_has_a_frame_a_key_and_names_off_the_dots(tmp_path):
+    path = _wrong_start(tmp_path / "w.rrd")
+    dots = np.array(_column(path, "start/boxes/training", "Points2D:positions")[0])
+    radius = _column(path, "start/boxes/training", "Points2D:radii")[0][0]
+    names = np.array(_column(path, "start/boxes/training_names", "Points2D:positions")[0])
+    assert _column(path, "start/boxes/training_names", "Points2D:labels")[0] == [
+        "demo_0",
+        "demo_1",
+    ]
+    assert dots[:, 0] == pytest.approx([0.20, 0.26])
+    assert dots[:, 1] == pytest.approx([-0.12, -0.20])  # depth upwards: the view's y runs down
+    # each name is anchored below its dot, clear of it (a label hangs below its anchor)
+    assert names[:, 0] == pytest.approx(dots[:, 0])
+    assert np.all(names[:, 1] - dots[:, 1] > radius)
+    episode = np.array(_column(path, "start/boxes/episode", "Points2D:positions")[0])
+    episode_radius = _column(path, "start/boxes/episode", "Points2D:radii")[0][0]
+    episode_name = np.array(_column(path, "start/boxes/episode_name", "Points2D:positions")[0])
+    assert episode[0] == pytest.approx([0.23, -0.13])
+    assert episode_name[0, 1] - episode[0, 1] > episode_radius
+    ticks = _column(path, "start/boxes/tick_values", "Points2D:labels")[0]
+    assert "0.2" in ticks and len(ticks) >= 4
+    titles = _column(path, "start/boxes/axis_titles", "Points2D:labels")[0]
+    assert titles == ["w_m →", "↑ d_m"]
+    assert _column(path, "start/boxes/key_names", "Points2D:labels")[0] == ["start 1", "start 2"]
+    key = _column(path, "start/boxes/key", "Points2D:colors")[0]
+    assert key[:2] == [
+        _column(path, "start/boxes/training", "Points2D:colors")[0][i] for i in (0, 1)
+    ]
+
+
+def test_a_start_axis_must_be_a_feature_or_a_given_value(tmp_path):
+    decision = StartDecision(0.0, "joint", [StartOption({"a": "a_go"}, -0.1)], {"a": "a_go"})
+    ref = StartReference("demo_0", {"a": "a_go"}, {"w_m": 0.2})
+    with EpisodeRecorder(tmp_path / "x.rrd", feature_names=FEATURES, mp_names=MP_NAMES) as rec:
+        with pytest.raises(ConfigError, match=r"unknown \['w_m'\]"):
+            rec.log_start(decision, [ref], ["w_m"])
+        with pytest.raises(UnknownMPError):
+            rec.log_start(decision, [ref], ["w_m"], correct={"a": "a_fly"}, values={"w_m": 0.1})
+        rec.log_start(decision, [ref], ["w_m"], values={"w_m": 0.1})
+
+
+def test_the_start_map_bounds_hold_everything_it_draws():
+    """The view is zoomed to the map (the viewer's default left most of the view empty): every
+    dot, anchor and line end lies inside the bounds."""
+    references = [
+        StartReference("d0", {"a": "a_go"}, {"w": 0.20, "d": 0.12}),
+        StartReference("d1", {"a": "a_wait"}, {"w": 0.26, "d": 0.20}),
+    ]
+    drawn = start_map(references, ["w", "d"], [0.23, 0.13], [{"a": "a_go"}, {"a": "a_wait"}])
+    corners = []
+    for _, archetype in drawn.entities:
+        for batch in archetype.as_component_batches():
+            name = str(batch.component_descriptor())
+            if "positions" in name or "strips" in name:
+                values = batch.as_arrow_array().to_pylist()
+                corners += [p for v in values for p in (v if isinstance(v[0], list) else [v])]
+    xy = np.array(corners)
+    (x0, x1), (y0, y1) = drawn.x_range, drawn.y_range
+    assert len(xy) > 10
+    assert np.all((xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1))
+    # and they are not much larger than the drawing: under twice its extent
+    assert (x1 - x0) < 2 * np.ptp(xy[:, 0]) and (y1 - y0) < 2 * np.ptp(xy[:, 1])

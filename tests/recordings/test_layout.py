@@ -14,6 +14,7 @@ from cpmp.recordings.layout import (
     entity,
     geom_archetypes,
     parse_geom,
+    parse_geoms,
     pose_rows,
     status_markdown,
 )
@@ -77,6 +78,19 @@ def test_parse_geom_defaults_and_colour() -> None:
         parse_geom(2, {"body": "b", "type": "box", "size": [1, 1, 1], "quat": [1, 0, 0]})
     with pytest.raises(ConfigError, match=r"geoms\[0\]: missing 'body'"):
         parse_geom(0, {"type": "box", "size": [1, 1, 1]})
+
+
+def test_every_geom_gets_its_own_entity_path() -> None:
+    """An empty name (MuJoCo's unnamed geoms) would log the geom at its body's own path, where
+    its pose in the body and the body's pose in the world fight over one transform."""
+    sphere = {"body": "arm", "type": "sphere", "size": [0.05]}
+    geoms = parse_geoms([{**sphere, "name": ""}, {**sphere, "name": "elbow"}, sphere])
+    assert [g["name"] for g in geoms] == ["geom_0", "elbow", "geom_2"]
+    assert len({entity("world", g["body"], g["name"]) for g in geoms}) == 3
+    with pytest.raises(ConfigError, match=r"geoms\[1\] and geoms\[0\] are both named 'elbow'"):
+        parse_geoms([{**sphere, "name": "elbow"}, {**sphere, "name": "elbow"}])
+    # the same name on two bodies is two paths
+    assert len(parse_geoms([{**sphere, "name": "e"}, {**sphere, "body": "leg", "name": "e"}])) == 2
 
 
 def test_geom_archetypes_centre_capsules_and_turn_quaternions() -> None:

@@ -24,7 +24,7 @@ from cpmp.recordings import (
 from cpmp.recordings import layout as recording_layout
 from cpmp.recordings import reader as recording_reader
 from cpmp.recordings import writer as recording_writer
-from cpmp.records import SequencerNote, TransitionEvent
+from cpmp.records import PendingSwitch, SequencerNote, TransitionEvent
 
 MP_NAMES = {"left_pos": ["approach", "grasp", "lift"], "right_fingers": ["open", "close"]}
 FEATURES = ["box_x", "box_z"]
@@ -527,3 +527,31 @@ def test_summary_holds_the_sequencers_own_records(tmp_path: Path) -> None:
     fields = ["t", "variable", "source", "target", "probability", "kind"]
     assert list(data["transitions"][0]) == fields
     assert data["notes"][0]["text"] == note.text
+
+
+def test_an_incomplete_episodes_cause_is_in_the_recording_and_its_summary(
+    tmp_path: Path, capsys
+) -> None:
+    """The outcome names the switch that never came; an event marks when its p was best."""
+    path = tmp_path / "cause.rrd"
+    cause = PendingSwitch("left_pos", "approach", "grasp", "still_improving", 0.91, 0.1, 0.9, 0.65)
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        for tick in range(4):
+            recorder.log_tick(
+                tick * DT,
+                [tick, 0.0],
+                progress={},
+                active={"left_pos": "approach", "right_fingers": "open"},
+            )
+        recorder.log_outcome(3 * DT, "incomplete", "deadlock", success=False, cause=cause)
+    summary = read_recording(path)
+    assert summary.cause == cause
+    assert summary.reason == f"deadlock; {cause.describe()}"
+    assert summary.to_dict()["cause"]["best_p"] == 0.91
+    text = format_summary(summary)
+    assert f"cause: {cause.describe()}" in text
+    assert "variable=left_pos" in text and "expected=grasp" in text and "best_p=0.910" in text
+    assert main([str(path)]) == 0
+    assert "left_pos approach -> grasp never fired: p reached 0.910" in capsys.readouterr().out
+    assert "events/outcome" in summary.entity_paths
+    assert summary.duration == pytest.approx(3 * DT)

@@ -167,9 +167,11 @@ def test_save_load_bit_exact(fitted_klr, test_demos, tmp_path):
     )
 
 
-@pytest.mark.parametrize("kind", ["klr_sparse", "mlp"])
-def test_save_load_other_predictors(train_demos, tmp_path, kind):
-    seq = ConcurrentSequencer.fit(train_demos, kind, seed=0, logger=None, epochs=30)
+@pytest.mark.parametrize(
+    ("kind", "options"), [("klr_sparse", {"refine_iter": 5}), ("mlp", {"epochs": 30})]
+)
+def test_save_load_other_predictors(train_demos, tmp_path, kind, options):
+    seq = ConcurrentSequencer.fit(train_demos, kind, seed=0, logger=None, **options)
     loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
     x = train_demos[1].features
     assert np.array_equal(loaded.progress(x), seq.progress(x))

@@ -12,9 +12,7 @@ def test_learned_rule_weighs_every_demonstrated_start_by_its_probability(fitted_
     assert fitted_klr.config.start_rule == "learned"
     start = fitted_klr.branches.start
     assert start is not None and len(start.combinations) >= 2
-    assert sorted(map(str, start.combinations)) == sorted(
-        map(str, fitted_klr.initial_combinations)
-    )
+    assert sorted(map(str, start.combinations)) == sorted(map(str, fitted_klr.initial_combinations))
     for demo in test_demos:
         active = fitted_klr.reset(0.0, demo.features[0])
         decision = fitted_klr.start_decision

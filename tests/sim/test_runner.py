@@ -194,3 +194,55 @@ def test_run_episodes_rejects_mismatched_inputs(boxes, demos, cfg):
     with pytest.raises(ConfigError, match="expected must hold one entry per box"):
         run_episodes(two, [ReplayPolicy(demos["right"])] * 2, cfg, expected=[demos["right"]])
     assert run_episodes([], ReplayPolicy(demos["right"]), cfg) == []
+
+
+def test_an_incomplete_episode_names_the_switch_that_never_came(learned, demos, boxes, cfg):
+    """Issue #36: the cause of an incomplete outcome, explained by a fitted sequencer, from the
+    sequences alone for any other policy (and none for a complete or wrong-start one)."""
+    demo = demos["right"]
+    want = mp_sequences(demo)
+
+    class Frozen(ReplayPolicy):
+        def step(self, t, x):
+            return self.reset(0.0, x)
+
+    weak = learned.with_config(threshold=0.999)  # a p that never passes: no switch fires
+    frozen, sequencer = run_episodes(
+        [boxes["right"]] * 2,
+        [Frozen(demo), weak],
+        cfg,
+        expected=[demo] * 2,
+        max_time=1.0,
+    )
+    for result in (frozen, sequencer):
+        cause = result.cause
+        assert result.outcome == "incomplete" and cause is not None
+        v = cause.variable
+        assert result.sequences[v] == [cause.current] and want[v][:2] == [
+            cause.current,
+            cause.expected,
+        ]
+        assert result.reason.endswith(cause.describe()) and "time-out" in result.reason
+    assert frozen.cause.reason == "unknown" and np.isnan(frozen.cause.best_p)
+    cause = sequencer.cause
+    assert cause.reason == "below_threshold" and cause.threshold == 0.999
+    assert 0.0 <= cause.final_p <= cause.best_p < 0.999 and 0.0 < cause.best_t <= 1.0
+
+    class SkipLift(ReplayPolicy):
+        def step(self, t, x):
+            active = super().step(t, x)
+            if active["right_pos"] == "lift":
+                active["right_pos"] = "carry"
+            return active
+
+    wrong = run_episode(boxes["right"], SkipLift(demo), cfg, expected=demo).cause
+    assert (wrong.reason, wrong.variable, wrong.current, wrong.expected, wrong.fired) == (
+        "wrong_transition",
+        "right_pos",
+        "reach_top",
+        "lift",
+        "carry",
+    )
+    assert wrong.at > 0.0
+    complete = run_episode(boxes["right"], ReplayPolicy(demo), cfg, expected=demo)
+    assert complete.outcome == "complete" and complete.cause is None

@@ -37,12 +37,14 @@ Held-out demonstrations for a progress MAE: ``paced_relay(other_seed, n).demonst
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cpmp.config.task import Pacing
 from cpmp.data import Demonstration
+from cpmp.data.demonstration import mp_sequences
 from cpmp.records import Policy
 from cpmp.worlds.common import (
     ScriptPolicy,
@@ -269,12 +271,22 @@ def evaluate(
     task = task or PacedRelayTask(pacing=ROBOT_PACING)
     episodes = task.episodes(n_episodes, seed, ROBOT_STREAM)
     scores = []
-    for episode, run in zip(
-        episodes, run_policies(task, episodes, policy, task.features, VARIABLES), strict=True
-    ):
+    runs = run_policies(task, episodes, policy, task.features, VARIABLES, expected_for(task))
+    for episode, run in zip(episodes, runs, strict=True):
         outcome = episode_outcome(run.initial == task.initial_mps(episode), run.reached_goal)
-        scores.append(EpisodeScore(outcome, episode.strategy, run.time))
+        cause = run.cause if outcome == "incomplete" else None
+        reason = cause.describe() if cause is not None else ""
+        scores.append(EpisodeScore(outcome, episode.strategy, run.time, reason, cause))
     return scores
+
+
+def expected_for(task: PacedRelayTask) -> Callable[[PacedEpisode], dict[str, list[str]]]:
+    """The demonstrator's MP sequences of an episode of ``task`` (from its demonstration)."""
+
+    def expected(episode: PacedEpisode) -> dict[str, list[str]]:
+        return mp_sequences(demonstrate(task, episode))
+
+    return expected
 
 
 def paced_relay(
