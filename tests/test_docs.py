@@ -1,4 +1,5 @@
-"""The Python examples of the README and docs/ run as written, and do what their text says."""
+"""The Python examples of the README and docs/ run as written, and do what their text says;
+every relative link of the README and docs/ resolves."""
 
 from __future__ import annotations
 
@@ -32,6 +33,23 @@ def test_readme_python_api_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     torch.set_num_threads(1)
     ns = run_blocks("README.md")
+    seq, demos = ns["seq"], ns["demos"]  # seq: the model loaded back from model.pt
+    assert (tmp_path / "model.pt").is_file()
+    # the loaded model is the fitted one: the same seed fits it again bit for bit
+    x = demos[1].features[::10]
+    again = ns["ConcurrentSequencer"].fit(demos, seed=0)
+    np.testing.assert_array_equal(seq.progress(x), again.progress(x))
+    assert seq.events == []  # a loaded model starts with no episode
+    # the replay stepped every variable: one active MP per graph, each a node of its graph
+    active = ns["active"]
+    assert set(active) == set(seq.graphs)
+    assert all(mp in seq.graphs[v].nodes for v, mp in active.items())
+
+
+def test_guide_python_api_runs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    torch.set_num_threads(1)
+    ns = run_blocks("docs/guide.md")
     seq, demos = ns["seq"], ns["demos"]  # seq: the model loaded back from model.pt
     assert (tmp_path / "model.pt").is_file()
     # the block replayed a demonstration through `seq.events[-1]` (an empty list would have
@@ -80,16 +98,52 @@ def test_data_format_examples_run_and_load(tmp_path, monkeypatch):
     assert loaded.metadata == demo.metadata
 
 
-def test_imports_documented_before_the_package_split_still_work():
-    """The README's and data_format.md's imports of cpmp 0.1 name the same objects today."""
-    import cpmp.data
-    import cpmp.worlds.two_point
-    from cpmp.datafile import list_splits, load_demonstrations, save_demonstrations
-    from cpmp.sequencer import PAPER_OPTIONS, ConcurrentSequencer
-    from cpmp.synthetic import make_demonstrations
+_LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 
-    assert load_demonstrations is cpmp.data.load_demonstrations
-    assert save_demonstrations is cpmp.data.save_demonstrations
-    assert list_splits is cpmp.data.list_splits
-    assert make_demonstrations is cpmp.worlds.two_point.make_demonstrations
-    assert callable(ConcurrentSequencer.fit) and {"coupling", "recovery"} <= set(PAPER_OPTIONS)
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces -> '-'."""
+    text = heading.lstrip("#").strip().lower()
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def anchors(path: Path) -> set[str]:
+    text = _FENCE.sub("", path.read_text(encoding="utf-8"))
+    return {slug(line) for line in text.splitlines() if re.match(r"^#{1,6} ", line)}
+
+
+def broken_links(docs: list[Path]) -> list[str]:
+    """Every relative link of ``docs`` whose file, or heading in it, does not exist."""
+    broken = []
+    for doc in docs:
+        text = _FENCE.sub("", doc.read_text(encoding="utf-8"))
+        for target in _LINK.findall(text):
+            if re.match(r"^[a-z]+:", target):  # http(s):, mailto: ...
+                continue
+            file, _, anchor = target.partition("#")
+            path = (doc.parent / file).resolve() if file else doc
+            if not path.exists():
+                broken.append(f"{doc.name}: {target} (no such file)")
+            elif anchor and path.suffix == ".md" and anchor not in anchors(path):
+                broken.append(f"{doc.name}: {target} (no such heading)")
+    return broken
+
+
+def test_every_relative_link_resolves():
+    docs = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    broken = broken_links(docs)
+    assert not broken, "\n".join(broken)
+
+
+def test_the_link_check_sees_a_broken_link(tmp_path):
+    assert slug("## The main job: `scripts/experiment.py`") == "the-main-job-scriptsexperimentpy"
+    assert slug("### Bring your own robot's recordings") == "bring-your-own-robots-recordings"
+    (tmp_path / "a.md").write_text("# Top\n\n```\n# not a heading\n```\n")
+    assert anchors(tmp_path / "a.md") == {"top"}
+    links = "[a](a.md) [b](a.md#top) [c](https://x.org/y) [d](gone.md) [e](a.md#not-a-heading)"
+    (tmp_path / "b.md").write_text(links + "\n")
+    assert broken_links([tmp_path / "b.md"]) == [
+        "b.md: gone.md (no such file)",
+        "b.md: a.md#not-a-heading (no such heading)",
+    ]

@@ -86,7 +86,7 @@ def test_reference_condition_is_the_worlds_own_loop(fitted_klr):
             assert record.sequences == sequences and record.switch_times == times
             assert len(record.switch_errors) == sum(len(t) for t in times.values())
         completed += strict
-    assert completed >= 8  # the default fit completes the two-point task (README)
+    assert completed >= 8  # the default fit completes the two-point task (docs/results.md)
     assert evaluate(fitted_klr, n_episodes=10, seed=1000)["complete"] >= completed
 
 

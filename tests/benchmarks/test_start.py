@@ -1,4 +1,4 @@
-"""The start-decision analysis behind the README's wrong-start table (scripts/bench_start.py)."""
+"""The start-decision analysis behind docs/results.md's start table (scripts/bench_start.py)."""
 
 from __future__ import annotations
 
