@@ -379,15 +379,8 @@ def start_markdown(
             lines += ["", f"The demonstrator starts this box with {_combination_text(correct)}."]
     here = {**features, **(values or {})}
     shown = [a for a in axes if a in here]
-    if references and shown:
-        point = np.array([here[a] for a in shown])
-        scale = np.ptp([[r.values[a] for a in shown] for r in references], axis=0)
-        scale = np.where(scale > 0, scale, 1.0)
-
-        def distance(ref: StartReference) -> float:
-            there = np.array([ref.values[a] for a in shown])
-            return float(np.linalg.norm((there - point) / scale))
-
+    nearest = reference_distances(here, references, axes)
+    if nearest:
         lines += [
             "",
             "This episode against the training starts (dist.: distance in training ranges):",
@@ -398,11 +391,10 @@ def start_markdown(
             + " | ".join(f"{here[a]:.3f}" for a in shown)
             + f" | 0 | {_start_number(combos, decision.chosen)} |",
         ]
-        for ref in sorted(references, key=distance):
+        for ref, dist in nearest:
             row = " | ".join(f"{ref.values[a]:.3f}" for a in shown)
             lines.append(
-                f"| {ref.name} | {row} | {distance(ref):.2f} | "
-                f"{_start_number(combos, ref.combination)} |"
+                f"| {ref.name} | {row} | {dist:.2f} | {_start_number(combos, ref.combination)} |"
             )
     if features:
         lines += ["", "Features at the start (as the sequencer sees them):", ""]
@@ -412,6 +404,34 @@ def start_markdown(
             for group, members in groups.items()
         ]
     return "\n".join(lines)
+
+
+def reference_distances(
+    here: Mapping[str, float], references: Sequence[StartReference], axes: Sequence[str]
+) -> list[tuple[StartReference, float]]:
+    """The training starts with their distance to this episode's, nearest first.
+
+    Args:
+        here: the episode's value of each axis (features and given values).
+        references: the training demonstrations' starts.
+        axes: what they are compared on; axes ``here`` lacks are left out.
+
+    Returns:
+        ``(reference, distance)`` pairs, nearest first; the distance is Euclidean over the
+        axes, each in units of its range over the references (1 where they all agree). Empty
+        without references or a shared axis.
+    """
+    shown = [a for a in axes if a in here]
+    if not references or not shown:
+        return []
+    point = np.array([here[a] for a in shown])
+    scale = np.ptp([[r.values[a] for a in shown] for r in references], axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    pairs = [
+        (ref, float(np.linalg.norm((np.array([ref.values[a] for a in shown]) - point) / scale)))
+        for ref in references
+    ]
+    return sorted(pairs, key=lambda pair: pair[1])
 
 
 def _ticks(lo: float, hi: float) -> np.ndarray:
@@ -757,6 +777,8 @@ def blueprint(
     marks: Mapping[str, Sequence[str]] | None = None,
     duration: float | None = None,
     start_bounds: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    focus: str | None = None,
+    focus_time: tuple[float, float] | None = None,
 ) -> Any:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
@@ -778,7 +800,9 @@ def blueprint(
     ended at its first tick, e.g. a wrong start, where the plots would hold one point): the
     start decision takes the middle column instead, its map goes between the lanes and the
     events log on the right. The time panel starts collapsed (one row), the blueprint and
-    selection panels too.
+    selection panels too. A failure opens on the variable that failed: ``focus`` picks its tab
+    among the per-variable probability tabs, and ``focus_time`` selects the span of its
+    pending switch on the time panel (rerun 0.41 has no way to place the time cursor itself).
 
     Args:
         feature_groups: panel name -> feature names.
@@ -791,6 +815,8 @@ def blueprint(
         duration: the episode's last time [s] (``None``: the viewer's default time axes).
         start_bounds: the start map's (x range, y range) (:class:`StartMap`; ``None``: the
             viewer's default, which leaves most of the view empty).
+        focus: the variable whose tab the probability tabs open on (``None``: the first).
+        focus_time: (start, end) [s] selected on the time panel (``None``: no selection).
 
     Returns:
         The blueprint.
@@ -810,11 +836,11 @@ def blueprint(
         + [entity(MARKS_ENTITY, var, kind) for kind in (marks or {}).get(var, ())]
         for var in series
     }
+    tab_variables = [var for var, logged in series.items() if logged.progress or logged.targets]
     variable_tabs = [
-        _variable_views(var, logged, extra[var], duration)
-        for var, logged in series.items()
-        if logged.progress or logged.targets
+        _variable_views(var, series[var], extra[var], duration) for var in tab_variables
     ]
+    focus_tab = tab_variables.index(focus) if focus in tab_variables else 0
     overview = [
         rrb.TimeSeriesView(
             origin=entity("transition", var),
@@ -869,7 +895,7 @@ def blueprint(
         parts.append(rrb.Tabs(*feature_views, name="features", active_tab=0))
         shares.append(3.0)
         if variable_tabs:
-            parts.append(rrb.Tabs(*variable_tabs, name="probabilities"))
+            parts.append(rrb.Tabs(*variable_tabs, name="probabilities", active_tab=focus_tab))
             shares.append(4.0)
         middle = rrb.Vertical(*parts, row_shares=shares)
         right = logs
@@ -877,7 +903,15 @@ def blueprint(
         rrb.Horizontal(left, middle, right, column_shares=[2, 4, 3]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed"),
+        rrb.TimePanel(
+            state="collapsed",
+            timeline="time",
+            time_selection=None
+            if focus_time is None
+            else rr.encodings.AbsoluteTimeRange(
+                round(focus_time[0] * 1e9), round(focus_time[1] * 1e9)
+            ),
+        ),
     )
 
 

@@ -67,7 +67,11 @@ class RecordingSummary:
     ``start``: the start decision logged (``None`` if none), with its options and scores.
     ``note_texts``: each of ``notes`` as the events log shows it (a hold with how long it was
     held and what ended it: ``"...; held 0.63 s, until left_fingers switched to relax at
-    9.91 s"``).
+    9.91 s"``). ``cause``: an incomplete outcome's missing switch. ``start_correct``: the
+    initial MPs the demonstrator uses for this episode (empty if unknown);
+    ``start_references``: the training starts against this one, nearest first, each
+    ``{"name", "combination", "values", "distance"}`` (distance in training ranges; empty for
+    files written before they were kept).
     """
 
     episodes: list[str]
@@ -83,6 +87,8 @@ class RecordingSummary:
     start: StartDecision | None = None
     note_texts: list[str] = field(default_factory=list)
     cause: PendingSwitch | None = None
+    start_correct: dict[str, str] = field(default_factory=dict)
+    start_references: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields.
@@ -162,6 +168,8 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     notes: list[tuple[SequencerNote, str]] = []
     outcomes: list[tuple[float, int, str, str, PendingSwitch | None]] = []
     start: StartDecision | None = None
+    start_correct: dict[str, str] = {}
+    start_references: list[dict[str, Any]] = []
     duration = 0.0
     for index, _store, entity_path, batch in batches:
         columns = batch.schema.names
@@ -232,8 +240,16 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                 name: batch.column(f"{START_ARCHETYPE}:{name}").to_pylist()
                 for name in ("rule", "chosen", "options")
             }
+            for name in ("correct", "references"):
+                cells[name] = (
+                    batch.column(f"{START_ARCHETYPE}:{name}").to_pylist()
+                    if f"{START_ARCHETYPE}:{name}" in columns
+                    else [None] * len(times)
+                )
             for row, t in enumerate(times):
                 if _first(cells["rule"][row]) is not None:
+                    start_correct = json.loads(_first(cells["correct"][row]) or "{}")
+                    start_references = json.loads(_first(cells["references"][row]) or "[]")
                     options = json.loads(_first(cells["options"][row]) or "[]")
                     start = StartDecision(
                         t,
@@ -277,6 +293,8 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         notes=[note for note, _ in notes],
         feature_groups=feature_groups,
         start=start,
+        start_correct=start_correct,
+        start_references=start_references,
         note_texts=[text for _, text in notes],
     )
 
@@ -386,6 +404,15 @@ def format_summary(summary: RecordingSummary) -> str:
         lines.append(f"t={summary.start.t:8.3f} s  {start_text(summary.start)}")
         lines.append(f"  start options ({len(summary.start.options)}, by score, best first):")
         lines += [f"  {line}" for line in start_table(summary.start)]
+        if summary.start_correct:
+            right = ", ".join(f"{v}={mp}" for v, mp in sorted(summary.start_correct.items()))
+            lines.append(f"  the demonstrator starts this episode with {right}")
+        if summary.start_references:
+            lines.append("  training starts, nearest first (distance in training ranges):")
+            for ref in summary.start_references:
+                values = ", ".join(f"{a} {v:.3f}" for a, v in ref["values"].items())
+                combo = ", ".join(f"{v}={mp}" for v, mp in sorted(ref["combination"].items()))
+                lines.append(f"    {ref['distance']:6.2f}  {ref['name']}: {values}; {combo}")
     lines.append(f"transitions ({len(summary.transitions)}):")
     lines += [
         f"  t={e.t:8.3f} s  "

@@ -53,6 +53,7 @@ from cpmp.recordings.layout import (
     outcome_text,
     parse_geoms,
     pose_rows,
+    reference_distances,
     series_color,
     series_label,
     start_labels,
@@ -166,6 +167,8 @@ class EpisodeRecorder:
         self._start_line = ""
         self._start_features: dict[str, float] = {}
         self._start_bounds: tuple[tuple[float, float], tuple[float, float]] | None = None
+        self._cause: PendingSwitch | None = None
+        """The outcome's cause (:meth:`log_outcome`): the blueprint opens on its variable."""
         self._holds: dict[str, _Hold] = {}
         self._events: set[str] = set()
         self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
@@ -573,6 +576,20 @@ class EpisodeRecorder:
                 "options": json.dumps(
                     [{"combination": o.combination, "score": o.score} for o in decision.options]
                 ),
+                "correct": json.dumps(dict(correct or {}), sort_keys=True),
+                "references": json.dumps(
+                    [
+                        {
+                            "name": ref.name,
+                            "combination": ref.combination,
+                            "values": {a: ref.values[a] for a in axes if a in ref.values},
+                            "distance": dist,
+                        }
+                        for ref, dist in reference_distances(
+                            {**self._start_features, **values}, references, axes
+                        )
+                    ]
+                ),
             },
         )
         self._start_line = start_text(decision)
@@ -625,6 +642,7 @@ class EpisodeRecorder:
         components = {"outcome": str(outcome), "reason": reason}
         level = "WARN" if success is False else "INFO"
         if cause is not None:
+            self._cause = cause
             words = cause.describe()
             if words not in reason:
                 reason = f"{reason}; {words}" if reason else words
@@ -688,7 +706,21 @@ class EpisodeRecorder:
             marks={v: [k for k in MARK_STYLES if k in kinds] for v, kinds in self._marks.items()},
             duration=self._last_t if self._n_ticks > 1 else None,
             start_bounds=self._start_bounds,
+            focus=self._cause.variable if self._cause is not None else None,
+            focus_time=self._focus_time(),
         )
+
+    def _focus_time(self) -> tuple[float, float] | None:
+        """The span [s] of the failed variable's pending switch.
+
+        From the time of its best ``p`` (the last tick if it has none) to the last tick;
+        ``None`` without a cause or a variable to focus on.
+        """
+        cause = self._cause
+        if cause is None or not cause.variable or not math.isfinite(self._last_t):
+            return None
+        start = cause.best_t if math.isfinite(cause.best_t) else self._last_t
+        return (min(start, self._last_t), self._last_t)
 
     def abort(self) -> None:
         """Discard the recording: nothing is written at ``path``. Idempotent."""

@@ -22,6 +22,7 @@ from cpmp.recordings import (
     EpisodeRecorder,
     StartReference,
     event_lines,
+    format_summary,
     read_recording,
     read_views,
 )
@@ -502,3 +503,49 @@ def test_the_start_map_bounds_hold_everything_it_draws():
     assert np.all((xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1))
     # and they are not much larger than the drawing: under twice its extent
     assert (x1 - x0) < 2 * np.ptp(xy[:, 0]) and (y1 - y0) < 2 * np.ptp(xy[:, 1])
+
+
+def test_inspect_tells_the_start_as_the_viewer_does(tmp_path):
+    """The recording keeps the training starts with their distances (nearest first) and the
+    demonstrator's start for this episode; ``read_recording`` returns them and
+    ``format_summary`` (``cpmp-inspect-rrd``) prints them, as the start panel shows them."""
+    decision = StartDecision(
+        0.0,
+        "joint",
+        [StartOption({"a": "a_go", "b": "b_go"}, -0.2), StartOption({"a": "a_wait"}, -1.5)],
+        {"a": "a_go", "b": "b_go"},
+    )
+    references = [
+        StartReference("far", {"a": "a_wait", "b": "b_go"}, {"w_m": 0.6, "d_m": 0.5}),
+        StartReference("near", {"a": "a_go", "b": "b_go"}, {"w_m": 0.25, "d_m": 0.1}),
+    ]
+    here = {"w_m": 0.3, "d_m": 0.2}
+    path = tmp_path / "s.rrd"
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        recorder.log_tick(0.0, [0.3, 0.3, 0, 0], {"a": {"a_go": 0.1}}, {"a": "a_go", "b": "b_go"})
+        recorder.log_start(
+            decision, references, ["w_m", "d_m"], correct={"a": "a_wait"}, values=here
+        )
+        recorder.log_outcome(0.0, "wrong_start", "a differs", success=False)
+    summary = read_recording(path)
+    # each axis in units of its range over the training starts (0.35 and 0.4)
+    span = np.array([0.35, 0.4])
+    expected = {
+        ref.name: float(
+            np.linalg.norm(
+                (np.array([ref.values["w_m"], ref.values["d_m"]]) - np.array([0.3, 0.2])) / span
+            )
+        )
+        for ref in references
+    }
+    assert [r["name"] for r in summary.start_references] == ["near", "far"]
+    for ref in summary.start_references:
+        assert ref["distance"] == pytest.approx(expected[ref["name"]])
+    assert summary.start_references[0]["combination"] == {"a": "a_go", "b": "b_go"}
+    assert summary.start_references[1]["values"] == {"w_m": 0.6, "d_m": 0.5}
+    assert summary.start_correct == {"a": "a_wait"}
+    text = format_summary(summary)
+    assert "the demonstrator starts this episode with a=a_wait" in text
+    near = text.index(f"{expected['near']:6.2f}  near: w_m 0.250, d_m 0.100; a=a_go, b=b_go")
+    assert near < text.index(f"{expected['far']:6.2f}  far: w_m 0.600")
+    assert summary.to_dict()["start_references"] == summary.start_references

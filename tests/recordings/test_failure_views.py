@@ -21,7 +21,7 @@ from cpmp.recordings.layout import (
     OVERVIEW_NAME,
 )
 from cpmp.recordings.reader import _note_text
-from cpmp.records import SequencerNote, StartDecision, StartOption
+from cpmp.records import PendingSwitch, SequencerNote, StartDecision, StartOption
 
 MP_NAMES = {
     "a": ["a_go", "a_wait", "a_back"],
@@ -45,7 +45,7 @@ DECISION = StartDecision(
 )
 
 
-def _episode(path: Path, threshold: float | None = 0.7) -> Path:
+def _episode(path: Path, threshold: float | None = 0.7, cause: PendingSwitch | None = None) -> Path:
     """``a`` is held from a_wait at 0.2 s (p 0.75) and switches at 0.4 s (p 0.8); ``b``
     recovers to b_back at 0.5 s (p 0.3); ``c`` never gets a successor p (no plot)."""
     with EpisodeRecorder(
@@ -73,7 +73,7 @@ def _episode(path: Path, threshold: float | None = 0.7) -> Path:
                 recorder.log_transition(t, "a", "a_go", "a_wait", 0.8)
             if tick == 5:
                 recorder.log_transition(t, "b", "b_go", "b_back", 0.3, "recovery")
-        recorder.log_outcome(N_TICKS * DT, "incomplete", "deadlock", success=False)
+        recorder.log_outcome(N_TICKS * DT, "incomplete", "deadlock", success=False, cause=cause)
     return path
 
 
@@ -297,3 +297,41 @@ def test_a_hold_of_an_older_file_still_says_how_long_it_was_held():
     cells = {"until": 1.5, "count": 3, "ended_by": None, "then": None}
     assert _note_text(note, cells) == "why; held 0.50 s, until 1.50 s (noted 3 times)"
     assert _note_text(SequencerNote(1.0, "recovery", "a", "x"), {"until": None}) == "x"
+
+
+def _tabs_and_time(path: Path) -> tuple[dict[str, str], dict[str, str], dict | None]:
+    """The blueprint's tabs containers (name -> the id of their active tab), every container's
+    name by id, and the time panel's selection (``{"min", "max"}`` in ns, or ``None``)."""
+    reader = RrdReader(path)
+    active: dict[str, str] = {}
+    names: dict[str, str] = {}
+    selection = None
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        cells = {
+            n: batch.column(n)[batch.num_rows - 1].as_py() for n in batch.schema.names if ":" in n
+        }
+        key = "/".join(chunk.entity_path.strip("/").split("/")[:2])
+        name = (cells.get("ContainerBlueprint:display_name") or [""])[0]
+        if "ContainerBlueprint:container_kind" in cells:
+            names[key] = name
+        if cells.get("ContainerBlueprint:active_tab"):
+            active[name] = cells["ContainerBlueprint:active_tab"][0]
+        if chunk.entity_path == "/time_panel":
+            selection = (cells.get("TimePanelBlueprint:time_selection") or [None])[0]
+    return active, names, selection
+
+
+def test_a_failure_opens_on_the_variable_that_failed(tmp_path):
+    """The probability tabs open on the cause's variable (here the second tab, ``b``), and the
+    time panel selects its pending switch: from its best p to the last tick."""
+    cause = PendingSwitch(
+        "b", "b_back", "b_go", "below_threshold", best_p=0.35, best_t=0.6, threshold=0.7
+    )
+    active, names, selection = _tabs_and_time(_episode(tmp_path / "f.rrd", cause=cause))
+    assert names[active["probabilities"]] == "b"
+    assert selection == {"min": round(0.6e9), "max": round((N_TICKS - 1) * DT * 1e9)}
+    # without a cause: the first variable's tab, nothing selected
+    active, names, selection = _tabs_and_time(_episode(tmp_path / "ok.rrd"))
+    assert names[active["probabilities"]] == "a"
+    assert selection is None
