@@ -383,7 +383,10 @@ def divergence(
     """The first place the episode's MP sequences leave the demonstrator's.
 
     A wrong switch (a variable's sequence that is not a prefix of the demonstrator's) comes
-    first; otherwise the first variable (in ``expected``'s order) whose sequence is shorter.
+    first; otherwise, of the variables whose sequence is shorter, the one with the most
+    demonstrated switches still to make (the furthest behind: a variable left with only its
+    last switch is usually waiting for the others, e.g. a helper arm that retreats once the
+    task is done), the first in ``expected``'s order among equals.
 
     Args:
         sequences: variable -> the MPs the episode ran, in order.
@@ -393,7 +396,7 @@ def divergence(
         The divergence, or ``None`` when every sequence equals the demonstrator's or a
         variable started with another MP (a wrong start, not a missing switch).
     """
-    pending = None
+    pending: tuple[Divergence, int] | None = None
     for v, want in expected.items():
         ran = list(sequences.get(v, ()))
         if not ran or not want or ran[0] != want[0]:
@@ -402,9 +405,10 @@ def divergence(
         k = next((i for i in range(same) if ran[i] != want[i]), same)
         if k < len(ran):  # a switch to another MP than the demonstrator's, or one too many
             return Divergence(v, k, ran[k - 1], want[k] if k < len(want) else "", ran[k])
-        if k < len(want) and pending is None:
-            pending = Divergence(v, k, ran[k - 1], want[k], "")
-    return pending
+        left = len(want) - k
+        if left > 0 and (pending is None or left > pending[1]):
+            pending = (Divergence(v, k, ran[k - 1], want[k], ""), left)
+    return None if pending is None else pending[0]
 
 
 def pending_switch(

@@ -85,6 +85,16 @@ def test_divergence_finds_a_wrong_switch_first_then_the_first_missing_one() -> N
     assert divergence({"u": ["B"], "w": ["X"]}, expected) is None  # a wrong start
 
 
+def test_of_several_missing_switches_the_variable_furthest_behind_is_named() -> None:
+    """A helper that only has its last switch left waits for the others: the variable with the
+    most demonstrated switches still to make is named (ties: ``expected``'s order)."""
+    expected = {"holder": ["hold", "retreat"], "inserter": ["align", "insert", "release", "home"]}
+    found = divergence({"holder": ["hold"], "inserter": ["align"]}, expected)
+    assert found == Divergence("inserter", 1, "align", "insert", "")
+    found = divergence({"holder": ["hold"], "inserter": ["align", "insert", "release"]}, expected)
+    assert found == Divergence("holder", 1, "hold", "retreat", "")  # one left each: first
+
+
 def test_pending_switch_from_sequences_alone_and_its_words() -> None:
     expected = {"u": ["A", "B", "C"], "w": ["X", "Y"]}
     cause = pending_switch({"u": ["A", "B"], "w": ["X", "Y"]}, expected)

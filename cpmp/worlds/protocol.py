@@ -364,6 +364,33 @@ def _episode(
     return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
 
 
+def score_episode(
+    world: World,
+    context: Any,
+    initial: dict[str, str],
+    sequences: dict[str, list[str]],
+    time: float,
+    completed: bool,
+    policy: object = None,
+) -> EpisodeRun:
+    """Score an episode run outside :func:`run_episodes` (e.g. while recording it).
+
+    Args:
+        world: the world.
+        context: the episode's context.
+        initial: the policy's initial MPs.
+        sequences: variable -> the MPs it ran, in order.
+        time: when the episode ended [s].
+        completed: whether the goal state was reached.
+        policy: the policy that ran it, asked for an incomplete episode's cause (a fitted
+            sequencer explains it; ``None`` or another policy: ``unknown`` why).
+
+    Returns:
+        The scored :class:`EpisodeRun`, as :func:`run_episodes` scores it.
+    """
+    return _episode(world, context, initial, sequences, time, completed, (policy, None))
+
+
 def expected_sequences(world: World, context: Any) -> dict[str, list[str]]:
     """The demonstrator's MPs per variable in ``context`` (from its demonstration)."""
     known = getattr(world, "expected_sequences", None)
