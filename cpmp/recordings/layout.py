@@ -779,6 +779,7 @@ def blueprint(
     start_bounds: tuple[tuple[float, float], tuple[float, float]] | None = None,
     focus: str | None = None,
     focus_time: tuple[float, float] | None = None,
+    scene: bool = True,
 ) -> Any:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
@@ -817,6 +818,8 @@ def blueprint(
             viewer's default, which leaves most of the view empty).
         focus: the variable whose tab the probability tabs open on (``None``: the first).
         focus_time: (start, end) [s] selected on the time panel (``None``: no selection).
+        scene: whether there is a 3D scene (geoms or body poses logged); without one the
+            status and start tabs take the left column (a synthetic world).
 
     Returns:
         The blueprint.
@@ -875,9 +878,9 @@ def blueprint(
             origin="active", name="active MP log", columns=_TEXT_FIRST, format_options=_MONOSPACE
         ),
     )
-    scene = rrb.Spatial3DView(origin="world", name="scene")
+    view3d = rrb.Spatial3DView(origin="world", name="scene")
     if start_focus and start:
-        left = rrb.Vertical(scene, status, row_shares=[1, 1])
+        left = rrb.Vertical(view3d, status, row_shares=[1, 1]) if scene else status
         middle = start_doc  # the whole column: every feature at the start without scrolling
         right = rrb.Vertical(lanes, start_plot, logs, row_shares=[3, 3, 2])
     else:
@@ -885,7 +888,11 @@ def blueprint(
         if start:
             lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
         # the start document's tab shows its tables and the features' heading unscrolled
-        left = rrb.Vertical(scene, lower_left, row_shares=[2, 3] if start else [1, 1])
+        left = (
+            rrb.Vertical(view3d, lower_left, row_shares=[2, 3] if start else [1, 1])
+            if scene
+            else lower_left
+        )
         parts: list[Any] = [lanes]
         shares = [3.0]
         if overview:

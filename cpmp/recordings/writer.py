@@ -155,6 +155,8 @@ class EpisodeRecorder:
         self.episode = str(episode)
         self.flush_every = int(flush_every)
         parsed_geoms = parse_geoms(geoms or [])
+        self._scene = bool(parsed_geoms)
+        """Whether anything 3D was logged (geoms or body poses): else the layout has no scene."""
 
         self._rr = rr
         self._feature_paths = tuple(entity("features", name) for name in self.feature_names)
@@ -369,6 +371,7 @@ class EpisodeRecorder:
         if changed:
             self._log_status(t)
         if poses is not None:
+            self._scene = True
             bodies, positions, quats = poses
             self._columns.add_poses(bodies, tick, t, positions, quats)
 
@@ -706,6 +709,7 @@ class EpisodeRecorder:
             marks={v: [k for k in MARK_STYLES if k in kinds] for v, kinds in self._marks.items()},
             duration=self._last_t if self._n_ticks > 1 else None,
             start_bounds=self._start_bounds,
+            scene=self._scene,
             focus=self._cause.variable if self._cause is not None else None,
             focus_time=self._focus_time(),
         )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from cpmp.experiment.world_recording import HELD_OUT_SEED, main, record_world_episode
-from cpmp.recordings import read_recording
+from cpmp.recordings import read_recording, read_views
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.worlds.protocol import run_episodes
 from cpmp.worlds.registry import make_world
@@ -40,6 +40,10 @@ def test_a_recorded_episode_is_the_one_the_benchmarks_count(peg, tmp_path):
                 summary.cause.variable in world.variables
             )
         assert "features/" + world.feature_names[0] in summary.entity_paths
+        # nothing 3D to draw: no empty scene view, the status takes the left column
+        views = read_views(path)
+        assert "scene" not in [v.name for v in views]
+        assert "status" in [v.name for v in views]
 
 
 def test_the_command_records_and_rejects_an_unknown_world(tmp_path, capsys):

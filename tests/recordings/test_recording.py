@@ -155,6 +155,10 @@ def test_scalar_values_round_trip(episode_file: Path) -> None:
     ]
 
 
+def test_a_recording_with_geoms_opens_on_its_scene(episode_file: Path) -> None:
+    assert [v.kind for v in read_views(episode_file) if v.name == "scene"] == ["3D"]
+
+
 def test_poses_and_geoms(episode_file: Path) -> None:
     _, quaternions = _column(episode_file, "world/box", "Transform3D:quaternion")
     # wxyz (0, 1, 0, 0) is stored in rerun's xyzw order.
@@ -412,6 +416,8 @@ def test_feature_panels_in_blueprint(robot_file: Path) -> None:
     for group, members in groups.items():
         assert panels[group].kind == "TimeSeries"
         assert panels[group].contents == [f"+ features/{name}" for name in members]
+    # nothing 3D logged here (no geoms, no body poses): no empty scene view
+    assert "scene" not in [v.name for v in read_views(robot_file)]
     # Each feature's series is named by the feature less its panel's name (a narrow legend),
     # not by its entity path; a name without the panel's prefix stays whole.
     _, names = _column(robot_file, "features/dist.left_fingers.grasp", "SeriesLines:names")
