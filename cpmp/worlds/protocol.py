@@ -310,14 +310,8 @@ def run_episodes(
             over[i] = runs[i].done(active[i])
             times[i] = t
     return [
-        _episode(
-            world,
-            contexts[i],
-            initial[i],
-            seqs[i],
-            times[i],
-            runs[i].complete(active[i]),
-            (batch, i),
+        score_episode(
+            world, contexts[i], initial[i], seqs[i], times[i], runs[i].complete(active[i]), batch, i
         )
         for i in range(n)
     ]
@@ -339,29 +333,7 @@ def _run_one(
         active = dict(policy.step(t, see(run.features())))
         note_switches(seqs, active)
         over = run.done(active)
-    return _episode(world, context, initial, seqs, t, run.complete(active), (policy, None))
-
-
-def _episode(
-    world: World,
-    context: Any,
-    initial: dict[str, str],
-    sequences: dict[str, list[str]],
-    time: float,
-    completed: bool,
-    explainer: tuple[object, int | None] = (None, None),
-) -> EpisodeRun:
-    """The scored :class:`EpisodeRun`; an incomplete one with its cause.
-
-    ``explainer``: the policy that ran it and the episode's index in it (``None``: a single
-    policy), asked for the cause (:func:`~cpmp.records.episode_cause`).
-    """
-    outcome = world.score(context, initial, sequences, completed)
-    cause = None
-    if outcome == "incomplete":
-        policy, index = explainer
-        cause = episode_cause(policy, sequences, expected_sequences(world, context), index)
-    return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
+    return score_episode(world, context, initial, seqs, t, run.complete(active), policy)
 
 
 def score_episode(
@@ -372,8 +344,12 @@ def score_episode(
     time: float,
     completed: bool,
     policy: object = None,
+    index: int | None = None,
 ) -> EpisodeRun:
-    """Score an episode run outside :func:`run_episodes` (e.g. while recording it).
+    """Score an episode: its outcome, and an incomplete one's cause.
+
+    :func:`run_episodes` scores its episodes with it; so does a loop of one's own (e.g. one
+    that records the episode).
 
     Args:
         world: the world.
@@ -382,13 +358,19 @@ def score_episode(
         sequences: variable -> the MPs it ran, in order.
         time: when the episode ended [s].
         completed: whether the goal state was reached.
-        policy: the policy that ran it, asked for an incomplete episode's cause (a fitted
-            sequencer explains it; ``None`` or another policy: ``unknown`` why).
+        policy: the policy that ran it, asked for an incomplete episode's cause
+            (:func:`~cpmp.records.episode_cause`: a fitted sequencer explains it; ``None`` or
+            another policy: ``unknown`` why).
+        index: the episode's index in a batched ``policy`` (``None``: a single policy).
 
     Returns:
-        The scored :class:`EpisodeRun`, as :func:`run_episodes` scores it.
+        The scored :class:`EpisodeRun`.
     """
-    return _episode(world, context, initial, sequences, time, completed, (policy, None))
+    outcome = world.score(context, initial, sequences, completed)
+    cause = None
+    if outcome == "incomplete":
+        cause = episode_cause(policy, sequences, expected_sequences(world, context), index)
+    return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
 
 
 def expected_sequences(world: World, context: Any) -> dict[str, list[str]]:
