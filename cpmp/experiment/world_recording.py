@@ -18,10 +18,8 @@ from typing import Any
 from cpmp.errors import ConfigError, CpmpError
 from cpmp.experiment.reproduction import EpisodeLogger
 from cpmp.recordings import EpisodeRecorder
-from cpmp.records import TickInfo
 from cpmp.sequencer import ConcurrentSequencer
-from cpmp.worlds.common import note_switches
-from cpmp.worlds.protocol import EpisodeRun, World, score_episode
+from cpmp.worlds.protocol import EpisodeRun, World, run_episode
 from cpmp.worlds.registry import make_world, world_names
 
 HELD_OUT_SEED = 1000
@@ -33,8 +31,9 @@ def record_world_episode(
 ) -> EpisodeRun:
     """Run one episode of ``world`` with ``seq`` and record it to ``path`` (``.rrd``).
 
-    The loop is :func:`cpmp.worlds.protocol.evaluate`'s (one policy call per world tick of
-    ``world.dt``), so the episode and its outcome are the ones the benchmarks count.
+    The loop is :func:`cpmp.worlds.protocol.run_episode`, the one
+    :func:`cpmp.worlds.protocol.evaluate` runs, so the episode and its outcome are the ones the
+    benchmarks count.
 
     Args:
         world: a registered world (:func:`cpmp.worlds.registry.make_world`).
@@ -46,32 +45,17 @@ def record_world_episode(
         The scored episode, an incomplete one with its cause.
     """
     mp_names = {v: list(seq.graphs[v].ordered_nodes()) for v in world.variables}
-    run = world.start(context)
     with EpisodeRecorder(
         path,
         feature_names=list(world.feature_names),
         mp_names=mp_names,
-        episode=f"{world.name}",
+        episode=world.name,
         metadata={"world": world.name, "strategy": world.strategy(context)},
         threshold=seq.config.threshold,
     ) as recorder:
-        logger = EpisodeLogger(recorder, seq)
-        x = run.features()
-        active = dict(seq.reset(0.0, x))
-        logger(TickInfo(0.0, active=dict(active), features=x))
-        initial = dict(active)
-        sequences = {v: [active[v]] for v in world.variables}
-        t = 0.0
-        while not run.done(active) and t < world.max_time - 1e-9:
-            run.advance(active, world.dt)
-            t = round(t + world.dt, 10)
-            x = run.features()
-            active = dict(seq.step(t, x))
-            logger(TickInfo(t, active=dict(active), features=x))
-            note_switches(sequences, active)
-        episode = score_episode(world, context, initial, sequences, t, run.complete(active), seq)
+        episode = run_episode(world, seq, context, on_tick=EpisodeLogger(recorder, seq))
         recorder.log_outcome(
-            t,
+            episode.time,
             episode.outcome,
             f"strategy {episode.strategy}",
             success=episode.outcome == "complete",

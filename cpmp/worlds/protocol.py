@@ -30,7 +30,7 @@ from typing_extensions import override
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.records import PendingSwitch, Policy, episode_cause
+from cpmp.records import PendingSwitch, Policy, TickInfo, episode_cause
 from cpmp.worlds.common import SteppedTask, note_switches, positive_count, seeded_episodes
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
@@ -285,7 +285,7 @@ def run_episodes(
     """
     make_batch = getattr(policy, "batched", None)
     if make_batch is None or observe is not None or not contexts:
-        return [_run_one(world, policy, c, observe or (lambda x: x)) for c in contexts]
+        return [run_episode(world, policy, c, observe) for c in contexts]
     n = len(contexts)
     batch = make_batch(n)
     runs = [world.start(c) for c in contexts]
@@ -317,12 +317,33 @@ def run_episodes(
     ]
 
 
-def _run_one(
-    world: World, policy: Policy, context: Any, see: Callable[[np.ndarray], np.ndarray]
+def run_episode(
+    world: World,
+    policy: Policy,
+    context: Any,
+    observe: Callable[[np.ndarray], np.ndarray] | None = None,
+    on_tick: Callable[[TickInfo], None] | None = None,
 ) -> EpisodeRun:
-    """One episode of :func:`run_episodes`, one policy call per tick."""
+    """One episode of :func:`run_episodes` on ``context``, one policy call per tick.
+
+    Args:
+        world: the world.
+        policy: the policy (``reset`` at ``t = 0``, then ``step`` every ``world.dt``).
+        context: the episode's context.
+        observe: maps the true features ``(d,)`` to what the policy sees (default: them).
+        on_tick: called after ``reset`` and after every ``step`` with the time, the active
+            MPs and the true features (e.g. a recording,
+            :mod:`cpmp.experiment.world_recording`).
+
+    Returns:
+        The scored run.
+    """
+    see = observe or (lambda x: x)
     run = world.start(context)
-    active = dict(policy.reset(0.0, see(run.features())))
+    x = run.features()
+    active = dict(policy.reset(0.0, see(x)))
+    if on_tick is not None:
+        on_tick(TickInfo(0.0, active=dict(active), features=x))
     initial = dict(active)
     seqs = {v: [active[v]] for v in world.variables}
     t = 0.0
@@ -330,7 +351,10 @@ def _run_one(
     while not over and t < world.max_time - _EPS_T:
         run.advance(active, world.dt)
         t = round(t + world.dt, 10)
-        active = dict(policy.step(t, see(run.features())))
+        x = run.features()
+        active = dict(policy.step(t, see(x)))
+        if on_tick is not None:
+            on_tick(TickInfo(t, active=dict(active), features=x))
         note_switches(seqs, active)
         over = run.done(active)
     return score_episode(world, context, initial, seqs, t, run.complete(active), policy)
@@ -348,8 +372,7 @@ def score_episode(
 ) -> EpisodeRun:
     """Score an episode: its outcome, and an incomplete one's cause.
 
-    :func:`run_episodes` scores its episodes with it; so does a loop of one's own (e.g. one
-    that records the episode).
+    :func:`run_episodes` and :func:`run_episode` score their episodes with it.
 
     Args:
         world: the world.
