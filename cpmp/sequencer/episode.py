@@ -112,6 +112,21 @@ class TickRow(NamedTuple):
     inconsistent: list[int]
 
 
+class _TickProbabilities(NamedTuple):
+    """The first step of a tick (:meth:`SequencerEpisode._probabilities`).
+
+    Attributes:
+        rows: one :class:`TickRow` per variable with successors, in the plan's order.
+        chosen_by: variable -> the successor its branching node lets fire (``None``: no
+            branch choice there).
+        above: the variables whose watch saw a ``p`` above the threshold this tick.
+    """
+
+    rows: list[TickRow]
+    chosen_by: dict[str, str | None]
+    above: set[str]
+
+
 class _PendingTick(NamedTuple):
     """What a tick computed, kept until :attr:`SequencerEpisode.last_tick` is read."""
 
@@ -308,21 +323,10 @@ class SequencerEpisode:
             DataError: the features or a φ are not finite and the option ``nonfinite`` is
                 ``raise``.
         """
-        model = self.model
-        c = model.config
         self._last_t = t
         reading = self._clock.tick(t, state if phi is not None else None, stamp)
         if reading.clock_step > 0.0:
-            period = self._clock.period or 0.0
-            self.notes.append(
-                SequencerNote(
-                    t,
-                    "clock_step",
-                    "",
-                    f"the time jumped by {reading.clock_step + period:.3f} s (ticks every "
-                    f"{period:.3f} s): a clock step, counted as one tick",
-                )
-            )
+            self._note_clock_step(t, reading.clock_step)
         if phi is None or not finite:
             return self._hold_nonfinite(t, state, phi)
         self._nonfinite = False
@@ -333,12 +337,51 @@ class SequencerEpisode:
             context = dict(self.active)
             self._plan = TransitionPlan(context, self._transition_plan(context))
         context, plan = self._plan
-        coupled = self._coupled
-        joint = coupled and c.joint
         stopped = self.gave_up is not None
+        # 1. every successor's p, the branch choices, which watches saw p above the threshold
+        probs = self._probabilities(t, m, state, phi, plan, stopped)
+        # 2. each variable's rule decides; the coupling and the branch choice hold some back
         held: dict[str, str] = {}
+        going = {} if stopped else self._rule_decisions(t, m, phi, plan, probs, context, held)
+        # 3. the switches fire, those demonstrated together with another's waiting for it
+        ready = {**self._armed, **going}
+        fired = self._fire(t, m, state, phi, plan, probs.rows, ready, context, held)
+        # 4. no switch and the features at rest: recover, or give up
+        c = self.model.config
+        if not (fired or stopped) and c.recovery and reading.fresh and self._stall.stalled(m):
+            self._resolve_stall(t, m, state, phi, probs.rows, plan)
+        active = dict(self.active)
+        self._pending = _PendingTick(t, phi, probs.rows, active, held)
+        return dict(active)
+
+    def _note_clock_step(self, t: float, step: float) -> None:
+        """Note a jump of ``step`` [s] beyond the tick period at ``t`` [s] (one tick)."""
+        period = self._clock.period or 0.0
+        self.notes.append(
+            SequencerNote(
+                t,
+                "clock_step",
+                "",
+                f"the time jumped by {step + period:.3f} s (ticks every "
+                f"{period:.3f} s): a clock step, counted as one tick",
+            )
+        )
+
+    def _probabilities(
+        self,
+        t: float,
+        m: float,
+        state: np.ndarray,
+        phi: list[float],
+        plan: list[PlanRow],
+        stopped: bool,
+    ) -> _TickProbabilities:
+        """Every variable's successor ``p`` at ``t`` [s] (measured at ``m`` [s]).
+
+        Also the successor each branching node lets fire at ``state (d,)`` and, through each
+        active MP's watch, which variables have a ``p`` above the threshold.
+        """
         rows = []
-        fired = False
         chosen_by: dict[str, str | None] = {}
         above: set[str] = set()
         for v, current, names, columns, exit_column, unseen, checks, _, scale in plan:
@@ -354,19 +397,40 @@ class SequencerEpisode:
             chosen_by[v] = self._branch_choice(v, current, names, unseen, state)
             if self._watch[v][-1].see(t, m, p, stopped):
                 above.add(v)
+        return _TickProbabilities(rows, chosen_by, above)
+
+    def _rule_decisions(
+        self,
+        t: float,
+        m: float,
+        phi: list[float],
+        plan: list[PlanRow],
+        probs: _TickProbabilities,
+        context: dict[str, str],
+        held: dict[str, str],
+    ) -> dict[str, str]:
+        """Each variable's switching rule on its allowed successors: the switches it fires.
+
+        A successor is allowed when the active MP's exit is above ``min_exit``, (with the
+        coupling) its context was demonstrated, and (at a branching node) it is the chosen
+        one. A best successor above the threshold that is not allowed is held: added to
+        ``held`` (variable -> target) and noted once.
+
+        Returns:
+            Variable -> the successor its rule fires.
+        """
+        c = self.model.config
+        coupled = self._coupled
         going: dict[str, str] = {}
-        for plan_row, row in zip(plan, rows, strict=True):
-            if stopped:
-                break
+        for plan_row, row in zip(plan, probs.rows, strict=True):
             v, current, names, p, bad = row
-            exit_p = phi[plan_row.exit_column]
-            gate = exit_p > c.min_exit
+            gate = phi[plan_row.exit_column] > c.min_exit
             allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
-            chosen = chosen_by[v]
+            chosen = probs.chosen_by[v]
             if chosen is not None:
                 allowed = [ok and s == chosen for ok, s in zip(allowed, names, strict=True)]
             k = self._rules[v].update(m, p, allowed)
-            if v in above:
+            if v in probs.above:
                 self._watch[v][-1].gate(allowed, chosen)
             armed = self._armed.get(v)
             if armed is not None and (armed not in names or p[names.index(armed)] <= c.threshold):
@@ -383,7 +447,27 @@ class SequencerEpisode:
                         stay = chosen == STAY
                         self._note_hold(t, v, current, names[top], p[top], context, phi, stay)
             self._holding[v] = held.get(v)
-        ready = {**self._armed, **going}
+        return going
+
+    def _fire(
+        self,
+        t: float,
+        m: float,
+        state: np.ndarray,
+        phi: list[float],
+        plan: list[PlanRow],
+        rows: list[TickRow],
+        ready: dict[str, str],
+        context: dict[str, str],
+        held: dict[str, str],
+    ) -> bool:
+        """Fire the ``ready`` switches (variable -> target); whether any fired.
+
+        With joint switches, one always demonstrated together with another variable's switch
+        waits (armed, held and noted) until that one is ready too.
+        """
+        joint = self._coupled and self.model.config.joint
+        fired = False
         for plan_row, row in zip(plan, rows, strict=True):
             v = row.variable
             target = ready.get(v)
@@ -406,11 +490,7 @@ class SequencerEpisode:
             self._armed.pop(v, None)
             self._switch(t, m, v, target, row.p[k], state, phi, "switch")
             fired = True
-        if not (fired or stopped) and c.recovery and reading.fresh and self._stall.stalled(m):
-            self._resolve_stall(t, m, state, phi, rows, plan)
-        active = dict(self.active)
-        self._pending = _PendingTick(t, phi, rows, active, held)
-        return dict(active)
+        return fired
 
     def _branch_choice(
         self, v: str, current: str, names: list[str], unseen: list[int], state: np.ndarray
