@@ -237,7 +237,9 @@ class PendingSwitch:
 
     * ``below_threshold``: its ``p`` never exceeded ``threshold``;
     * ``still_improving``: it did, but when last above it was still rising by more than
-      ``min_improvement`` per ``patience`` (the rule waits for a plateau);
+      ``min_improvement`` per ``patience`` (the rule waits for a plateau); ``detail`` says
+      when ``p`` had levelled off and only wobbled up again (the rule compares ``p`` with
+      its value ``patience`` before);
     * ``held``: it was above the threshold but held back when last above (the coupling, a
       switch it waits for, a branch or stay choice, or a successor of higher ``p``;
       ``detail`` says which);

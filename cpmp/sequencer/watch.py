@@ -201,8 +201,14 @@ class ActivationWatch:
         elif status == "stopped":
             reason = "given_up"
         elif status in ("rising", "flat"):
-            # flat: the rule itself still saw it improving (it would have fired otherwise)
             reason = "still_improving"
+            if status == "flat":  # the rule would have fired on a plateau: p dipped and rose
+                detail = (
+                    f"p had stopped gaining more than {self.min_improvement:g} for "
+                    f"{self.patience:g} s, but rose again above its value {self.patience:g} s "
+                    "before, so the rule still saw it improving: a p that wobbles near its "
+                    "plateau"
+                )
         else:
             reason = "below_threshold"
         return PendingSwitch(

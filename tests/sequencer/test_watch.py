@@ -40,8 +40,11 @@ def test_watch_tells_a_rising_p_from_a_plateau(step, status):
     for k in range(20):  # 0.2 s above the threshold, patience 0.05 s
         assert w.see(k * DT, k * DT, [0.7 + step * k], stopped=False)
     assert w.status == [status]
-    # a rule that did not fire on a flat p judged it improving (see ActivationWatch.pending)
-    assert w.pending("x", gave_up=None).reason == "still_improving"
+    # a rule that did not fire on a flat p judged it improving: the cause says the p wobbles
+    cause = w.pending("x", gave_up=None)
+    assert cause.reason == "still_improving"
+    assert ("wobbles" in cause.detail) == (status == "flat")
+    assert ("wobbles" in cause.describe()) == (status == "flat")
 
 
 def test_watch_gate_marks_held_and_outranked_successors():
