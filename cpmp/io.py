@@ -190,16 +190,19 @@ def payload_digest(payload: Mapping[str, Any]) -> str:
     def feed(tag: bytes, data: bytes) -> None:
         digest.update(tag + struct.pack("<Q", len(data)) + data)
 
+    inside: set[int] = set()  # the containers being walked (a damaged pickle can loop)
+
     def walk(obj: Any, where: str) -> None:
-        if isinstance(obj, Mapping):
-            feed(b"d", str(len(obj)).encode())
-            for key, value in obj.items():
-                walk(key, where)
-                walk(value, f"{where}/{key}")
-        elif isinstance(obj, list | tuple):
-            feed(b"l" if isinstance(obj, list) else b"t", str(len(obj)).encode())
-            for i, value in enumerate(obj):
-                walk(value, f"{where}[{i}]")
+        if isinstance(obj, Mapping | list | tuple):
+            if id(obj) in inside:
+                raise TypeError(
+                    f"checkpoint payload holds itself at {where or '/'}; checkpoints hold no cycles"
+                )
+            inside.add(id(obj))
+            try:
+                walk_container(obj, where)
+            finally:
+                inside.discard(id(obj))
         elif isinstance(obj, str):
             feed(b"s", obj.encode("utf-8", "surrogatepass"))
         elif obj is None or isinstance(obj, bool):
@@ -219,6 +222,19 @@ def payload_digest(payload: Mapping[str, Any]) -> str:
                 f"checkpoint payload holds a {type(obj).__name__} at {where or '/'}; checkpoints "
                 "hold tensors and plain Python only"
             )
+
+    def walk_container(
+        obj: Mapping[object, object] | list[object] | tuple[object, ...], where: str
+    ) -> None:
+        if isinstance(obj, Mapping):
+            feed(b"d", str(len(obj)).encode())
+            for key, value in obj.items():
+                walk(key, where)
+                walk(value, f"{where}/{key}")
+        else:
+            feed(b"l" if isinstance(obj, list) else b"t", str(len(obj)).encode())
+            for i, value in enumerate(obj):
+                walk(value, f"{where}[{i}]")
 
     walk({k: v for k, v in payload.items() if k != CHECKSUM_KEY}, "")
     return digest.hexdigest()

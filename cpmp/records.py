@@ -1,9 +1,11 @@
-"""The records every layer shares: transitions, notes, ticks, replays and policy protocols.
+"""The records every layer shares: transitions, notes, ticks, replays, fit reports, protocols.
 
 A transition, a sequencer note, a start decision, a control tick, an open-loop replay, the
 policy protocols a closed loop drives, an episode's recoveries judged against the demonstrator
-(:func:`count_recoveries`) and the cause of an incomplete episode (:class:`PendingSwitch`,
-:func:`pending_switch`, :func:`episode_cause`); the closed sets of transition, note and cause
+(:func:`count_recoveries`), the cause of an incomplete episode (:class:`PendingSwitch`,
+:func:`pending_switch`, :func:`episode_cause`) and what a fit reports (:class:`FitReport` for
+the learned sequencer, filled by the predictor's training and the sequencer's fit;
+:class:`BaselineFitReport` for the baselines); the closed sets of transition, note and cause
 kinds (:data:`SwitchKind`, :data:`NoteKind`, :data:`CauseReason`) are checked where a record is
 made.
 
@@ -19,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple, Protocol, get_args
+from typing import Literal, NamedTuple, Protocol, TypeAlias, get_args
 
 import numpy as np
 
@@ -361,6 +363,347 @@ class PendingSwitch:
             raise DataError(f"not a pending switch: {data!r} ({err})") from err
 
 
+JsonValue: TypeAlias = "str | int | float | bool | list[JsonValue] | dict[str, JsonValue] | None"
+"""A value a JSON file holds (what a fit report's free-form facts are made of)."""
+
+
+@dataclass(frozen=True)
+class NewtonOutcome:
+    """How the damped Newton steps of a convex fit ended, for the worst node.
+
+    Attributes:
+        iterations: the most Newton iterations any node took.
+        grad_max: the largest final gradient max-norm over the nodes.
+        converged: every node reached the trainer's ``newton_tol``.
+    """
+
+    iterations: int
+    grad_max: float
+    converged: bool
+
+
+_TRAINING_KEYS = (
+    "loss",
+    "loss_history",
+    "val_loss",
+    "val_mae",
+    "val_mae_final",
+    "lr_history",
+    "epochs",
+    "max_epochs",
+    "stopped_early",
+    "monitor",
+    "device",
+    "seconds",
+    "solver",
+    "kind",
+    "n_nodes",
+    "n_parameters",
+)
+_SUPPORT_KEYS = ("support_counts", "n_support_total")
+_NEWTON_KEYS = ("newton_iterations", "newton_grad_max", "newton_converged")
+_SEQUENCER_KEYS = ("n_demos", "label_glitches", "warnings", "stay_choices", "entry_scale")
+_FIT_REPORT_KEYS = frozenset(_TRAINING_KEYS + _SUPPORT_KEYS + _NEWTON_KEYS + _SEQUENCER_KEYS)
+
+
+@dataclass(frozen=True)
+class FitReport:
+    """What the fit of a learned sequencer reports (``ConcurrentSequencer.fit_summary``).
+
+    The progress predictor's training (:func:`cpmp.predictors.training.fit_predictor`) fills
+    the fields down to ``newton``; the sequencer's fit (:func:`cpmp.sequencer.fit.fit_parts`,
+    :meth:`~cpmp.sequencer.ConcurrentSequencer.fit_config`) adds the ones after it. Sequences
+    are kept as tuples. :meth:`to_dict` is the JSON form (``report.json``, the checkpoints'
+    ``fit_summary``, the benchmarks), :meth:`from_dict` reads it back, also as checkpoints
+    written before a field existed hold it.
+
+    Attributes:
+        loss: the training loss of the fitted bank (after its ``finalize``; soft-label
+            cross-entropy, eq. 5, or the predictor's own training loss).
+        loss_history: the training loss of each epoch, in order.
+        val_loss: the validation loss of each epoch (empty without validation data).
+        val_mae: the held-out progress MAE of each epoch (empty without validation data).
+        val_mae_final: the held-out progress MAE of the fitted bank (after ``finalize``);
+            ``None`` without validation data.
+        lr_history: the learning rate of each epoch (Adam and LBFGS; empty for Newton).
+        epochs: the epochs actually run.
+        max_epochs: the epoch budget.
+        stopped_early: early stopping ended an Adam fit before ``max_epochs``.
+        monitor: the quantity early stopping and the rate decay watch (``val/loss`` with
+            validation data, ``train/loss`` without).
+        device: the device the fit ran on (``cpu``, ``cuda:0``).
+        seconds: the wall time of the predictor's fit [s].
+        solver: how the parameters were fitted: ``adam``, ``newton`` or ``lbfgs``.
+        kind: the predictor's kind (``klr``, ``mlp``, ...).
+        n_nodes: the bank's heads (graph nodes and start heads).
+        n_parameters: the bank's parameter entries (trainable or not).
+        support_counts: kernel banks: ``"variable/mp"`` -> its support points; ``None`` for
+            the others.
+        n_support_total: kernel banks: the support points of all heads; ``None`` otherwise.
+        predictor_facts: the rest of the predictor's own facts
+            (:meth:`~cpmp.predictors.ProgressPredictor.summary`, in its order): e.g.
+            ``hidden`` (mlp), ``window`` (dtw), ``sparsity_path``, ``sparsity_level``,
+            ``n_support_graph`` (klr_sparse).
+        newton: convex fits by Newton steps: how they ended; ``None`` for the others.
+        n_demos: the training demonstrations (validation ones taken out).
+        label_glitches: the label glitches repaired before the graphs were built, each as
+            :meth:`cpmp.sequencer.glitches.LabelGlitch.to_dict`.
+        warnings: what the fit warned about (short activations, still nodes, ...), readable.
+        stay_choices: ``"variable: mp"`` of each node with a learned stay choice.
+        entry_scale: ``"variable: source -> target"`` -> the factor dividing that edge's
+            entry probability (the edges whose demonstrated switches φ would not make).
+    """
+
+    loss: float
+    loss_history: tuple[float, ...]
+    val_loss: tuple[float, ...]
+    val_mae: tuple[float, ...]
+    val_mae_final: float | None
+    lr_history: tuple[float, ...]
+    epochs: int
+    max_epochs: int
+    stopped_early: bool
+    monitor: str
+    device: str
+    seconds: float
+    solver: str
+    kind: str
+    n_nodes: int
+    n_parameters: int
+    support_counts: Mapping[str, int] | None = None
+    n_support_total: int | None = None
+    predictor_facts: Mapping[str, JsonValue] = field(default_factory=dict)
+    newton: NewtonOutcome | None = None
+    n_demos: int = 0
+    label_glitches: tuple[Mapping[str, JsonValue], ...] = ()
+    warnings: tuple[str, ...] = ()
+    stay_choices: tuple[str, ...] = ()
+    entry_scale: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("loss_history", "val_loss", "val_mae", "lr_history", "warnings"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        object.__setattr__(self, "stay_choices", tuple(self.stay_choices))
+        object.__setattr__(self, "label_glitches", tuple(dict(g) for g in self.label_glitches))
+        object.__setattr__(self, "predictor_facts", dict(self.predictor_facts))
+        object.__setattr__(self, "entry_scale", dict(self.entry_scale))
+        if self.support_counts is not None:
+            object.__setattr__(self, "support_counts", dict(self.support_counts))
+        clash = sorted(_FIT_REPORT_KEYS & set(self.predictor_facts))
+        if clash:
+            raise DataError(f"predictor facts {clash} are fields of the fit report itself")
+
+    def to_dict(self) -> dict[str, JsonValue]:
+        """The report as the JSON-ready dict the fit has always written, in its key order.
+
+        The training's keys, the predictor's facts (``kind``, ``n_nodes``, ``n_parameters``,
+        ``support_counts`` and ``n_support_total`` where set, then :attr:`predictor_facts`),
+        Newton's outcome as ``newton_iterations``, ``newton_grad_max`` and
+        ``newton_converged`` (convex Newton fits only), then ``n_demos``, ``label_glitches``,
+        ``warnings``, ``stay_choices`` and ``entry_scale``. Values are as the fit gave them
+        (:func:`cpmp.io.to_builtin` makes them plain for a checkpoint).
+        """
+        out: dict[str, JsonValue] = {
+            "loss": self.loss,
+            "loss_history": list(self.loss_history),
+            "val_loss": list(self.val_loss),
+            "val_mae": list(self.val_mae),
+            "val_mae_final": self.val_mae_final,
+            "lr_history": list(self.lr_history),
+            "epochs": self.epochs,
+            "max_epochs": self.max_epochs,
+            "stopped_early": self.stopped_early,
+            "monitor": self.monitor,
+            "device": self.device,
+            "seconds": self.seconds,
+            "solver": self.solver,
+            "kind": self.kind,
+            "n_nodes": self.n_nodes,
+            "n_parameters": self.n_parameters,
+        }
+        if self.support_counts is not None:
+            out["support_counts"] = dict(self.support_counts)
+        if self.n_support_total is not None:
+            out["n_support_total"] = self.n_support_total
+        out.update(self.predictor_facts)
+        if self.newton is not None:
+            out["newton_iterations"] = self.newton.iterations
+            out["newton_grad_max"] = self.newton.grad_max
+            out["newton_converged"] = self.newton.converged
+        out["n_demos"] = self.n_demos
+        out["label_glitches"] = [dict(g) for g in self.label_glitches]
+        out["warnings"] = list(self.warnings)
+        out["stay_choices"] = list(self.stay_choices)
+        out["entry_scale"] = dict(self.entry_scale)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, object]) -> FitReport:
+        """The report of :meth:`to_dict`, or of a checkpoint's ``fit_summary``.
+
+        Keys a checkpoint written before they existed lacks take the value that says so:
+        empty histories, ``val_mae_final`` ``None``, ``max_epochs`` the epochs run,
+        ``stopped_early`` false, ``monitor``, ``device`` and ``solver`` empty, no Newton
+        outcome, no glitches, warnings, stay choices or entry factors. Keys the report has no
+        field for are kept among :attr:`predictor_facts`.
+
+        Raises:
+            DataError: ``loss``, ``seconds``, ``epochs`` or ``kind`` missing, or a value of
+                the wrong type.
+        """
+        get = data.get
+        try:
+            newton = None
+            if "newton_iterations" in data:
+                newton = NewtonOutcome(
+                    _int(data["newton_iterations"]),
+                    _float(get("newton_grad_max")),
+                    bool(get("newton_converged", False)),
+                )
+            counts = get("support_counts")
+            total = get("n_support_total")
+            val_final = get("val_mae_final")
+            epochs = _int(data["epochs"])
+            return cls(
+                loss=_float(data["loss"]),
+                loss_history=tuple(_float(v) for v in _items(get("loss_history", []))),
+                val_loss=tuple(_float(v) for v in _items(get("val_loss", []))),
+                val_mae=tuple(_float(v) for v in _items(get("val_mae", []))),
+                val_mae_final=None if val_final is None else _float(val_final),
+                lr_history=tuple(_float(v) for v in _items(get("lr_history", []))),
+                epochs=epochs,
+                max_epochs=_int(get("max_epochs", epochs)),
+                stopped_early=bool(get("stopped_early", False)),
+                monitor=str(get("monitor", "")),
+                device=str(get("device", "")),
+                seconds=_float(data["seconds"]),
+                solver=str(get("solver", "")),
+                kind=str(data["kind"]),
+                n_nodes=_int(get("n_nodes", 0)),
+                n_parameters=_int(get("n_parameters", 0)),
+                support_counts=(
+                    None if counts is None else {k: _int(v) for k, v in _mapping(counts).items()}
+                ),
+                n_support_total=None if total is None else _int(total),
+                predictor_facts={
+                    k: v for k, v in _mapping(data).items() if k not in _FIT_REPORT_KEYS
+                },
+                newton=newton,
+                n_demos=_int(get("n_demos", 0)),
+                label_glitches=tuple(_mapping(g) for g in _items(get("label_glitches", []))),
+                warnings=tuple(str(w) for w in _items(get("warnings", []))),
+                stay_choices=tuple(str(s) for s in _items(get("stay_choices", []))),
+                entry_scale={
+                    str(k): _float(v) for k, v in _mapping(get("entry_scale", {})).items()
+                },
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise DataError(f"not a fit report ({type(err).__name__}: {err})") from err
+
+
+@dataclass(frozen=True)
+class BaselineFitReport:
+    """What the fit of a sequencing baseline reports (its ``fit_summary``).
+
+    The baselines (:mod:`cpmp.baselines`: ``goal_nearest``, ``bc``) learn no progress
+    predictor in Lightning; they report what every fit does. :meth:`to_dict` is the JSON form,
+    :meth:`from_dict` reads it back.
+
+    Attributes:
+        kind: the baseline's kind (``goal_nearest``, ``bc``).
+        n_demos: the training demonstrations.
+        n_support_total: ``bc``: the support points of all node classifiers; ``None`` for a
+            baseline without supports.
+        seconds: the wall time of the fit [s].
+        nodes: ``bc``: ``"variable/mp"`` -> its classifier's fit
+            (:class:`cpmp.baselines.bc.NodeFit` as a dict); ``None`` for the others.
+        warnings: what the fit warned about, readable (not kept in a checkpoint).
+    """
+
+    kind: str
+    n_demos: int
+    n_support_total: int | None
+    seconds: float
+    nodes: Mapping[str, Mapping[str, JsonValue]] | None = None
+    warnings: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "warnings", tuple(self.warnings))
+        if self.nodes is not None:
+            object.__setattr__(self, "nodes", {k: dict(v) for k, v in self.nodes.items()})
+
+    def to_dict(self) -> dict[str, JsonValue]:
+        """The report as the JSON-ready dict the baselines have always written.
+
+        ``kind``, ``n_demos``, ``n_support_total``, ``seconds``, ``nodes`` (where set) and
+        ``warnings``, in that order.
+        """
+        out: dict[str, JsonValue] = {
+            "kind": self.kind,
+            "n_demos": self.n_demos,
+            "n_support_total": self.n_support_total,
+            "seconds": self.seconds,
+        }
+        if self.nodes is not None:
+            out["nodes"] = {k: dict(v) for k, v in self.nodes.items()}
+        out["warnings"] = list(self.warnings)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, object]) -> BaselineFitReport:
+        """The report of :meth:`to_dict` (a checkpoint's, without ``warnings``: none).
+
+        Raises:
+            DataError: ``kind``, ``n_demos`` or ``seconds`` missing, or a value of the wrong
+                type.
+        """
+        try:
+            total = data.get("n_support_total")
+            nodes = data.get("nodes")
+            return cls(
+                kind=str(data["kind"]),
+                n_demos=_int(data["n_demos"]),
+                n_support_total=None if total is None else _int(total),
+                seconds=_float(data["seconds"]),
+                nodes=(
+                    None if nodes is None else {k: _mapping(v) for k, v in _mapping(nodes).items()}
+                ),
+                warnings=tuple(str(w) for w in _items(data.get("warnings", []))),
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise DataError(f"not a baseline's fit report ({type(err).__name__}: {err})") from err
+
+
+def _float(value: object) -> float:
+    """``value`` as a float (``None``, as a checkpoint stores a non-finite one: ``nan``)."""
+    if value is None:
+        return math.nan
+    if not isinstance(value, int | float | str):
+        raise TypeError(f"expected a number, got {type(value).__name__}")
+    return float(value)
+
+
+def _int(value: object) -> int:
+    """``value`` as an int (a JSON number)."""
+    if not isinstance(value, int | float | str):
+        raise TypeError(f"expected a number, got {type(value).__name__}")
+    return int(value)
+
+
+def _items(value: object) -> list[object]:
+    """The items of a JSON list (or tuple)."""
+    if not isinstance(value, list | tuple):
+        raise TypeError(f"expected a list, got {type(value).__name__}")
+    return list(value)
+
+
+def _mapping(value: object) -> dict[str, JsonValue]:
+    """A JSON object as a dict."""
+    if not isinstance(value, Mapping):
+        raise TypeError(f"expected a mapping, got {type(value).__name__}")
+    return {str(k): v for k, v in value.items()}
+
+
 class Divergence(NamedTuple):
     """Where an episode's MP sequences first leave the demonstrator's (:func:`divergence`).
 
@@ -515,9 +858,13 @@ __all__ = [
     "CAUSE_REASONS",
     "NOTE_KINDS",
     "SWITCH_KINDS",
+    "BaselineFitReport",
     "BatchedPolicy",
     "CauseReason",
     "Divergence",
+    "FitReport",
+    "JsonValue",
+    "NewtonOutcome",
     "NoteKind",
     "PendingSwitch",
     "Policy",

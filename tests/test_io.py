@@ -220,3 +220,14 @@ def test_checkpoint_without_checksum_loads_with_a_warning(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="cpmp.io"):
         assert _load(path) == (3, 1)
     assert "has no checksum" in caplog.text and "save it again" in caplog.text
+
+
+def test_a_payload_that_holds_itself_is_refused_not_walked_forever() -> None:
+    """A damaged pickle can nest a container in itself: the digest refuses it (a TypeError, so
+    the checksum does not match) instead of recursing without end."""
+    loop: list[object] = []
+    loop.append(loop)
+    with pytest.raises(TypeError, match="holds itself at /a\\[0\\]"):
+        payload_digest({"a": loop})
+    shared = [1.0]  # held twice, not in itself: a digest as any other
+    assert payload_digest({"a": shared, "b": shared}) == payload_digest({"a": [1.0], "b": [1.0]})

@@ -3,17 +3,22 @@ a transition's feature vector takes no part in equality or hashing, and kinds ar
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import numpy as np
 import pytest
 
 from cpmp.errors import DataError
+from cpmp.io import to_builtin
 from cpmp.records import (
     CAUSE_REASONS,
     NOTE_KINDS,
     SWITCH_KINDS,
+    BaselineFitReport,
     Divergence,
+    FitReport,
     PendingSwitch,
     RecoveryCounts,
     SequencerNote,
@@ -151,3 +156,140 @@ def test_pending_switch_round_trips_and_refuses_an_unknown_reason() -> None:
         PendingSwitch("v", "a", "b", "slow")
     with pytest.raises(DataError, match="not a pending switch"):
         PendingSwitch.from_dict({"variable": "v"})
+
+
+# --- the fit's report -------------------------------------------------------------------------
+
+OLD_KLR_KEYS = [  # the keys of a klr fit's summary dict, in the order the fit wrote them
+    "loss",
+    "loss_history",
+    "val_loss",
+    "val_mae",
+    "val_mae_final",
+    "lr_history",
+    "epochs",
+    "max_epochs",
+    "stopped_early",
+    "monitor",
+    "device",
+    "seconds",
+    "solver",
+    "kind",
+    "n_nodes",
+    "n_parameters",
+    "support_counts",
+    "n_support_total",
+    "newton_iterations",
+    "newton_grad_max",
+    "newton_converged",
+    "n_demos",
+    "label_glitches",
+    "warnings",
+    "stay_choices",
+    "entry_scale",
+]
+
+
+def test_a_fit_report_round_trips_through_its_dict_in_the_fits_key_order(
+    fitted_klr, train_demos
+) -> None:
+    report = fitted_klr.fit_summary
+    assert isinstance(report, FitReport)
+    data = report.to_dict()
+    assert list(data) == OLD_KLR_KEYS
+    assert FitReport.from_dict(data) == report
+    # as a checkpoint holds it (plain builtins) and as report.json holds it (JSON)
+    assert FitReport.from_dict(to_builtin(data)) == report
+    assert FitReport.from_dict(json.loads(json.dumps(to_builtin(data)))) == report
+    assert report.kind == "klr" and report.solver == "newton" and report.epochs == 1
+    assert report.newton is not None and report.newton.converged
+    assert report.n_support_total == sum(report.support_counts.values()) > 0
+    assert report.n_demos == len(train_demos)
+    assert isinstance(report.loss_history, tuple) and report.loss == report.loss_history[-1]
+
+
+def test_predictor_facts_keep_their_place_in_the_dict() -> None:
+    report = FitReport(
+        loss=0.5,
+        loss_history=[0.7, 0.5],
+        val_loss=[],
+        val_mae=[],
+        val_mae_final=None,
+        lr_history=[1e-3, 1e-3],
+        epochs=2,
+        max_epochs=10,
+        stopped_early=True,
+        monitor="train/loss",
+        device="cpu",
+        seconds=1.25,
+        solver="adam",
+        kind="mlp",
+        n_nodes=3,
+        n_parameters=40,
+        predictor_facts={"hidden": [8, 8]},
+        n_demos=2,
+        warnings=["w"],
+    )
+    data = report.to_dict()
+    assert list(data)[13:17] == ["kind", "n_nodes", "n_parameters", "hidden"]
+    assert "support_counts" not in data and "newton_iterations" not in data
+    assert data["loss_history"] == [0.7, 0.5] and data["warnings"] == ["w"]
+    assert FitReport.from_dict(data) == report
+    assert report.loss_history == (0.7, 0.5)  # kept as a tuple
+    with pytest.raises(DataError, match="fields of the fit report"):
+        dataclasses.replace(report, predictor_facts={"loss": 1.0})
+
+
+def test_a_fit_report_is_frozen(fitted_klr) -> None:
+    report = fitted_klr.fit_summary
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        report.loss = 0.0  # type: ignore[misc]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        report.newton.converged = False  # type: ignore[union-attr,misc]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        BaselineFitReport("bc", 3, 10, 0.1).seconds = 0.0  # type: ignore[misc]
+
+
+def test_a_fit_report_from_an_older_fit_takes_the_documented_defaults(fitted_klr) -> None:
+    old = {
+        k: v
+        for k, v in fitted_klr.fit_summary.to_dict().items()
+        if k
+        not in {
+            "val_loss",
+            "val_mae",
+            "val_mae_final",
+            "lr_history",
+            "max_epochs",
+            "stopped_early",
+            "monitor",
+            "device",
+            "label_glitches",
+            "stay_choices",
+            "entry_scale",
+        }
+    }
+    report = FitReport.from_dict(old)
+    assert (report.loss, report.epochs, report.max_epochs) == (old["loss"], 1, 1)
+    assert (report.val_mae, report.val_mae_final, report.lr_history) == ((), None, ())
+    assert (report.monitor, report.device, report.stopped_early) == ("", "", False)
+    assert (report.label_glitches, report.stay_choices, report.entry_scale) == ((), (), {})
+    assert report.support_counts == old["support_counts"]
+    with pytest.raises(DataError, match="not a fit report"):
+        FitReport.from_dict({k: v for k, v in old.items() if k != "loss"})
+    with pytest.raises(DataError, match="not a fit report"):
+        FitReport.from_dict({**old, "warnings": "not a list"})
+
+
+def test_a_baseline_fit_report_round_trips_in_the_baselines_key_order() -> None:
+    report = BaselineFitReport(
+        "bc", 4, 12, 0.5, nodes={"v/a": {"iterations": 3, "converged": True}}, warnings=["x"]
+    )
+    data = report.to_dict()
+    assert list(data) == ["kind", "n_demos", "n_support_total", "seconds", "nodes", "warnings"]
+    assert BaselineFitReport.from_dict(data) == report
+    plain = BaselineFitReport("goal_nearest", 4, None, 0.5)
+    assert list(plain.to_dict()) == ["kind", "n_demos", "n_support_total", "seconds", "warnings"]
+    # a checkpoint keeps no warnings
+    saved = {k: v for k, v in plain.to_dict().items() if k != "warnings"}
+    assert BaselineFitReport.from_dict(saved) == plain

@@ -53,7 +53,7 @@ from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
-from cpmp.records import SequencerNote, TickInfo, TransitionEvent
+from cpmp.records import BaselineFitReport, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import checked_features, checked_time
 
 CHECKPOINT_FORMAT = "cpmp-bc"
@@ -270,8 +270,8 @@ class BCSequencer(EpisodicBaseline):
             successors.
         starts: ``(variable, MP)`` -> ``(n, d)`` scaled first samples of the demonstrations
             starting with that MP, for every initial node.
-        fit_summary: ``kind``, ``n_demos``, ``n_support_total``, ``seconds``, ``warnings`` and
-            ``nodes`` (``"variable/MP"`` -> :class:`NodeFit` as a dict).
+        fit_summary: what the fit reported (``nodes``: ``"variable/MP"`` -> :class:`NodeFit`
+            as a dict); ``None`` for one built by hand.
         active, events, notes, last_tick: the current episode (as the learned sequencer's).
     """
 
@@ -285,7 +285,7 @@ class BCSequencer(EpisodicBaseline):
         predictor: NearestProgress,
         classifiers: Mapping[tuple[str, str], NodeClassifier],
         starts: Mapping[tuple[str, str], np.ndarray],
-        fit_summary: dict[str, Any] | None = None,
+        fit_summary: BaselineFitReport | None = None,
     ) -> None:
         self.graphs = dict(graphs)
         self.feature_names = list(feature_names)
@@ -293,7 +293,7 @@ class BCSequencer(EpisodicBaseline):
         self.predictor = predictor
         self.classifiers = dict(classifiers)
         self.starts = {k: np.asarray(s, dtype=np.float64) for k, s in starts.items()}
-        self.fit_summary = fit_summary or {}
+        self.fit_summary = fit_summary
         d = len(self.feature_names)
         for v, g in self.graphs.items():
             for mp in g.nodes:
@@ -369,18 +369,18 @@ class BCSequencer(EpisodicBaseline):
             clf, info = cls._fit_node(v, mp, sorted(graphs[v].successors(mp)), nd, config)
             classifiers[(v, mp)] = clf
             fits[f"{v}/{mp}"] = info._asdict()
-        summary = {
-            "kind": KIND,
-            "n_demos": len(demos),
-            "n_support_total": sum(len(c.supports) for c in classifiers.values()),
-            "seconds": perf_counter() - started,
-            "nodes": fits,
-            "warnings": [
+        summary = BaselineFitReport(
+            kind=KIND,
+            n_demos=len(demos),
+            n_support_total=sum(len(c.supports) for c in classifiers.values()),
+            seconds=perf_counter() - started,
+            nodes=fits,
+            warnings=tuple(
                 f"bc: the classifier of {key} did not converge in {f['iterations']} Newton steps"
                 for key, f in fits.items()
                 if not f["converged"]
-            ],
-        }
+            ),
+        )
         return cls(
             graphs,
             feature_names,
@@ -492,7 +492,7 @@ class BCSequencer(EpisodicBaseline):
             f"switch when a successor's probability > {c.threshold:g}; start at the nearest "
             "demonstrated first sample"
         ]
-        nodes = self.fit_summary.get("nodes", {})
+        nodes = (None if self.fit_summary is None else self.fit_summary.nodes) or {}
         for v in sorted(self.graphs):
             parts.append(self.graphs[v].to_text())
             for mp in self.graphs[v].ordered_nodes():
@@ -539,7 +539,11 @@ class BCSequencer(EpisodicBaseline):
                     {"variable": v, "mp": mp, "states": torch.from_numpy(s)}
                     for (v, mp), s in sorted(self.starts.items())
                 ],
-                "fit_summary": {k: v for k, v in self.fit_summary.items() if k != "warnings"},
+                "fit_summary": (
+                    {}
+                    if self.fit_summary is None
+                    else {k: v for k, v in self.fit_summary.to_dict().items() if k != "warnings"}
+                ),
             },
         )
 
@@ -571,6 +575,7 @@ class BCSequencer(EpisodicBaseline):
             for r in payload["classifiers"]
         }
         starts = {(r["variable"], r["mp"]): r["states"].numpy() for r in payload["starts"]}
+        summary = payload.get("fit_summary") or {}
         return cls(
             graphs,
             payload["feature_names"],
@@ -578,7 +583,7 @@ class BCSequencer(EpisodicBaseline):
             predictor,
             classifiers,
             starts,
-            {**payload.get("fit_summary", {}), "warnings": []},
+            BaselineFitReport.from_dict(summary) if summary else None,
         )
 
 

@@ -49,7 +49,7 @@ from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
-from cpmp.records import SequencerNote, TickInfo, TransitionEvent
+from cpmp.records import BaselineFitReport, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import (
     checked_features,
     checked_time,
@@ -101,7 +101,7 @@ class GoalNearestSequencer(EpisodicBaseline):
         motion: Mapping[str, Mapping[str, np.ndarray]],
         entries: Mapping[tuple[str, str | None, str], np.ndarray],
         finals: Mapping[tuple[str, str], np.ndarray],
-        fit_summary: dict[str, Any] | None = None,
+        fit_summary: BaselineFitReport | None = None,
     ) -> None:
         self.graphs = dict(graphs)
         self.feature_names = list(feature_names)
@@ -112,7 +112,7 @@ class GoalNearestSequencer(EpisodicBaseline):
         }
         self.entries = {k: np.asarray(e, dtype=np.float64) for k, e in entries.items()}
         self.finals = {k: np.asarray(e, dtype=np.float64) for k, e in finals.items()}
-        self.fit_summary = fit_summary or {}
+        self.fit_summary = fit_summary
         d = len(self.feature_names)
         for v, g in self.graphs.items():
             for mp in g.nodes:
@@ -190,13 +190,12 @@ class GoalNearestSequencer(EpisodicBaseline):
             path[binary] = 0.0
             top = float(path.max(initial=0.0))
             motion[v][mp] = (path >= config.motion_share * top) & (path > 0.0)
-        summary = {
-            "kind": KIND,
-            "n_demos": len(demos),
-            "n_support_total": None,
-            "seconds": perf_counter() - started,
-            "warnings": [],
-        }
+        summary = BaselineFitReport(
+            kind=KIND,
+            n_demos=len(demos),
+            n_support_total=None,
+            seconds=perf_counter() - started,
+        )
         return cls(
             graphs,
             feature_names,
@@ -321,7 +320,11 @@ class GoalNearestSequencer(EpisodicBaseline):
                     {"variable": v, "mp": mp, "states": torch.from_numpy(e)}
                     for (v, mp), e in sorted(self.finals.items())
                 ],
-                "fit_summary": {k: v for k, v in self.fit_summary.items() if k != "warnings"},
+                "fit_summary": (
+                    {}
+                    if self.fit_summary is None
+                    else {k: v for k, v in self.fit_summary.to_dict().items() if k != "warnings"}
+                ),
             },
         )
 
@@ -349,6 +352,7 @@ class GoalNearestSequencer(EpisodicBaseline):
         motion = {
             v: {mp: m.numpy() for mp, m in masks.items()} for v, masks in payload["motion"].items()
         }
+        summary = payload.get("fit_summary") or {}
         return cls(
             graphs,
             payload["feature_names"],
@@ -357,5 +361,5 @@ class GoalNearestSequencer(EpisodicBaseline):
             motion,
             entries,
             finals,
-            {**payload.get("fit_summary", {}), "warnings": []},
+            BaselineFitReport.from_dict(summary) if summary else None,
         )

@@ -155,7 +155,7 @@ def bench_fit(
         start = time.perf_counter()
         seq = ConcurrentSequencer.fit(list(demos), "klr", seed=seed, logger=None)
         totals.append(time.perf_counter() - start)
-        fits.append(float(seq.fit_summary["seconds"]))
+        fits.append(float(seq.fit_summary.seconds))
     problems = node_kernels(seq, demos)
     for _ in range(repeats):
         solutions, seconds = newton_solve_all(problems)
@@ -165,6 +165,7 @@ def bench_fit(
     peer = peers[-1]
     peer_loss = problem_loss(problems, peer["solutions"])
     peer_seconds = [p["seconds"] for p in peers]
+    newton = seq.fit_summary.newton
     out: dict[str, Any] = {
         "n_demos": len(demos),
         "n_features": int(demos[0].n_features),
@@ -176,9 +177,9 @@ def bench_fit(
             "fit_seconds": timing_stats(fits),
             "sequencer_fit_seconds": timing_stats(totals),
             "solve_seconds": timing_stats(solves),
-            "loss": float(seq.fit_summary["loss"]),
+            "loss": float(seq.fit_summary.loss),
             "solve_loss": klr_loss,
-            "newton_iterations": seq.fit_summary.get("newton_iterations"),
+            "newton_iterations": None if newton is None else newton.iterations,
         },
         "sklearn": {
             "seconds": timing_stats(peer_seconds),
@@ -198,8 +199,8 @@ def bench_fit(
         slow = ConcurrentSequencer.fit(list(demos), "klr", seed=seed, logger=None, solver="lbfgs")
         out["lbfgs"] = {
             "sequencer_fit_seconds": time.perf_counter() - start,
-            "fit_seconds": float(slow.fit_summary["seconds"]),
-            "loss": float(slow.fit_summary["loss"]),
+            "fit_seconds": float(slow.fit_summary.seconds),
+            "loss": float(slow.fit_summary.loss),
         }
     return out
 
@@ -288,7 +289,7 @@ def _fit_point(demos: Sequence[Demonstration], seed: int) -> dict[str, Any]:
     peer = sklearn_peer(problems)
     return {
         "sequencer": seq,
-        "fit_seconds": float(seq.fit_summary["seconds"]),
+        "fit_seconds": float(seq.fit_summary.seconds),
         "solve_seconds": solve,
         "sklearn_seconds": peer["seconds"],
         "n_support_total": int(sum(k.shape[1] for k in problems["kernels"])),

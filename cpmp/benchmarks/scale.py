@@ -80,10 +80,10 @@ run = evaluate(world, seq, args["episodes"], args["held_out_seed"])
 print("RESULT " + json.dumps({
     "samples": int(sum(d.n_samples for d in train)),
     "fit_s": fit_s,
-    "predictor_s": float(seq.fit_summary["seconds"]),
+    "predictor_s": float(seq.fit_summary.seconds),
     "peak_rss_gb": peak,
     "base_rss_gb": base,
-    "supports": int(seq.fit_summary["n_support_total"]),
+    "supports": int(seq.fit_summary.n_support_total),
     "mae": mae,
     "complete": int(run.complete),
     "episodes": args["episodes"],

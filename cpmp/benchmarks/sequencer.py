@@ -60,16 +60,17 @@ def bench_sequencer(
             seq.step(0.01 * (k + 1), x)
             times[k] = time.perf_counter() - t0
         n_bytes = sum(t.numel() * t.element_size() for t in seq.predictor.state_dict().values())
+        report = seq.fit_summary
         out["predictors"][kind] = {
             "fit_seconds": fit_s,
-            "epochs": seq.fit_summary.get("epochs"),
+            "epochs": report.epochs,
             "max_epochs": extra.get("epochs", getattr(seq.predictor.config, "epochs", None)),
-            "loss": seq.fit_summary.get("loss"),
+            "loss": report.loss,
             "step_ms_mean": float(times.mean() * 1e3),
             "step_ms_p95": float(np.percentile(times, 95) * 1e3),
             "n_nodes": len(seq.node_keys),
-            "n_support_total": seq.fit_summary.get("n_support_total"),
-            "solver": seq.fit_summary.get("solver"),
+            "n_support_total": report.n_support_total,
+            "solver": report.solver,
             "n_parameters": seq.predictor.n_parameters(),
             "state_bytes": int(n_bytes),
         }

@@ -156,7 +156,7 @@ def benchmark(
             n_demos=n_demos,
             fit_seconds=fit_s,
             n_heads=len(seq.predictor.node_keys),
-            n_support_total=seq.fit_summary.get("n_support_total"),
+            n_support_total=seq.fit_summary.n_support_total,
         )
         report["learned"] = learned
     return report

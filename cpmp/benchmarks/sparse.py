@@ -248,18 +248,20 @@ def measure(
         start = time.perf_counter()
         seq = ConcurrentSequencer.fit(list(demos), kind, seed=seed, logger=None, **options)
         times.append(time.perf_counter() - start)
+    report = seq.fit_summary
     row = {
         "fit_s": min(times),
         "supports": sum(seq.predictor.support_counts()[f"{v}/{m}"] for v, m in seq.node_keys),
-        "supports_all": int(seq.fit_summary["n_support_total"]),
+        "supports_all": int(report.n_support_total),
         "mae": float(progress_errors(activation_progress(seq, world.test))["mae"]),
         **tick_costs(seq, world.test[0]),
         "complete": world.complete(seq),
     }
     if kind == "klr_sparse":
-        row["level"] = seq.fit_summary.get("sparsity_level")
-        row["gamma_scale"] = seq.fit_summary.get("sparsity_gamma_scale")
-        row["validation"] = seq.fit_summary.get("sparsity_validation")
+        facts = report.predictor_facts
+        row["level"] = facts.get("sparsity_level")
+        row["gamma_scale"] = facts.get("sparsity_gamma_scale")
+        row["validation"] = facts.get("sparsity_validation")
     return row
 
 

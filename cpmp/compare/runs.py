@@ -42,6 +42,7 @@ from cpmp.experiment.reproduction import reproduce_seed
 from cpmp.experiment.settings import ExperimentSettings, to_dict
 from cpmp.experiment.strategies import balanced_subset
 from cpmp.experiment.workers import spawned_pool
+from cpmp.records import FitReport
 
 log = logging.getLogger(__name__)
 
@@ -243,8 +244,10 @@ def _fit_and_score(
         out.error = f"{type(err).__name__}: {err}"
         return None
     out.fit_s = out.seconds["fit"]
-    out.supports = seq.fit_summary.get("n_support_total")
-    out.sparsity = {k: seq.fit_summary[k] for k in SPARSITY_KEYS if k in seq.fit_summary}
+    report = seq.fit_summary
+    out.supports = None if report is None else report.n_support_total
+    facts = report.predictor_facts if isinstance(report, FitReport) else {}
+    out.sparsity = {k: facts[k] for k in SPARSITY_KEYS if k in facts}
     with stage("evaluate"):
         out.demo_errors = demo_errors(seq, test)
         total = sum(e.samples for e in out.demo_errors)

@@ -44,7 +44,7 @@ class FitConfig:
         repair_glitches: relabel one or two samples of another MP between two samples of
             the same MP with that MP before the graphs are built
             (:func:`cpmp.sequencer.glitches.repair_glitches`; each repair is listed in
-            ``fit_summary["label_glitches"]``); ``False``: keep them as nodes.
+            ``fit_summary.label_glitches``); ``False``: keep them as nodes.
     """
 
     predictor: str = "klr"

@@ -111,9 +111,10 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
             demos, settings, int(cfg.seed), log_dir=run_dir / "lightning", validation=validation
         )
     out = seq.save(run_dir / "model.pt")
+    fit = {} if seq.fit_summary is None else seq.fit_summary.to_dict()
     write_json(
         run_dir / "train_summary.json",
-        {"data": str(path), "split": split, "n_demos": len(demos), **seq.fit_summary},
+        {"data": str(path), "split": split, "n_demos": len(demos), **fit},
     )
     log.info("graphs:\n%s", seq.describe())
     return out

@@ -159,6 +159,7 @@ def run_train_size(
             label=f"D{d}_",
             train=subset,
         )
+    fit = {} if seq.fit_summary is None else seq.fit_summary.to_dict()
     row = {
         "progress": {k: offline["progress"][k] for k in ("mae", "mae_first", "mae_last")},
         "replay": {
@@ -166,9 +167,7 @@ def run_train_size(
             for k in ("all_match", "sequence_match", "distance_mean", "distance_std")
         },
         "reproduction": summarize_episodes(episodes),
-        "fit": {
-            k: seq.fit_summary.get(k) for k in ("loss", "seconds", "n_support_total", "warnings")
-        },
+        "fit": {k: fit.get(k) for k in ("loss", "seconds", "n_support_total", "warnings")},
     }
     smap = None
     if d == max(settings.train_sizes):

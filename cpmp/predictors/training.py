@@ -32,6 +32,7 @@ from cpmp.predictors.base import START_PREFIX, NodeData, ProgressPredictor
 from cpmp.predictors.datamodule import ProgressDataModule
 from cpmp.predictors.lightning import HeldOutSums, ProgressModule, Solver
 from cpmp.predictors.newton import NewtonInfo
+from cpmp.records import FitReport, NewtonOutcome
 
 log = logging.getLogger(__name__)
 
@@ -186,7 +187,7 @@ def fit_predictor(
     seed: int = 0,
     validation: list[NodeData] | None = None,
     logger: Logger | str | None = None,
-) -> dict[str, Any]:
+) -> FitReport:
     """Initialise and fit ``predictor`` on every node's data in one Lightning fit.
 
     The randomness (initial weights, mini-batch shuffles) comes from a local generator seeded
@@ -205,13 +206,14 @@ def fit_predictor(
             ``trainer.log_dir``) or ``None``.
 
     Returns:
-        A summary: final ``loss``, ``loss_history`` per epoch, ``val_loss`` and ``val_mae``
-        per epoch (empty without validation data), ``lr_history`` (Adam and LBFGS: the rate
-        of each epoch) and ``val_mae_final`` (the fitted bank's,
-        after :meth:`~cpmp.predictors.ProgressPredictor.finalize`; ``None`` without
-        validation), ``epochs`` actually run, ``max_epochs`` (the budget), ``stopped_early``
-        (early stopping ended an Adam fit before the budget), ``monitor``, ``device``, wall
-        time ``seconds``, ``solver`` and the predictor's facts (and Newton's outcome).
+        The fit's report: final ``loss``, ``loss_history`` per epoch, ``val_loss`` and
+        ``val_mae`` per epoch (empty without validation data), ``lr_history`` (Adam and
+        LBFGS: the rate of each epoch) and ``val_mae_final`` (the fitted bank's, after
+        :meth:`~cpmp.predictors.ProgressPredictor.finalize`; ``None`` without validation),
+        ``epochs`` actually run, ``max_epochs`` (the budget), ``stopped_early`` (early
+        stopping ended an Adam fit before the budget), ``monitor``, ``device``, wall time
+        ``seconds``, ``solver``, the predictor's facts and Newton's outcome; the sequencer's
+        fields (``n_demos``, ``warnings``, ...) at their defaults.
 
     Raises:
         ConfigError: a bad logger, or more than one device.
@@ -286,33 +288,40 @@ def fit_predictor(
         final,
         "" if val_final is None else f", held-out progress MAE {val_final:.4f}",
     )
-    out: dict[str, Any] = {
-        "loss": final,
-        "loss_history": history.train_loss,
-        "val_loss": history.val_loss,
-        "val_mae": history.val_mae,
-        "val_mae_final": val_final,
-        "lr_history": history.lr,
-        "epochs": len(history.train_loss),
-        "max_epochs": epochs,
-        "stopped_early": stopped_early,
-        "monitor": monitor,
-        "device": device,
-        "seconds": elapsed,
-        "solver": solver,
-        **predictor.summary(),
-    }
-    if module.newton_info:
-        out.update(_newton_summary(module.newton_info))
-        if not out["newton_converged"]:
-            log.warning(
-                "Newton stopped before newton_tol=%g on some nodes (largest gradient %.3g after "
-                "%d iterations); raise newton_max_iter",
-                cfg.newton_tol,
-                out["newton_grad_max"],
-                out["newton_iterations"],
-            )
-    return out
+    facts = dict(predictor.summary())
+    counts, total = facts.pop("support_counts", None), facts.pop("n_support_total", None)
+    newton = _newton_outcome(module.newton_info) if module.newton_info else None
+    report = FitReport(
+        loss=final,
+        loss_history=tuple(history.train_loss),
+        val_loss=tuple(history.val_loss),
+        val_mae=tuple(history.val_mae),
+        val_mae_final=val_final,
+        lr_history=tuple(history.lr),
+        epochs=len(history.train_loss),
+        max_epochs=epochs,
+        stopped_early=stopped_early,
+        monitor=monitor,
+        device=device,
+        seconds=elapsed,
+        solver=solver,
+        kind=facts.pop("kind"),
+        n_nodes=facts.pop("n_nodes"),
+        n_parameters=facts.pop("n_parameters"),
+        support_counts=counts,
+        n_support_total=total,
+        predictor_facts=facts,
+        newton=newton,
+    )
+    if newton is not None and not newton.converged:
+        log.warning(
+            "Newton stopped before newton_tol=%g on some nodes (largest gradient %.3g after "
+            "%d iterations); raise newton_max_iter",
+            cfg.newton_tol,
+            newton.grad_max,
+            newton.iterations,
+        )
+    return report
 
 
 def _predictor_name(predictor: ProgressPredictor) -> str:
@@ -354,10 +363,10 @@ def _held_out_mae(
     return float(sums.mae(graph_node.cpu()))
 
 
-def _newton_summary(infos: list[NewtonInfo]) -> dict[str, Any]:
+def _newton_outcome(infos: list[NewtonInfo]) -> NewtonOutcome:
     """The worst node's Newton outcome: iterations, final gradient max-norm, convergence."""
-    return {
-        "newton_iterations": max(i.iterations for i in infos),
-        "newton_grad_max": max(i.grad_max for i in infos),
-        "newton_converged": all(i.converged for i in infos),
-    }
+    return NewtonOutcome(
+        iterations=max(i.iterations for i in infos),
+        grad_max=max(i.grad_max for i in infos),
+        converged=all(i.converged for i in infos),
+    )

@@ -12,9 +12,9 @@ This is the only module of :mod:`cpmp.sequencer` that imports the training stack
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from lightning.pytorch.loggers import Logger
@@ -26,6 +26,7 @@ from cpmp.graph import SequenceGraph, build_graphs
 from cpmp.predictors import PREDICTORS, ProgressPredictor
 from cpmp.predictors.datamodule import held_out_split
 from cpmp.predictors.training import check_logger, fit_predictor
+from cpmp.records import FitReport
 from cpmp.sequencer.fit_data import (
     demo_progress,
     fit_warnings,
@@ -102,8 +103,9 @@ class FittedParts:
         graphs: variable -> its sequence graph.
         predictor: the fitted predictor bank (training mode; the sequencer puts it in eval).
         feature_names: the ``d`` feature names.
-        summary: the fit's summary (loss, timings, ``n_demos``, ``label_glitches``,
-            ``warnings``, the predictor's own entries).
+        summary: the fit's report (loss, timings, the predictor's own facts, ``n_demos``,
+            ``label_glitches``, ``warnings``; the stay choices and entry factors are added
+            when the sequencer is built).
         glitches: the label glitches repaired before the graphs were built.
         initial_combinations: the initial MP per variable of each training demonstration
             (distinct).
@@ -118,7 +120,7 @@ class FittedParts:
     graphs: dict[str, SequenceGraph]
     predictor: ProgressPredictor
     feature_names: list[str]
-    summary: dict[str, Any]
+    summary: FitReport
     glitches: list[LabelGlitch]
     initial_combinations: list[dict[str, str]]
     coupling: Coupling
@@ -175,9 +177,12 @@ def fit_parts(
             f"the {predictor} fit produced non-finite parameters ({', '.join(bad)}); "
             "check the feature magnitudes and the options gamma / l2 / lr"
         )
-    summary["n_demos"] = len(demos)
-    summary["label_glitches"] = [g.to_dict() for g in glitches]
-    summary["warnings"] = glitch_warnings(graphs, demos) + fit_warnings(model, data)
+    summary = dataclasses.replace(
+        summary,
+        n_demos=len(demos),
+        label_glitches=tuple(g.to_dict() for g in glitches),
+        warnings=tuple(glitch_warnings(graphs, demos) + fit_warnings(model, data)),
+    )
     progress = demo_progress(graphs, data, [d.n_samples for d in demos])
     return FittedParts(
         graphs=graphs,

@@ -60,7 +60,7 @@ class LabelGlitch:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (``fit_summary["label_glitches"]``)."""
+        """JSON-ready form (``fit_summary.label_glitches``)."""
         return {**dataclasses.asdict(self), "would_add": list(self.would_add)}
 
 

@@ -39,6 +39,7 @@ from cpmp.graph import SequenceGraph
 from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
 from cpmp.predictors import ProgressPredictor, predictor_from_spec
 from cpmp.records import (
+    FitReport,
     PendingSwitch,
     ReplayResult,
     SequencerNote,
@@ -99,7 +100,7 @@ class ConcurrentSequencer:
         predictor: ProgressPredictor,
         feature_names: Sequence[str],
         config: SequencerConfig | None = None,
-        fit_summary: dict[str, Any] | None = None,
+        fit_summary: FitReport | None = None,
         initial_combinations: Sequence[Mapping[str, str]] | None = None,
         coupling: Coupling | None = None,
         feature_range: np.ndarray | None = None,
@@ -109,7 +110,9 @@ class ConcurrentSequencer:
         self.predictor = predictor.eval()
         self.feature_names = list(feature_names)
         self.config = config or SequencerConfig()
-        self.fit_summary = fit_summary or {}
+        self.fit_summary = fit_summary
+        """What the fit reported; ``None`` for a sequencer built by hand or loaded from a
+        checkpoint without one."""
         self.initial_combinations = [dict(c) for c in initial_combinations or []]
         """Initial MP per variable of each demonstration (distinct; for ``start_rule=joint``)."""
         if len(self.feature_names) != predictor.n_features:
@@ -210,13 +213,13 @@ class ConcurrentSequencer:
                 job's ``predictor=klr sequencer=coupled``).
             validation: the fit's held-out demonstrations (``None``: the trainer's
                 ``val_fraction`` of ``demos``, none by default): the progress MAE on them is
-                logged every epoch (``fit_summary["val_mae"]``) and Adam fits stop on their
+                logged every epoch (``fit_summary.val_mae``) and Adam fits stop on their
                 loss.
             logger: a Lightning ``Logger``, ``"csv"``, ``"tensorboard"`` (both writing into
                 the trainer's ``log_dir``) or ``None`` (no logging).
 
         Label glitches (``A A X A A``) are repaired first unless ``config.repair_glitches`` is
-        off; ``fit_summary["label_glitches"]`` lists each, with the node and edges it would
+        off; ``fit_summary.label_glitches`` lists each, with the node and edges it would
         have added.
 
         Returns:
@@ -230,7 +233,7 @@ class ConcurrentSequencer:
 
         config = config or FitConfig()
         fitted = fit_parts(demos, config, validation, logger)
-        for text in [g.describe() for g in fitted.glitches] + fitted.summary["warnings"]:
+        for text in [g.describe() for g in fitted.glitches] + list(fitted.summary.warnings):
             log.warning("%s", text)
         graphs = fitted.graphs
         seq = cls(
@@ -248,10 +251,13 @@ class ConcurrentSequencer:
             fitted.demos, sorted(graphs), fitted.progress, 0.2 if margin is None else margin
         )
         stays = seq._confusing(stays)
-        fitted.summary["stay_choices"] = sorted(f"{v}: {mp}" for v, mp in stays)
         start = StartChoice.learn(fitted.demos, sorted(graphs), fitted.feature_range)
         scales = seq._entry_scales()
-        fitted.summary["entry_scale"] = {f"{v}: {a} -> {b}": g for (v, a, b), g in scales.items()}
+        seq.fit_summary = dataclasses.replace(
+            fitted.summary,
+            stay_choices=tuple(sorted(f"{v}: {mp}" for v, mp in stays)),
+            entry_scale={f"{v}: {a} -> {b}": g for (v, a, b), g in scales.items()},
+        )
         return seq._with_branches(
             BranchChoices.learn(fitted.coupling, fitted.feature_range, stays, start, scales)
         )
@@ -469,7 +475,9 @@ class ConcurrentSequencer:
                 "graphs": {v: g.to_dict() for v, g in self.graphs.items()},
                 "predictor": {"spec": self.predictor.spec(), "state": self.predictor.state_dict()},
                 "sequencer": dataclasses.asdict(self.config),
-                "fit_summary": to_builtin(self.fit_summary),
+                "fit_summary": (
+                    {} if self.fit_summary is None else to_builtin(self.fit_summary.to_dict())
+                ),
                 "initial_combinations": self.initial_combinations,
                 "coupling": self.coupling.to_dict(),
                 "feature_range": self.feature_range.tolist(),
@@ -531,12 +539,13 @@ class ConcurrentSequencer:
                     f"feature_range must be {predictor.n_features} finite numbers, got shape "
                     f"{feature_range.shape}"
                 )
+        summary = payload.get("fit_summary") or {}
         return cls(
             graphs,
             predictor,
             payload["feature_names"],
             SequencerConfig(**options),
-            payload.get("fit_summary", {}),
+            FitReport.from_dict(summary) if summary else None,
             payload.get("initial_combinations", []),
             Coupling.from_dict(payload.get("coupling", [])),
             feature_range,

@@ -37,7 +37,7 @@ def demonstrated(demo, variables):
 
 
 def test_training_data_has_one_switch_tick_per_left_activation(two_point_bc, two_point_demos):
-    nodes = two_point_bc.fit_summary["nodes"]
+    nodes = two_point_bc.fit_summary.nodes
     assert set(nodes) == {"a/a_go", "a/a_wait", "b/b_go", "b/b_wait"}  # terminals: none
     for key, fit in nodes.items():
         v, mp = key.split("/")
@@ -47,7 +47,7 @@ def test_training_data_has_one_switch_tick_per_left_activation(two_point_bc, two
         assert fit["n_switches"] == len(activations)
         assert fit["n_samples"] == sum(s.stop - s.start for s in activations)
         assert fit["converged"] and fit["switch_recall"] == 1.0
-    assert two_point_bc.fit_summary["n_support_total"] == sum(
+    assert two_point_bc.fit_summary.n_support_total == sum(
         len(c.supports) for c in two_point_bc.classifiers.values()
     )
 
@@ -147,7 +147,7 @@ def test_save_load_round_trip_gives_identical_decisions(two_point_bc, two_point_
     loaded = BCSequencer.load(path)
     assert isinstance(load_sequencer(path), BCSequencer)
     assert loaded.config == two_point_bc.config
-    assert loaded.fit_summary["nodes"] == two_point_bc.fit_summary["nodes"]
+    assert loaded.fit_summary.nodes == two_point_bc.fit_summary.nodes
     for demo in two_point_demos:
         a = two_point_bc.replay(demo.time, demo.features)
         b = loaded.replay(demo.time, demo.features)

@@ -70,7 +70,7 @@ def test_sklearn_peer_reaches_klrs_loss(fitted_klr, train_demos):
     assert len(problems["kernels"]) == len(fitted_klr.predictor.node_keys)
     peer = sklearn_peer(problems)
     assert peer["converged"] and peer["iterations"] >= 1
-    klr_loss = fitted_klr.fit_summary["loss"]
+    klr_loss = fitted_klr.fit_summary.loss
     assert problem_loss(problems, peer["solutions"]) == pytest.approx(klr_loss, rel=1e-5)
     solutions, _ = newton_solve_all(problems)
     assert problem_loss(problems, solutions) == pytest.approx(klr_loss, rel=1e-9)
@@ -96,7 +96,7 @@ def test_padding_features_keeps_the_supports():
     assert not padded[0].features[:, 6:].any()
 
     counts = [
-        ConcurrentSequencer.fit(d, "klr", seed=0, logger=None).fit_summary["n_support_total"]
+        ConcurrentSequencer.fit(d, "klr", seed=0, logger=None).fit_summary.n_support_total
         for d in (demos, padded)
     ]
     assert counts[0] == counts[1]

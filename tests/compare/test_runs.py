@@ -64,7 +64,7 @@ def test_a_synthetic_job_fits_on_the_first_d_demos_and_scores_the_worlds_episode
     )
     counts = two_point.evaluate(seq, n_episodes=8, seed=EPISODE_SEED_OFFSET)
     assert {o: out.outcomes.count(o) for o in counts} == counts
-    assert out.supports == seq.fit_summary["n_support_total"] and out.tick_ms > 0
+    assert out.supports == seq.fit_summary.n_support_total and out.tick_ms > 0
     assert set(out.seconds) == {"fit", "evaluate", "reproduce"}
 
 

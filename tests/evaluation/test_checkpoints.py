@@ -11,7 +11,7 @@ import torch
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.errors import CpmpFileError
 from cpmp.evaluation.checkpoints import load_sequencer
-from cpmp.io import CHECKSUM_KEY, payload_digest, save_checkpoint
+from cpmp.io import CHECKSUM_KEY, payload_digest, save_checkpoint, to_builtin
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 
@@ -139,3 +139,37 @@ def test_a_damaged_format_entry_is_called_damage_not_another_format(payload, tmp
     with pytest.raises(CpmpFileError, match="is a damaged checkpoint") as info:
         load_sequencer(path)
     assert "neither" not in str(info.value)
+
+
+def test_a_checkpoint_with_the_fit_summary_as_a_dict_still_loads(payload, tmp_path, fitted_klr):
+    """Checkpoints written before the fit's report was a record hold it as the fit's dict."""
+    old_summary = to_builtin(fitted_klr.fit_summary.to_dict())  # as the old code saved it
+    old = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    path = save_checkpoint(tmp_path / "dict.pt", {**old, "fit_summary": old_summary})
+    loaded = ConcurrentSequencer.load(path)
+    assert loaded.fit_summary == fitted_klr.fit_summary
+    assert loaded.fit_summary.to_dict() == old_summary
+    # saved again, the same dict comes back
+    again = torch.load(loaded.save(tmp_path / "again.pt"), weights_only=True)
+    assert again["fit_summary"] == old_summary
+    # older still: before the validation, Newton and branch entries; or without a summary
+    older = {
+        k: v
+        for k, v in old_summary.items()
+        if k not in {"val_mae_final", "lr_history", "monitor", "device", "stay_choices"}
+        and not k.startswith("newton_")
+        and k != "entry_scale"
+    }
+    path = save_checkpoint(tmp_path / "older.pt", {**old, "fit_summary": older})
+    report = ConcurrentSequencer.load(path).fit_summary
+    assert (report.loss, report.n_support_total) == (older["loss"], older["n_support_total"])
+    assert report.newton is None and report.stay_choices == () and report.entry_scale == {}
+    none = {k: v for k, v in old.items() if k != "fit_summary"}
+    assert ConcurrentSequencer.load(save_checkpoint(tmp_path / "none.pt", none)).fit_summary is None
+
+
+def test_a_damaged_fit_summary_is_a_file_error(payload, tmp_path):
+    old = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    path = save_checkpoint(tmp_path / "bad.pt", {**old, "fit_summary": {"kind": "klr"}})
+    with pytest.raises(CpmpFileError, match="not a fit report"):
+        ConcurrentSequencer.load(path)

@@ -85,8 +85,6 @@ def test_cpmp_train_logs_held_out_progress_mae_per_epoch(demo_file, tmp_path, ru
 def test_train_sequencer_validates_on_the_given_demonstrations(train_demos, test_demos):
     settings = job_fit_settings(compose_train("logger=none"))
     seq = train_sequencer(train_demos, settings, seed=0, validation=test_demos)
-    assert len(seq.fit_summary["val_mae"]) == 1 and seq.fit_summary["monitor"] == "val/loss"
+    assert len(seq.fit_summary.val_mae) == 1 and seq.fit_summary.monitor == "val/loss"
     plain = train_sequencer(train_demos, settings, seed=0)
-    assert (
-        plain.fit_summary["val_mae"] == [] and plain.fit_summary["loss"] == seq.fit_summary["loss"]
-    )
+    assert plain.fit_summary.val_mae == () and plain.fit_summary.loss == seq.fit_summary.loss

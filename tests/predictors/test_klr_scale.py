@@ -79,8 +79,8 @@ def test_blocks_give_the_fit_of_the_whole_kernel(whole_and_blocked):
     # the same convex problem, summed in another order and solved from another start
     assert torch.allclose(whole.weight, blocked.weight, atol=1e-10, rtol=0)
     assert torch.allclose(whole.bias, blocked.bias, atol=1e-10, rtol=0)
-    assert s_blocked["loss"] == pytest.approx(s_whole["loss"], abs=1e-12)
-    assert s_blocked["newton_converged"] and s_whole["newton_converged"]
+    assert s_blocked.loss == pytest.approx(s_whole.loss, abs=1e-12)
+    assert s_blocked.newton.converged and s_whole.newton.converged
     with torch.no_grad():
         for i, node in enumerate(data):
             # node_logits in blocks and whole, the same bank: rounding only
@@ -209,7 +209,7 @@ def test_bad_scale_options_are_config_errors(name, value):
 
 def test_the_fit_runs_on_the_trainers_accelerator(whole_and_blocked):
     (bank, _, summary), _ = whole_and_blocked
-    assert summary["device"] == "cpu"
+    assert summary.device == "cpu"
     assert {t.device.type for t in [*bank.parameters(), *bank.buffers()]} == {"cpu"}
 
 
@@ -219,7 +219,7 @@ def test_a_pooled_blocked_fit_converges_on_the_pooled_supports(train_demos):
     rule = [len(bank._supports_for(node)) for node in data]
     assert all(c == r if r <= 20 else c <= 12 for c, r in zip(counts, rule, strict=True))
     assert any(r > 20 for r in rule)  # some nodes were pooled
-    assert summary["newton_converged"] and summary["n_support_total"] == sum(counts)
+    assert summary.newton.converged and summary.n_support_total == sum(counts)
 
 
 def test_too_many_rule_points_to_pool_is_a_config_error(train_demos):

@@ -35,23 +35,26 @@ def validated(train_demos, test_demos):
 
 @pytest.fixture(scope="module")
 def klr_count(fit_on_train):
-    return fit_on_train("klr", start_kernel="isotropic").fit_summary["n_support_total"]
+    return fit_on_train("klr", start_kernel="isotropic").fit_summary.n_support_total
 
 
 def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_demos):
     summary = validated.fit_summary
-    path = summary["sparsity_path"]
+    path = summary.predictor_facts["sparsity_path"]
     config = validated.predictor.config
-    assert summary["sparsity_validation"] == "validation"
+    assert summary.predictor_facts["sparsity_validation"] == "validation"
     assert len(path) == len(config.path_levels) * len(config.gamma_scales)
     assert all(p["val_loss"] is not None and p["val_mae"] is not None for p in path)
     best = min(path, key=lambda p: (p["val_mae"], p["val_loss"], p["n_support"]))
     assert [p["chosen"] for p in path] == [p is best for p in path]
-    assert (summary["sparsity_level"], summary["sparsity_gamma_scale"]) == (
+    assert (
+        summary.predictor_facts["sparsity_level"],
+        summary.predictor_facts["sparsity_gamma_scale"],
+    ) == (
         best["level"],
         best["gamma_scale"],
     )
-    assert summary["n_support_graph"] == best["n_support"]
+    assert summary.predictor_facts["n_support_graph"] == best["n_support"]
     # the bank's kernel is the chosen width
     assert float(validated.predictor.gamma) == pytest.approx(config.gamma * best["gamma_scale"])
     for scale in config.gamma_scales:  # each width's path grows with its level
@@ -69,17 +72,19 @@ def _split_counts(counts: dict[str, int]) -> tuple[int, dict[str, int]]:
 def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, klr_count):
     summary = validated.fit_summary
     klr = fit_on_train("klr", start_kernel="isotropic")
-    klr_graph, klr_start = _split_counts(klr.fit_summary["support_counts"])
-    assert summary["n_support_rule"] == klr_graph  # the candidates are the fixed rule's
-    assert summary["n_support_graph"] <= 0.25 * klr_graph  # the largest level
-    assert all(n >= 1 for n in summary["support_counts"].values())
+    klr_graph, klr_start = _split_counts(klr.fit_summary.support_counts)
+    assert (
+        summary.predictor_facts["n_support_rule"] == klr_graph
+    )  # the candidates are the fixed rule's
+    assert summary.predictor_facts["n_support_graph"] <= 0.25 * klr_graph  # the largest level
+    assert all(n >= 1 for n in summary.support_counts.values())
     # the start heads are distilled to a quarter of the fixed rule's supports
-    graph, start = _split_counts(summary["support_counts"])
+    graph, start = _split_counts(summary.support_counts)
     assert start == {k: max(1, int(0.25 * n)) for k, n in klr_start.items()}
-    assert summary["n_support_start"] == sum(start.values())
-    assert summary["n_support_total"] == graph + sum(start.values()) <= 0.25 * klr_count
+    assert summary.predictor_facts["n_support_start"] == sum(start.values())
+    assert summary.n_support_total == graph + sum(start.values()) <= 0.25 * klr_count
     unvalidated = fit_on_train("klr_sparse")
-    assert unvalidated.fit_summary["n_support_graph"] <= 0.25 * klr_graph
+    assert unvalidated.fit_summary.predictor_facts["n_support_graph"] <= 0.25 * klr_graph
 
 
 def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, fit_on_train):
@@ -87,11 +92,11 @@ def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, f
     full = ConcurrentSequencer.fit(
         train_demos, "klr_sparse", seed=0, logger=None, start_share=1.0, start_kernel="isotropic"
     )
-    _, rule_start = _split_counts(full.fit_summary["support_counts"])
-    _, start = _split_counts(distilled.fit_summary["support_counts"])
+    _, rule_start = _split_counts(full.fit_summary.support_counts)
+    _, start = _split_counts(distilled.fit_summary.support_counts)
     assert start == {k: max(1, int(0.25 * n)) for k, n in rule_start.items()}
-    assert "start_distillation" not in full.fit_summary
-    error = distilled.fit_summary["start_distillation"]["max_logit_error"]
+    assert "start_distillation" not in full.fit_summary.predictor_facts
+    error = distilled.fit_summary.predictor_facts["start_distillation"]["max_logit_error"]
     assert 0.0 < error < math.inf  # measured: 0.78 (logits of magnitude up to about 8)
     last = distilled.predictor.describe_path().splitlines()[-1]
     assert last.startswith(f"start heads distilled to {sum(start.values())} supports")
@@ -121,19 +126,25 @@ def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, f
 
 def test_without_start_heads_nothing_is_distilled(fit_on_train):
     summary = fit_on_train("klr_sparse", start_kernel="shared").fit_summary
-    assert summary["n_support_start"] == 0 and "start_distillation" not in summary
+    assert (
+        summary.predictor_facts["n_support_start"] == 0
+        and "start_distillation" not in summary.predictor_facts
+    )
 
 
 def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit_on_train):
     summary = fit_on_train("klr_sparse").fit_summary
-    assert summary["sparsity_validation"] == "held-out activations"
-    path = summary["sparsity_path"]
+    assert summary.predictor_facts["sparsity_validation"] == "held-out activations"
+    path = summary.predictor_facts["sparsity_path"]
     assert all(p["val_loss"] is not None and p["val_mae"] is not None for p in path)
     best = min(path, key=lambda p: (p["val_mae"], p["val_loss"], p["n_support"]))
-    assert best["chosen"] and summary["sparsity_level"] == best["level"]
+    assert best["chosen"] and summary.predictor_facts["sparsity_level"] == best["level"]
     # the chosen level is then fitted on every activation: the level's share of the rule
-    level, n_rule = summary["sparsity_level"], summary["n_support_rule"]
-    assert summary["n_support_graph"] == int(level * n_rule)
+    level, n_rule = (
+        summary.predictor_facts["sparsity_level"],
+        summary.predictor_facts["n_support_rule"],
+    )
+    assert summary.predictor_facts["n_support_graph"] == int(level * n_rule)
 
 
 @pytest.mark.parametrize("validation", [True, False], ids=["validation", "held-out"])
@@ -148,11 +159,13 @@ def test_a_fixed_level_gives_that_count(train_demos, test_demos, validation):
     )
     summary = seq.fit_summary
     n_nodes = len(seq.node_keys)
-    assert summary["n_support_graph"] == max(n_nodes, int(0.1 * summary["n_support_rule"]))
-    assert summary["sparsity_level"] == 0.1
-    levels = sorted({p["level"] for p in summary["sparsity_path"]})
+    assert summary.predictor_facts["n_support_graph"] == max(
+        n_nodes, int(0.1 * summary.predictor_facts["n_support_rule"])
+    )
+    assert summary.predictor_facts["sparsity_level"] == 0.1
+    levels = sorted({p["level"] for p in summary.predictor_facts["sparsity_path"]})
     assert levels == [0.0625, 0.1]  # the path up to the fixed level
-    assert all(p["level"] == 0.1 for p in summary["sparsity_path"] if p["chosen"])
+    assert all(p["level"] == 0.1 for p in summary.predictor_facts["sparsity_path"] if p["chosen"])
 
 
 def test_same_seed_same_model(fit_on_train, train_demos):
@@ -160,17 +173,23 @@ def test_same_seed_same_model(fit_on_train, train_demos):
     one, two = first.predictor.state_dict(), second.predictor.state_dict()
     assert one.keys() == two.keys()
     assert all(torch.equal(one[k], two[k]) for k in one)
-    assert first.fit_summary["sparsity_path"] == second.fit_summary["sparsity_path"]
+    assert (
+        first.fit_summary.predictor_facts["sparsity_path"]
+        == second.fit_summary.predictor_facts["sparsity_path"]
+    )
     other = ConcurrentSequencer.fit(train_demos, "klr_sparse", seed=1, logger=None)
     # another seed holds out other activations
-    assert other.fit_summary["sparsity_path"] != first.fit_summary["sparsity_path"]
+    assert (
+        other.fit_summary.predictor_facts["sparsity_path"]
+        != first.fit_summary.predictor_facts["sparsity_path"]
+    )
 
 
 def test_summary_describes_the_path(validated):
     text = validated.predictor.describe_path()
     assert "<- chosen" in text and "chosen on validation" in text
     # a header, one line per point, the refinement, the start heads' distillation
-    assert text.count("\n") == len(validated.fit_summary["sparsity_path"]) + 2
+    assert text.count("\n") == len(validated.fit_summary.predictor_facts["sparsity_path"]) + 2
     assert "then refined" in text and "start heads distilled" in text
 
 
@@ -233,12 +252,15 @@ def test_refinement_moves_the_supports_and_lowers_the_loss(fit_on_train, validat
     moves them (and rescales the kernels), at a lower training loss."""
     kept = fit_on_train("klr_sparse", refine_iter=0)
     moved = fit_on_train("klr_sparse")
-    assert "refine" not in kept.fit_summary
-    refine = moved.fit_summary["refine"]
+    assert "refine" not in kept.fit_summary.predictor_facts
+    refine = moved.fit_summary.predictor_facts["refine"]
     assert refine["loss"] < refine["loss_start"] and refine["evaluations"] > 0
     # the same path, so the same supports before the refinement
-    assert kept.fit_summary["sparsity_path"] == moved.fit_summary["sparsity_path"]
-    assert kept.fit_summary["support_counts"] == moved.fit_summary["support_counts"]
+    assert (
+        kept.fit_summary.predictor_facts["sparsity_path"]
+        == moved.fit_summary.predictor_facts["sparsity_path"]
+    )
+    assert kept.fit_summary.support_counts == moved.fit_summary.support_counts
     graph = [
         i for i, (_, mp) in enumerate(moved.predictor.node_keys) if not mp.startswith("start:")
     ]

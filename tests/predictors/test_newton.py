@@ -47,10 +47,10 @@ def _rbf(x, s, gamma=4.0):
 
 def test_newton_matches_lbfgs_loss_and_progress(klr_fits, test_demos):
     newton, lbfgs = klr_fits["newton"], klr_fits["lbfgs"]
-    assert newton.fit_summary["solver"] == "newton" and newton.fit_summary["epochs"] == 1
-    assert newton.fit_summary["newton_converged"]
-    assert lbfgs.fit_summary["solver"] == "lbfgs" and "newton_iterations" not in lbfgs.fit_summary
-    loss_n, loss_l = newton.fit_summary["loss"], lbfgs.fit_summary["loss"]
+    assert newton.fit_summary.solver == "newton" and newton.fit_summary.epochs == 1
+    assert newton.fit_summary.newton.converged
+    assert lbfgs.fit_summary.solver == "lbfgs" and lbfgs.fit_summary.newton is None
+    loss_n, loss_l = newton.fit_summary.loss, lbfgs.fit_summary.loss
     assert loss_n == pytest.approx(loss_l, rel=1e-6)
     assert loss_n <= loss_l + 1e-12  # Newton's optimum is at least as low as LBFGS's
     x = np.concatenate([d.features for d in test_demos])
@@ -69,7 +69,7 @@ def test_gradient_vanishes_at_the_newton_solution(klr_fits):
     assert float(grad.abs().max()) < 1e-9
     model.zero_grad()
     # the same check with LBFGS's stopping rule would not be near this small
-    assert seq.fit_summary["newton_grad_max"] <= 1e-10
+    assert seq.fit_summary.newton.grad_max <= 1e-10
 
 
 def test_random_problem_gradient_is_zero_and_weights_respected():
@@ -148,7 +148,7 @@ def test_duplicated_supports_stay_finite(l2):
 def test_float32_predictor_uses_newton(train_demos, klr_fits):
     seq = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None, dtype="float32")
     assert seq.predictor.weight.dtype == torch.float32
-    assert seq.fit_summary["loss"] == pytest.approx(klr_fits["newton"].fit_summary["loss"], 1e-5)
+    assert seq.fit_summary.loss == pytest.approx(klr_fits["newton"].fit_summary.loss, 1e-5)
 
 
 def test_bad_solver_option_stops_a_fit(train_demos):
@@ -159,9 +159,9 @@ def test_bad_solver_option_stops_a_fit(train_demos):
 
 def test_newton_iteration_cap_is_reported(train_demos):
     seq = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None, newton_max_iter=1)
-    assert seq.fit_summary["newton_iterations"] == 1
-    assert not seq.fit_summary["newton_converged"]
-    assert seq.fit_summary["newton_grad_max"] > 1e-10
+    assert seq.fit_summary.newton.iterations == 1
+    assert not seq.fit_summary.newton.converged
+    assert seq.fit_summary.newton.grad_max > 1e-10
 
 
 def _problem(n=300, s=25, seed=3):

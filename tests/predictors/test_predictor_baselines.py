@@ -107,10 +107,10 @@ def test_sklearn_klr_reaches_klr_loss(train_demos, fitted, options):
         klr, sk = fitted["klr"], fitted["sklearn_klr"]
     assert torch.equal(sk.predictor.support, klr.predictor.support)
     assert torch.equal(sk.predictor.feature_weights(), klr.predictor.feature_weights())
-    loss_klr, loss_sk = klr.fit_summary["loss"], sk.fit_summary["loss"]
+    loss_klr, loss_sk = klr.fit_summary.loss, sk.fit_summary.loss
     # both solvers stop at gradient tolerances far below 1e-5 of the loss
     assert abs(loss_sk - loss_klr) <= 1e-5 * abs(loss_klr), (loss_sk, loss_klr)
-    assert sk.fit_summary["newton_grad_max"] < 1e-6
+    assert sk.fit_summary.newton.grad_max < 1e-6
 
 
 # ----------------------------------------------------------------------------- regression_clip

@@ -34,7 +34,7 @@ def test_held_out_progress_mae(fitted, test_demos, kind):
 def test_klr_uses_stated_support_count(fitted, train_demos):
     seq = fitted["klr"]
     scale, minimum = seq.predictor.config.support_scale, seq.predictor.config.min_support
-    counts = seq.fit_summary["support_counts"]
+    counts = seq.fit_summary.support_counts
     for v, graph in seq.graphs.items():
         for mp in graph.nodes:
             expected = sum(
@@ -45,7 +45,7 @@ def test_klr_uses_stated_support_count(fitted, train_demos):
 
 
 def test_klr_full_uses_every_sample(fitted, train_demos):
-    counts = fitted["klr_full"].fit_summary["support_counts"]
+    counts = fitted["klr_full"].fit_summary.support_counts
     n_a_go = sum(s.n_samples for d in train_demos for s in d.segments("a") if s.mp == "a_go")
     assert counts["a/a_go"] == n_a_go
 

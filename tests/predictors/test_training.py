@@ -43,12 +43,12 @@ def test_lightning_csv_logger_records_loss(train_demos, tmp_path, solver):
         train_demos, "klr", seed=0, logger="csv", log_dir=str(tmp_path), solver=solver
     )
     losses = _column(_metrics(tmp_path), "train/loss")
-    assert len(losses) == seq.fit_summary["epochs"] == {"newton": 1, "lbfgs": 3}[solver]
+    assert len(losses) == seq.fit_summary.epochs == {"newton": 1, "lbfgs": 3}[solver]
     # the CSV holds the float64 values the history holds; each epoch logs the loss after its
     # step, so the last one is the fitted model's
-    assert losses == seq.fit_summary["loss_history"]
+    assert losses == list(seq.fit_summary.loss_history)
     assert losses[-1] <= losses[0]
-    assert seq.fit_summary["loss"] == losses[-1]
+    assert seq.fit_summary.loss == losses[-1]
 
 
 def test_newton_reaches_the_convex_optimum(train_demos):
@@ -58,9 +58,9 @@ def test_newton_reaches_the_convex_optimum(train_demos):
     lbfgs = ConcurrentSequencer.fit(
         train_demos, "klr", seed=0, logger=None, solver="lbfgs", max_epochs=8
     )
-    assert newton.fit_summary["loss"] <= lbfgs.fit_summary["loss"] + 1e-12
-    assert again.fit_summary["newton_iterations"] == 0
-    assert again.fit_summary["loss"] == newton.fit_summary["loss"]
+    assert newton.fit_summary.loss <= lbfgs.fit_summary.loss + 1e-12
+    assert again.fit_summary.newton.iterations == 0
+    assert again.fit_summary.loss == newton.fit_summary.loss
 
 
 def test_hyperparameters_are_saved_with_the_logs(train_demos, tmp_path):
@@ -83,19 +83,19 @@ def test_a_fit_logs_and_prints_held_out_progress_mae_per_epoch(
         )  # fmt: skip
     summary = seq.fit_summary
     rows = _metrics(tmp_path)
-    assert _column(rows, "val/mae") == summary["val_mae"]
-    assert _column(rows, "val/loss") == summary["val_loss"]
-    assert _column(rows, "train/loss") == summary["loss_history"]
-    assert len(summary["val_mae"]) == summary["epochs"] == 12
+    assert _column(rows, "val/mae") == list(summary.val_mae)
+    assert _column(rows, "val/loss") == list(summary.val_loss)
+    assert _column(rows, "train/loss") == list(summary.loss_history)
+    assert len(summary.val_mae) == summary.epochs == 12
     lines = [r.getMessage() for r in caplog.records if "val/mae" in r.getMessage()]
     assert [line.split(":")[0] for line in lines] == [f"mlp epoch {e}/12" for e in range(1, 13)]
-    assert f"val/mae {summary['val_mae'][-1]:.4f}" in lines[-1]
+    assert f"val/mae {summary.val_mae[-1]:.4f}" in lines[-1]
     # the last epoch's val/mae is the fitted model's held-out progress MAE, as the offline
     # evaluation measures it (same samples and labels; the two differ only in rounding)
     offline = evaluate_offline(seq, test_demos)["progress"]["mae"]
-    assert summary["val_mae"][-1] == summary["val_mae_final"]
-    assert summary["val_mae_final"] == pytest.approx(offline, rel=1e-9)
-    assert summary["monitor"] == "val/loss"
+    assert summary.val_mae[-1] == summary.val_mae_final
+    assert summary.val_mae_final == pytest.approx(offline, rel=1e-9)
+    assert summary.monitor == "val/loss"
 
 
 def test_validation_changes_nothing_in_a_newton_fit(train_demos, test_demos):
@@ -104,20 +104,20 @@ def test_validation_changes_nothing_in_a_newton_fit(train_demos, test_demos):
         train_demos, "klr", seed=0, logger=None, validation=test_demos
     )
     _assert_same_parameters(plain, validated)
-    assert plain.fit_summary["loss"] == validated.fit_summary["loss"]
-    assert plain.fit_summary["val_mae"] == [] and plain.fit_summary["val_mae_final"] is None
-    assert len(validated.fit_summary["val_mae"]) == 1
+    assert plain.fit_summary.loss == validated.fit_summary.loss
+    assert plain.fit_summary.val_mae == () and plain.fit_summary.val_mae_final is None
+    assert len(validated.fit_summary.val_mae) == 1
     offline = evaluate_offline(validated, test_demos)["progress"]["mae"]
-    assert validated.fit_summary["val_mae"][0] == pytest.approx(offline, rel=1e-9)
+    assert validated.fit_summary.val_mae[0] == pytest.approx(offline, rel=1e-9)
 
 
 def test_val_fraction_holds_out_seeded_demonstrations(train_demos):
     default = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None)
-    assert default.fit_summary["n_demos"] == 6 and default.fit_summary["val_mae"] == []
+    assert default.fit_summary.n_demos == 6 and default.fit_summary.val_mae == ()
     a = ConcurrentSequencer.fit(train_demos, "klr", seed=3, logger=None, val_fraction=0.34)
     b = ConcurrentSequencer.fit(train_demos, "klr", seed=3, logger=None, val_fraction=0.34)
-    assert a.fit_summary["n_demos"] == 4  # round(0.34 * 6) = 2 held out
-    assert len(a.fit_summary["val_mae"]) == 1
+    assert a.fit_summary.n_demos == 4  # round(0.34 * 6) = 2 held out
+    assert len(a.fit_summary.val_mae) == 1
     _assert_same_parameters(a, b)
     split = held_out_split(6, 0.34, 3)
     fitted = ConcurrentSequencer.fit(
@@ -125,7 +125,7 @@ def test_val_fraction_holds_out_seeded_demonstrations(train_demos):
         validation=[train_demos[i] for i in split.val],
     )  # fmt: skip
     _assert_same_parameters(a, fitted)
-    assert fitted.fit_summary["val_mae"] == a.fit_summary["val_mae"]
+    assert fitted.fit_summary.val_mae == a.fit_summary.val_mae
 
 
 def test_held_out_split():
@@ -185,18 +185,18 @@ def test_early_stopping_ends_an_easy_fit_before_its_budget(train_demos, tmp_path
         lr_decay_patience=decay,
     )  # fmt: skip
     summary = seq.fit_summary
-    assert summary["stopped_early"] and summary["max_epochs"] == 5000
-    assert summary["monitor"] == "train/loss"
-    history = summary["loss_history"]
-    assert patience < summary["epochs"] == len(history) < 5000
+    assert summary.stopped_early and summary.max_epochs == 5000
+    assert summary.monitor == "train/loss"
+    history = summary.loss_history
+    assert patience < summary.epochs == len(history) < 5000
     # Lightning's EarlyStopping stopped where its rule says, and the scheduler lowered the
     # rate (x 0.1) where its rule says
-    assert _stop_epoch(history, delta, patience) == summary["epochs"]
+    assert _stop_epoch(history, delta, patience) == summary.epochs
     drops = _decay_epochs(history, delta, decay)
-    assert drops and _rate_drops(summary["lr_history"]) == [e for e in drops if e < len(history)]
+    assert drops and _rate_drops(summary.lr_history) == [e for e in drops if e < len(history)]
     rows = _metrics(tmp_path)
-    assert _column(rows, "train/loss") == history
-    assert _column(rows, "lr") == summary["lr_history"]  # Lightning's LearningRateMonitor
+    assert _column(rows, "train/loss") == list(history)
+    assert _column(rows, "lr") == list(summary.lr_history)  # Lightning's LearningRateMonitor
 
 
 def test_early_stopping_follows_the_validation_loss(train_demos, test_demos):
@@ -207,13 +207,13 @@ def test_early_stopping_follows_the_validation_loss(train_demos, test_demos):
         lr_decay_patience=decay,
     )  # fmt: skip
     summary = seq.fit_summary
-    epochs = summary["epochs"]
-    assert summary["monitor"] == "val/loss" and summary["stopped_early"]
-    assert _stop_epoch(summary["val_loss"], delta, patience) == epochs
-    drops = [e for e in _decay_epochs(summary["val_loss"], delta, decay) if e < epochs]
-    assert drops and _rate_drops(summary["lr_history"]) == drops
+    epochs = summary.epochs
+    assert summary.monitor == "val/loss" and summary.stopped_early
+    assert _stop_epoch(summary.val_loss, delta, patience) == epochs
+    drops = [e for e in _decay_epochs(summary.val_loss, delta, decay) if e < epochs]
+    assert drops and _rate_drops(summary.lr_history) == drops
     # the training loss would have lowered the rate at other epochs
-    assert drops != [e for e in _decay_epochs(summary["loss_history"], delta, decay) if e < epochs]
+    assert drops != [e for e in _decay_epochs(summary.loss_history, delta, decay) if e < epochs]
 
 
 def test_early_stopping_changes_nothing_but_the_epoch_count(train_demos):
@@ -221,14 +221,14 @@ def test_early_stopping_changes_nothing_but_the_epoch_count(train_demos):
     options = {"seed": 2, "logger": None, "early_stopping_min_delta": 3e-3}
     options |= {"early_stopping_patience": 5, "lr_decay_patience": 6}
     stopped = ConcurrentSequencer.fit(train_demos, "mlp", epochs=5000, **options)
-    epochs = stopped.fit_summary["epochs"]
-    assert stopped.fit_summary["stopped_early"]
-    assert len(set(stopped.fit_summary["lr_history"])) == 1
+    epochs = stopped.fit_summary.epochs
+    assert stopped.fit_summary.stopped_early
+    assert len(set(stopped.fit_summary.lr_history)) == 1
     plain = ConcurrentSequencer.fit(
         train_demos, "mlp", epochs=epochs, early_stopping=False, **options
     )
-    assert not plain.fit_summary["stopped_early"] and plain.fit_summary["epochs"] == epochs
-    assert plain.fit_summary["loss_history"] == stopped.fit_summary["loss_history"]
+    assert not plain.fit_summary.stopped_early and plain.fit_summary.epochs == epochs
+    assert plain.fit_summary.loss_history == stopped.fit_summary.loss_history
     _assert_same_parameters(plain, stopped)
 
 
@@ -237,8 +237,8 @@ def test_a_plateau_lowers_the_rate_and_the_fit_goes_on(train_demos):
     options |= {"early_stopping_patience": 15, "lr_decay_patience": 5, "logger": None}
     fit = functools.partial(ConcurrentSequencer.fit, train_demos, "mlp", **options)
     a, b = fit().fit_summary, fit(lr_decay_factor=0.5).fit_summary
-    tenth, half = a["loss_history"], b["loss_history"]
-    lr_tenth, lr_half = a["lr_history"], b["lr_history"]
+    tenth, half = a.loss_history, b.loss_history
+    lr_tenth, lr_half = a.lr_history, b.lr_history
     first = _rate_drops(lr_tenth)[0]
     # the same steps up to the first plateau, then training goes on at another rate
     assert _rate_drops(lr_half)[0] == first and tenth[:first] == half[:first]
@@ -253,19 +253,19 @@ def test_early_stopping_waits_while_the_loss_improves(train_demos):
         train_demos, "mlp", seed=0, logger=None, epochs=40, lr=0.003,
         early_stopping_min_delta=delta, early_stopping_patience=2, lr_decay_patience=1,
     )  # fmt: skip
-    history = seq.fit_summary["loss_history"]
+    history = seq.fit_summary.loss_history
     # with a small rate the first Adam steps of a fresh MLP each lower the loss by more than
     # min_delta: neither rule fires
     assert all(b + delta < a for a, b in itertools.pairwise(history))
-    assert seq.fit_summary["epochs"] == 40 and not seq.fit_summary["stopped_early"]
+    assert seq.fit_summary.epochs == 40 and not seq.fit_summary.stopped_early
 
 
 def test_convex_fits_ignore_early_stopping(train_demos):
     seq = ConcurrentSequencer.fit(
         train_demos, "klr", seed=0, logger=None, solver="lbfgs", early_stopping_patience=1
     )
-    assert seq.fit_summary["epochs"] == TrainerConfig().lbfgs_epochs
-    assert not seq.fit_summary["stopped_early"]
+    assert seq.fit_summary.epochs == TrainerConfig().lbfgs_epochs
+    assert not seq.fit_summary.stopped_early
 
 
 # ---------------------------------------------------------------------------- mini-batches
@@ -302,9 +302,9 @@ def test_mini_batches_train_an_adam_predictor(train_demos, tmp_path):
     )
     again = ConcurrentSequencer.fit(train_demos, "mlp", logger=None, batch_size=64, **options)
     _assert_same_parameters(mini, again)  # the shuffles come from the seed
-    assert mini.fit_summary["epochs"] == 5
+    assert mini.fit_summary.epochs == 5
     # several Adam steps per epoch get further than one full-batch step per epoch
-    assert mini.fit_summary["loss"] < full.fit_summary["loss"]
+    assert mini.fit_summary.loss < full.fit_summary.loss
     steps = {int(r["step"]) for r in _metrics(tmp_path) if r.get("train/loss")}
     largest = max(int(n.x.shape[0]) for n in _node_data(train_demos))
     assert max(steps) + 1 == 5 * math.ceil(largest / 64)
@@ -340,7 +340,7 @@ def test_a_fit_on_auto_accelerator_emits_no_warning(
             validation=test_demos, **options,
         )  # fmt: skip
     assert [str(w.message) for w in caught] == []
-    assert seq.fit_summary["device"] == "cpu"
+    assert seq.fit_summary.device == "cpu"
     assert all(p.device.type == "cpu" for p in seq.predictor.parameters())
 
 

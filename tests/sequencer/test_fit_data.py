@@ -27,7 +27,7 @@ def test_subsample_keeps_every_kth_and_last(train_demos, test_demos):
     sub = ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None, subsample=4)
     # same supports (placed on the full trajectories), fewer loss samples, a fit as good:
     # held-out MAE 0.031 with all samples; 0.06 is the bound of tests/test_predictors.py
-    assert sub.fit_summary["support_counts"] == full.fit_summary["support_counts"]
+    assert sub.fit_summary.support_counts == full.fit_summary.support_counts
     assert progress_errors(activation_progress(sub, test_demos))["mae"] < 0.06
     with pytest.raises(ConfigError, match="subsample"):
         ConcurrentSequencer.fit(train_demos, "klr", subsample=0)
@@ -48,12 +48,11 @@ def test_still_node_is_reported_in_the_fit_summary(train_demos, caplog):
     ]
     with caplog.at_level(logging.WARNING, logger="cpmp.sequencer.sequencer"):
         seq = ConcurrentSequencer.fit(still, "klr", seed=0, logger=None, variables=["c"])
-    warnings = seq.fit_summary["warnings"]
+    warnings = seq.fit_summary.warnings
     assert len(warnings) == 1 and warnings[0].startswith("node c/wait:")
     assert "do not change" in caplog.text
     assert (
-        ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None).fit_summary["warnings"]
-        == []
+        ConcurrentSequencer.fit(train_demos, "klr", seed=0, logger=None).fit_summary.warnings == ()
     )
 
 
@@ -66,9 +65,9 @@ def test_one_sample_label_glitch_is_reported(train_demos):
     labels["a"] = a.astype(str)
     glitched = Demonstration(demo.time, demo.features, labels, demo.feature_names, demo.name)
     seq = ConcurrentSequencer.fit([glitched, *train_demos[1:]], "klr", seed=0, logger=None)
-    warnings = [w for w in seq.fit_summary["warnings"] if "a_glitch" in w]
+    warnings = [w for w in seq.fit_summary.warnings if "a_glitch" in w]
     assert warnings[0].startswith("node a/a_glitch: its activation in demo_0 lasts 1 sample(s)")
-    assert not [w for w in seq.fit_summary["warnings"] if "a_glitch" not in w]
+    assert not [w for w in seq.fit_summary.warnings if "a_glitch" not in w]
 
 
 def test_node_training_data_follows_the_predictor_node_order(fitted_klr, train_demos):
@@ -146,7 +145,7 @@ def test_fitting_twice_repeats_the_work_and_the_result(noisy_demos, monkeypatch)
     assert calls[:n] == calls[n:]
     a, b = first.predictor.state_dict(), second.predictor.state_dict()
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
-    assert first.fit_summary["support_counts"] == second.fit_summary["support_counts"]
+    assert first.fit_summary.support_counts == second.fit_summary.support_counts
 
 
 def test_initial_combinations_are_distinct_and_in_order(train_demos):

@@ -73,7 +73,7 @@ def test_fit_repairs_a_glitch_by_default_and_keeps_it_on_request(train_demos):
     labels[-5] = "a_go"
     demos[1].labels["a"] = labels
     seq = ConcurrentSequencer.fit(demos, seed=0, logger=None)
-    (glitch,) = seq.fit_summary["label_glitches"]
+    (glitch,) = seq.fit_summary.label_glitches
     assert (glitch["demo"], glitch["variable"], glitch["glitch"], glitch["around"]) == (
         demos[1].name,
         "a",
@@ -85,6 +85,6 @@ def test_fit_repairs_a_glitch_by_default_and_keeps_it_on_request(train_demos):
     clean = ConcurrentSequencer.fit(train_demos, seed=0, logger=None)
     assert seq.graphs["a"].edges == clean.graphs["a"].edges
     kept = ConcurrentSequencer.fit(demos, seed=0, logger=None, repair_glitches=False)
-    assert kept.fit_summary["label_glitches"] == []
+    assert kept.fit_summary.label_glitches == ()
     assert kept.graphs["a"].successors("a_back") == ["a_go"]
-    assert any("a_go" in text for text in kept.fit_summary["warnings"])
+    assert any("a_go" in text for text in kept.fit_summary.warnings)

@@ -29,7 +29,7 @@ def test_a_typo_in_one_demonstration_is_a_fit_warning_naming_both(train_demos):
     typo = Demonstration(demo.time, demo.features, labels, demo.feature_names, demo.name)
     demos = [*train_demos[:victim], typo, *train_demos[victim + 1 :]]
     seq = ConcurrentSequencer.fit(demos, "klr", seed=0, logger=None)
-    warnings = [w for w in seq.fit_summary["warnings"] if "a_bakc" in w]
+    warnings = [w for w in seq.fit_summary.warnings if "a_bakc" in w]
     assert len(warnings) == 1
     assert warnings[0].startswith(f"node a/a_bakc: its one activation (in {demo.name}")
     assert "named like a/a_back" in warnings[0] and "relabel it 'a_back'" in warnings[0]
@@ -37,4 +37,4 @@ def test_a_typo_in_one_demonstration_is_a_fit_warning_naming_both(train_demos):
 
 def test_distinct_names_of_single_activations_are_not_typos(fitted_klr):
     """The synthetic task's MPs (a_go, a_wait, a_back, ...) are far apart: no warning."""
-    assert fitted_klr.fit_summary["warnings"] == []
+    assert fitted_klr.fit_summary.warnings == ()
