@@ -79,6 +79,12 @@ MARK_SIZE = 5.0
 OVERVIEW_NAME = "p(switch), every variable"
 """Name of the grid of every variable's p(switch) plot (small multiples, no clicking)."""
 
+LANE_SHARE = 0.8
+"""Share of the middle column per state lane (one per control variable), three at least:
+the lanes' view next to the overview (2 per row of three), the feature tabs (3) and the
+probability tabs (4). Six variables (the simulator) then show every lane unscrolled in a
+1080 px tall viewer; with a fixed share of 3 they showed four."""
+
 EVENT_WIDTH = 78
 """Characters per line of the events log, its time included (:func:`event_lines`). rerun 0.41
 shows the first line of a multi-line text log entry only, so a long event is logged as
@@ -784,7 +790,9 @@ def blueprint(
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
     Scene above the ``status`` document (and, with ``start``, the start decision and its 2D
-    plot in tabs beside it) | the active MPs as state lanes above a tab per feature panel (one
+    plot in tabs beside it) | the active MPs as state lanes (:data:`LANE_SHARE` of the
+    column's height per variable, so that every lane shows unscrolled) above a tab per feature
+    panel (one
     per group of ``feature_groups``: a plot the column's width, whose legend covers little of
     it; six small plots side by side had their legends over a third of their curves) above a
     tab per control variable of ``series`` with its φ (= exit), entry (1 - φ) and transition
@@ -894,7 +902,7 @@ def blueprint(
             else lower_left
         )
         parts: list[Any] = [lanes]
-        shares = [3.0]
+        shares = [max(3.0, LANE_SHARE * len(series))]
         if overview:
             columns = min(len(overview), 3)
             parts.append(rrb.Grid(*overview, grid_columns=columns, name=OVERVIEW_NAME))

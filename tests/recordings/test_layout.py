@@ -9,6 +9,9 @@ import pytest
 from cpmp.errors import ConfigError, DataError, UnknownMPError
 from cpmp.recordings.columns import ColumnBuffer
 from cpmp.recordings.layout import (
+    LANE_SHARE,
+    VariableSeries,
+    blueprint,
     check_feature_groups,
     check_mp,
     entity,
@@ -159,3 +162,21 @@ def test_column_buffer_makes_each_layout_once_and_sends_each_entity() -> None:
     assert stream.sent == [(path, 3) for path in paths] + [("world/box", 1)]
     columns.send()  # the buffers were emptied
     assert len(stream.sent) == len(paths) + 1
+
+
+def _middle_shares(n_variables: int) -> list[float]:
+    """The middle column's row shares of a blueprint for ``n_variables`` variables."""
+    series = {f"v{i}": VariableSeries(["a", "b"], ["b"]) for i in range(n_variables)}
+    bp = blueprint({"x": ["x0"]}, series, scene=True)
+    columns = bp.root_container.contents
+    return list(columns[1].row_shares)
+
+
+@pytest.mark.parametrize("n", [1, 2, 6, 10])
+def test_the_state_lanes_grow_with_the_variables(n: int) -> None:
+    """Every lane a share of the middle column (at least the three a lane or two always had),
+    so the simulator's six variables show without scrolling; the other rows keep theirs."""
+    shares = _middle_shares(n)
+    assert shares[0] == pytest.approx(max(3.0, LANE_SHARE * n))
+    rows = -(-n // 3)  # the overview grid: three plots a row
+    assert shares[1:] == pytest.approx([2.0 * rows, 3.0, 4.0])
