@@ -183,7 +183,20 @@ def _about_scale(r: Mapping[str, Any]) -> str:
         f"{s['held_out']} demonstrations and C of {s['episodes']} closed-loop episodes; then the "
         "growth exponents of fit time and memory against the training samples. The machine "
         "was shared with other jobs (`machine` in the JSON has its load averages), so the "
-        "times are pessimistic."
+        "times are pessimistic." + _about_lerobot(r)
+    )
+
+
+def _about_lerobot(r: Mapping[str, Any]) -> str:
+    """The scale section's sentence on its ``lerobot`` row (empty for a JSON without one)."""
+    row = r.get("lerobot")
+    if not row:
+        return ""
+    return (
+        f" The last row: {row['D']} demonstrations of {row['world']} written as a LeRobot v3 "
+        "dataset (float32 `observation.state`, per-frame label columns), imported by "
+        "`cpmp-import` and fitted the same way; the import's time and peak memory (its own "
+        "process) follow the table."
     )
 
 

@@ -12,6 +12,19 @@ included; ``base_rss_gb`` the same before the fit), the training samples, the su
 demonstrations of seed ``HELD_OUT_SEED + s`` and the closed-loop completions C of ``episodes``
 episodes of that seed. A process per size keeps one fit's memory out of the next one's peak.
 
+The ``lerobot`` leg (``--lerobot N``, default 400, 0 skips it) goes through a user's import:
+:data:`LEROBOT_WORLD`'s ``N`` demonstrations of seed ``s`` are written as a LeRobot v3 dataset
+(:func:`cpmp.benchmarks.lerobot_data.write_demonstrations`, ``write_s``, ``frames`` and
+``files`` data files) with its mapping, ``cpmp-import`` (its console-script function,
+:data:`IMPORT_ENTRY_POINT`) imports it in a process of its own (``import_s``: that process's
+wall time, interpreter start and Hydra included; ``import_rss_gb``: its peak RSS), and the
+imported file is fitted and measured in a further process exactly as a size above (same
+held-out demonstrations and episodes). The mapping keeps the world's feature, variable and MP
+names, so the world runs the fitted sequencer closed loop and C is measured; the features pass
+through LeRobot's float32 ``observation.state``. The row is the JSON's ``lerobot`` (absent
+when skipped) and is not part of the exponents. With ``--pythonpath`` the dataset is still
+written by this cpmp; the import and the fit are the other checkout's.
+
 Then per world the growth exponents: the least-squares slope of ``log fit_s`` and of
 ``log peak_rss_gb`` against ``log samples`` over all sizes, and between the last two sizes
 (``fit_last``, ``rss_last``); and issue #34's targets where their sizes were run (see
@@ -31,6 +44,8 @@ import math
 import os
 import subprocess
 import sys
+import tempfile
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -45,6 +60,14 @@ SIZES = (12, 48, 192, 768)
 """The training sizes D measured by default."""
 HELD_OUT_SEED = 1000
 """Held-out demonstrations and episodes of seed ``s`` are drawn with ``HELD_OUT_SEED + s``."""
+LEROBOT_WORLD = "two_point"
+"""The world whose demonstrations the ``lerobot`` leg writes and imports (issue #34)."""
+LEROBOT_EPISODES = 400
+"""The ``lerobot`` leg's default number of episodes (issue #34)."""
+LEROBOT_EPISODES_PER_FILE = 50
+"""Episodes per data file of the written dataset (LeRobot packs many episodes into a file)."""
+IMPORT_ENTRY_POINT = "cpmp.cli.main:import_main"
+"""``cpmp-import``'s console-script target (``pyproject.toml``'s ``[project.scripts]``)."""
 TARGETS = {
     "fit_s": 60.0,
     "peak_rss_gb": 2.0,
@@ -68,7 +91,11 @@ def rss_gb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
 
 world = make_world(args["world"])
-train = world.demonstrations(args["demos"], args["seed"])
+if args.get("demos_file"):
+    from cpmp.data import load_demonstrations
+    train = load_demonstrations(args["demos_file"])
+else:
+    train = world.demonstrations(args["demos"], args["seed"])
 test = world.demonstrations(args["held_out"], args["held_out_seed"])
 base = rss_gb()
 start = time.perf_counter()
@@ -76,14 +103,17 @@ seq = ConcurrentSequencer.fit(train, seed=args["seed"], logger=None)
 fit_s = time.perf_counter() - start
 peak = rss_gb()
 mae = float(progress_errors(activation_progress(seq, test))["mae"])
+summary = seq.fit_summary  # a FitReport; a dict in a checkout before it (--pythonpath)
+fact = summary.get if isinstance(summary, dict) else lambda key: getattr(summary, key)
 run = evaluate(world, seq, args["episodes"], args["held_out_seed"])
 print("RESULT " + json.dumps({
+    "demos": len(train),
     "samples": int(sum(d.n_samples for d in train)),
     "fit_s": fit_s,
-    "predictor_s": float(seq.fit_summary.seconds),
+    "predictor_s": float(fact("seconds")),
     "peak_rss_gb": peak,
     "base_rss_gb": base,
-    "supports": int(seq.fit_summary.n_support_total),
+    "supports": int(fact("n_support_total")),
     "mae": mae,
     "complete": int(run.complete),
     "episodes": args["episodes"],
@@ -91,6 +121,22 @@ print("RESULT " + json.dumps({
 }))
 """
 """The measuring process's program (public API only, so that another checkout runs it)."""
+
+_IMPORT = r"""
+import json, resource, sys
+module, function = sys.argv[1].split(":")
+sys.argv = ["cpmp-import", *sys.argv[2:]]
+status = 0
+try:
+    getattr(__import__(module, fromlist=[function]), function)()
+except SystemExit as stop:
+    status = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
+rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
+print("RESULT " + json.dumps({"status": status, "rss_gb": rss}), flush=True)
+sys.exit(status)
+"""
+"""The import process's program: ``cpmp-import`` as its console script runs it (the entry
+point's function on ``sys.argv``), then the process's exit status and peak RSS [GB]."""
 
 
 @dataclass
@@ -103,8 +149,9 @@ class ScaleSettings:
         seed: the training demonstrations' and the fit's seed.
         held_out: held-out demonstrations for the progress MAE.
         episodes: closed-loop episodes for C.
-        timeout: seconds a size's process may run.
+        timeout: seconds a size's process may run (and the ``lerobot`` leg's import).
         pythonpath: another checkout's root to measure (``None``: this cpmp).
+        lerobot: episodes of the ``lerobot`` leg (0: no such leg).
     """
 
     worlds: tuple[str, ...] = WORLDS
@@ -114,6 +161,7 @@ class ScaleSettings:
     episodes: int = 20
     timeout: float = 1800.0
     pythonpath: str | None = None
+    lerobot: int = LEROBOT_EPISODES
 
     def __post_init__(self) -> None:
         from cpmp.worlds.registry import world_names
@@ -129,6 +177,8 @@ class ScaleSettings:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)!r}")
         if any(int(d) < 1 for d in self.sizes) or list(self.sizes) != sorted(set(self.sizes)):
             raise ConfigError(f"sizes must be increasing counts >= 1, got {list(self.sizes)}")
+        if int(self.lerobot) < 0:
+            raise ConfigError(f"lerobot must be >= 0 episodes (0: skip), got {self.lerobot!r}")
         if not self.timeout > 0:
             raise ConfigError(f"timeout must be > 0 seconds, got {self.timeout!r}")
         if self.pythonpath is not None and not (Path(self.pythonpath) / "cpmp").is_dir():
@@ -136,25 +186,47 @@ class ScaleSettings:
 
     @classmethod
     def quick(cls, **options: Any) -> ScaleSettings:
-        """A small run for the tests: two_point at 4 and 8 demos, 2 held out, 2 episodes."""
+        """A small run for the tests: two_point at 4 and 8 demos, 2 held out, 2 episodes.
+
+        The ``lerobot`` leg runs at 3 episodes.
+        """
         values: dict[str, Any] = {
             "worlds": ("two_point",),
             "sizes": (4, 8),
             "held_out": 2,
             "episodes": 2,
             "timeout": 600.0,
+            "lerobot": 3,
         }
         values.update(options)
         return cls(**values)
 
 
-def measure_size(world: str, demos: int, settings: ScaleSettings) -> dict[str, Any]:
+def _environment(settings: ScaleSettings) -> dict[str, str]:
+    """The measuring processes' environment (``PYTHONPATH`` set for ``--pythonpath``)."""
+    env = dict(os.environ)
+    if settings.pythonpath is not None:
+        env["PYTHONPATH"] = str(Path(settings.pythonpath).resolve())
+    return env
+
+
+def _failure(done: subprocess.CompletedProcess[str]) -> str:
+    """A failed process's exit status and last lines of output."""
+    tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
+    return f"exit status {done.returncode}: {' / '.join(tail)}"
+
+
+def measure_size(
+    world: str, demos: int, settings: ScaleSettings, demos_file: str | None = None
+) -> dict[str, Any]:
     """One size of one world, measured in a fresh process (see the module docstring).
 
     Args:
         world: the world's name.
         demos: training demonstrations D.
         settings: the benchmark's settings.
+        demos_file: fit the demonstrations of this cpmp file (all of them) instead of drawing
+            ``demos`` of ``world``; the held-out demonstrations and episodes are the world's.
 
     Returns:
         The row: ``world``, ``D`` and the measures, or ``error`` when the process failed.
@@ -166,10 +238,9 @@ def measure_size(world: str, demos: int, settings: ScaleSettings) -> dict[str, A
         "held_out": settings.held_out,
         "held_out_seed": HELD_OUT_SEED + settings.seed,
         "episodes": settings.episodes,
+        "demos_file": demos_file,
     }
-    env = dict(os.environ)
-    if settings.pythonpath is not None:
-        env["PYTHONPATH"] = str(Path(settings.pythonpath).resolve())
+    env = _environment(settings)
     row: dict[str, Any] = {"world": world, "D": demos}
     try:
         done = subprocess.run(
@@ -185,9 +256,103 @@ def measure_size(world: str, demos: int, settings: ScaleSettings) -> dict[str, A
         return {**row, "error": f"ran past the timeout of {settings.timeout:g} s"}
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith("RESULT ")]
     if done.returncode != 0 or not lines:
-        tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
-        return {**row, "error": f"exit status {done.returncode}: {' / '.join(tail)}"}
+        return {**row, "error": _failure(done)}
     return {**row, **json.loads(lines[-1].removeprefix("RESULT "))}
+
+
+def run_import(
+    mapping: Path, dataset: Path, output: Path, run_dir: Path, settings: ScaleSettings
+) -> dict[str, Any]:
+    """``cpmp-import mapping=... input=... output=...`` in a process of its own.
+
+    The process calls :data:`IMPORT_ENTRY_POINT` on the command line, as the installed
+    ``cpmp-import`` script does (Hydra's run directory is ``run_dir``).
+
+    Args:
+        mapping: the mapping's YAML file.
+        dataset: the LeRobot dataset's folder.
+        output: the cpmp demonstration file to write.
+        run_dir: the import's run directory (its ``summary.txt``, Hydra's files).
+        settings: the benchmark's settings (``timeout``, ``pythonpath``).
+
+    Returns:
+        ``import_s`` (the process's wall time [s]) and ``import_rss_gb`` (its peak RSS [GB]),
+        or ``error`` when it failed, ran past the timeout or wrote no file.
+    """
+    command = [
+        sys.executable,
+        "-c",
+        _IMPORT,
+        IMPORT_ENTRY_POINT,
+        f"mapping={mapping}",
+        f"input={dataset}",
+        f"output={output}",
+        f"hydra.run.dir={run_dir}",
+    ]
+    start = time.perf_counter()
+    try:
+        done = subprocess.run(
+            command,
+            capture_output=True,
+            text=True,
+            timeout=settings.timeout,
+            env=_environment(settings),
+            cwd=settings.pythonpath or None,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return {"error": f"cpmp-import ran past the timeout of {settings.timeout:g} s"}
+    seconds = time.perf_counter() - start
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith("RESULT ")]
+    if done.returncode != 0 or not lines or not output.is_file():
+        return {"error": f"cpmp-import: {_failure(done)}"}
+    measured = json.loads(lines[-1].removeprefix("RESULT "))
+    return {"import_s": seconds, "import_rss_gb": measured["rss_gb"]}
+
+
+def measure_lerobot(settings: ScaleSettings) -> dict[str, Any]:
+    """The ``lerobot`` leg (see the module docstring): write, ``cpmp-import``, fit, measure.
+
+    Everything is written to a temporary folder, removed afterwards.
+
+    Args:
+        settings: the benchmark's settings (``lerobot`` episodes, at least 1).
+
+    Returns:
+        The row: ``world``, ``D``, ``source`` (``lerobot``), ``write_s`` [s], ``frames``,
+        ``files``, ``import_s`` [s], ``import_rss_gb`` [GB] and the measures of
+        :func:`measure_size`, or ``error`` when a step failed.
+    """
+    row: dict[str, Any] = {"world": LEROBOT_WORLD, "D": settings.lerobot, "source": "lerobot"}
+    try:
+        from cpmp.benchmarks.lerobot_data import (  # lazy: pyarrow, the import extra
+            import_mapping,
+            write_demonstrations,
+            write_import_mapping,
+        )
+    except ImportError as err:
+        return {**row, "error": f"cannot write LeRobot data ({err}); pip install cpmp[import]"}
+    from cpmp.worlds.registry import make_world  # lazy: torch, only for this leg
+
+    demos = make_world(LEROBOT_WORLD).demonstrations(settings.lerobot, settings.seed)
+    with tempfile.TemporaryDirectory(prefix="cpmp-scale-lerobot-") as tmp:
+        folder = Path(tmp)
+        start = time.perf_counter()
+        dataset = write_demonstrations(
+            folder / "dataset", demos, episodes_per_file=LEROBOT_EPISODES_PER_FILE
+        )
+        row["write_s"] = time.perf_counter() - start
+        row["frames"] = int(sum(d.n_samples for d in demos))
+        row["files"] = len(list(dataset.glob("data/*/*.parquet")))
+        mapping = write_import_mapping(folder / "mapping.yaml", import_mapping(demos))
+        del demos
+        output = folder / "demos.hdf5"
+        imported = run_import(mapping, dataset, output, folder / "import_run", settings)
+        row.update(imported)
+        if "error" in imported:
+            return row
+        measured = measure_size(LEROBOT_WORLD, settings.lerobot, settings, str(output))
+    return {**row, **{k: v for k, v in measured.items() if k not in row or k == "error"}}
 
 
 def growth_exponent(samples: Sequence[float], values: Sequence[float]) -> float | None:
@@ -273,8 +438,9 @@ def run_scale_benchmark(
         log: receives one progress line per size.
 
     Returns:
-        ``settings``, ``machine`` (CPUs, load averages before and after), ``rows`` and
-        ``summary`` (per world, :func:`summarise`).
+        ``settings``, ``machine`` (CPUs, load averages before and after), ``rows``,
+        ``summary`` (per world, :func:`summarise`) and, unless ``settings.lerobot`` is 0,
+        ``lerobot`` (:func:`measure_lerobot`'s row).
     """
     load_before = os.getloadavg()
     rows = []
@@ -283,6 +449,10 @@ def run_scale_benchmark(
             row = measure_size(world, demos, settings)
             rows.append(row)
             log(_line(row))
+    lerobot = None
+    if settings.lerobot > 0:
+        lerobot = measure_lerobot(settings)
+        log(_line(lerobot))
     return {
         "settings": asdict(settings),
         "targets": TARGETS,
@@ -293,32 +463,42 @@ def run_scale_benchmark(
         },
         "rows": rows,
         "summary": summarise(rows),
+        **({"lerobot": lerobot} if lerobot is not None else {}),
     }
+
+
+def _label(row: dict[str, Any]) -> str:
+    """A row's world, and how its demonstrations came (``via LeRobot v3``)."""
+    return row["world"] + (" via LeRobot v3" if row.get("source") == "lerobot" else "")
 
 
 def _line(row: dict[str, Any]) -> str:
     """One row as a progress line."""
     if "error" in row:
-        return f"{row['world']} D={row['D']}: {row['error']}"
+        return f"{_label(row)} D={row['D']}: {row['error']}"
     return (
-        f"{row['world']} D={row['D']}: {row['samples']} samples, fit {row['fit_s']:.1f} s, "
+        f"{_label(row)} D={row['D']}: {row['samples']} samples, fit {row['fit_s']:.1f} s, "
         f"peak RSS {row['peak_rss_gb']:.2f} GB, {row['supports']} supports, MAE "
         f"{row['mae']:.4f}, C {row['complete']}/{row['episodes']}"
     )
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """The rows as a Markdown table and the exponents per world, then the JSON's path line."""
+    """The rows as a Markdown table, the exponents per world, the ``lerobot`` leg's import.
+
+    The ``lerobot`` row (when the result has one) is the table's last.
+    """
     lines = [
         "| world | D | samples | fit [s] | peak RSS [GB] | supports | held-out MAE | C |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    for r in result["rows"]:
+    lerobot = result.get("lerobot")
+    for r in [*result["rows"], *([lerobot] if lerobot else [])]:
         if "error" in r:
-            lines.append(f"| {r['world']} | {r['D']} | - | {r['error']} | | | | |")
+            lines.append(f"| {_label(r)} | {r['D']} | - | {r['error']} | | | | |")
             continue
         lines.append(
-            f"| {r['world']} | {r['D']} | {r['samples']:,} | {r['fit_s']:.1f} | "
+            f"| {_label(r)} | {r['D']} | {r['samples']:,} | {r['fit_s']:.1f} | "
             f"{r['peak_rss_gb']:.2f} | {r['supports']:,} | {r['mae']:.4f} | "
             f"{r['complete']}/{r['episodes']} |"
         )
@@ -327,6 +507,13 @@ def markdown(result: dict[str, Any]) -> str:
         parts = [f"{k} {v:.2f}" for k, v in e.items() if v is not None]
         lines.append("")
         lines.append(f"{world}: growth exponents against samples: {', '.join(parts)}")
+    if lerobot and "import_s" in lerobot:
+        lines.append("")
+        lines.append(
+            f"{_label(lerobot)}: {lerobot['D']} episodes ({lerobot['frames']:,} frames, "
+            f"{lerobot['files']} data files) written in {lerobot['write_s']:.1f} s; cpmp-import "
+            f"{lerobot['import_s']:.1f} s, peak RSS {lerobot['import_rss_gb']:.2f} GB"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -358,8 +545,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--pythonpath", help="measure the cpmp of another checkout (its root directory)"
     )
+    parser.add_argument(
+        "--lerobot",
+        type=int,
+        help=f"episodes of {LEROBOT_WORLD} written as LeRobot v3 and read by cpmp-import "
+        f"({LEROBOT_EPISODES}; 0: skip)",
+    )
     args = parser.parse_args(argv)
-    names = ("worlds", "sizes", "seed", "held_out", "episodes", "timeout", "pythonpath")
+    names = (
+        "worlds",
+        "sizes",
+        "seed",
+        "held_out",
+        "episodes",
+        "timeout",
+        "pythonpath",
+        "lerobot",
+    )
     return run_settings_benchmark(
         "bench_scale",
         args,

@@ -126,6 +126,10 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
             | {"supports": 17, "mae": 0.0312, "complete": 5, "episodes": 5}
         ],
         "summary": {"two_point": {"exponents": {"fit": None}}},
+        "lerobot": {"world": "two_point", "D": 400, "source": "lerobot", "samples": 150000}
+        | {"fit_s": 30.5, "peak_rss_gb": 0.9, "supports": 700, "mae": 0.025, "complete": 5}
+        | {"episodes": 5, "write_s": 2.5, "frames": 150000, "files": 8, "import_s": 12.34}
+        | {"import_rss_gb": 1.5},
     }
     scale["settings"]["episodes"] = 5
     files = {
@@ -185,6 +189,11 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
         "| r | 4.5 |" in page
         and "| two_point | 12 | 1,234 | 1.2 | 0.50 | 17 | 0.0312 | 5/5 |" in page
     )
+    # the scale section's lerobot row: in the table, its import below it, said in the intro
+    assert "| two_point via LeRobot v3 | 400 | 150,000 | 30.5 | 0.90 | 700 | 0.0250 | 5/5 |" in page
+    assert "400 episodes (150,000 frames, 8 data files) written in 2.5 s" in page
+    assert "cpmp-import 12.3 s, peak RSS 1.50 GB" in page
+    assert "The last row: 400 demonstrations of two_point written as a LeRobot v3" in page
 
 
 def test_headline_puts_the_simulator_beside_the_paper_and_every_world(tmp_path: Path) -> None:

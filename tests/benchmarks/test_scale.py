@@ -1,24 +1,32 @@
 """The scale benchmark (cpmp.benchmarks.scale, scripts/bench_scale.py): the quick run writes the
-documented JSON from a process per size, its numbers other than times and memory are
-reproducible, the exponents are least-squares slopes, the targets read the right sizes, and bad
-options fail with exit status 2."""
+documented JSON from a process per size and its lerobot leg (written, imported by cpmp-import's
+entry point, fitted), its numbers other than times and memory are reproducible, the exponents are
+least-squares slopes, the targets read the right sizes, and bad options fail with exit status 2."""
 
 from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import pytest
 
+from cpmp.benchmarks import scale
+from cpmp.benchmarks.lerobot_data import import_mapping, write_demonstrations
 from cpmp.benchmarks.scale import (
+    IMPORT_ENTRY_POINT,
+    LEROBOT_WORLD,
     TARGETS,
     ScaleSettings,
     growth_exponent,
     main,
     measure_size,
+    run_import,
+    run_scale_benchmark,
     summarise,
 )
 from cpmp.errors import ConfigError
+from cpmp.worlds.registry import make_world
 
 MEASURED = ("fit_s", "predictor_s", "peak_rss_gb", "base_rss_gb", "threads")
 
@@ -42,8 +50,19 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     assert exponents["fit"] == growth_exponent(samples, [small["fit_s"], large["fit_s"]])
     assert exponents["fit_last"] == exponents["fit"]  # two sizes: the same two points
     assert result["summary"]["two_point"]["targets"] == {}  # no 768 in a quick run
+    # the lerobot leg: 3 episodes written, imported by cpmp-import, fitted; not an exponent's row
+    lerobot = result["lerobot"]
+    drawn = make_world(LEROBOT_WORLD, {}).demonstrations(3, 0)
+    assert (lerobot["world"], lerobot["D"], lerobot["source"]) == ("two_point", 3, "lerobot")
+    assert "error" not in lerobot and lerobot["demos"] == 3 and lerobot["files"] == 1
+    assert lerobot["samples"] == lerobot["frames"] == sum(d.n_samples for d in drawn)
+    assert set(lerobot) >= {"supports", "mae", "write_s", "import_s", *MEASURED}
+    assert 0 < lerobot["import_rss_gb"] and 0 < lerobot["import_s"]
+    assert 0 < lerobot["predictor_s"] < lerobot["fit_s"] and lerobot["supports"] > 0
+    assert 0 <= lerobot["complete"] <= lerobot["episodes"] == 2 and 0 < lerobot["mae"] < 1
     table = capsys.readouterr().out
     assert "| two_point | 4 |" in table and str(out) in table
+    assert "| two_point via LeRobot v3 | 3 |" in table and "cpmp-import" in table
     # a fresh process per size: the same settings give the same numbers (times aside)
     again = measure_size("two_point", 4, ScaleSettings.quick())
     assert {k: v for k, v in again.items() if k not in MEASURED} == {
@@ -92,6 +111,7 @@ def test_targets_read_768_against_48_and_192():
         {"sizes": (0,)},
         {"episodes": 0},
         {"pythonpath": "/nonexistent"},
+        {"lerobot": -1},
     ],
 )
 def test_bad_settings_are_config_errors(options):
@@ -103,3 +123,51 @@ def test_bad_options_exit_with_status_2(tmp_path, capsys):
     assert main(["--sizes", "12", "0", "--out", str(tmp_path / "x.json")]) == 2
     assert "bench_scale: error: sizes" in capsys.readouterr().err
     assert not (tmp_path / "x.json").exists()
+
+
+def test_the_import_runs_the_console_script_of_cpmp_import():
+    tomllib = pytest.importorskip("tomllib")
+    pyproject = Path(__file__).parents[2] / "pyproject.toml"
+    scripts = tomllib.loads(pyproject.read_text())["project"]["scripts"]
+    assert scripts["cpmp-import"] == IMPORT_ENTRY_POINT
+
+
+def test_the_lerobot_row_is_kept_out_of_the_rows_and_skipped_at_zero(monkeypatch):
+    sizes = []
+
+    def fake_size(world, demos, settings):
+        sizes.append(demos)
+        return _row(demos, 10 * demos, 1.0, 1.0, 1, 0.1, 1) | {"episodes": 1}
+
+    legs = []
+
+    def fake_lerobot(settings):
+        legs.append(settings.lerobot)
+        return {
+            "world": "two_point",
+            "D": settings.lerobot,
+            "source": "lerobot",
+            "error": "not run",
+        }
+
+    monkeypatch.setattr(scale, "measure_size", fake_size)
+    monkeypatch.setattr(scale, "measure_lerobot", fake_lerobot)
+    skipped = run_scale_benchmark(ScaleSettings(worlds=("two_point",), sizes=(2, 4), lerobot=0))
+    assert "lerobot" not in skipped and legs == [] and sizes == [2, 4]
+    result = run_scale_benchmark(ScaleSettings(worlds=("two_point",), sizes=(2, 4), lerobot=7))
+    assert result["lerobot"]["D"] == 7 and legs == [7]
+    assert [r["D"] for r in result["rows"]] == [2, 4] and list(result["summary"]) == ["w"]
+    assert "| two_point via LeRobot v3 | 7 | - | not run |" in scale.markdown(result)
+
+
+def test_a_failed_import_is_the_rows_error(tmp_path):
+    demos = make_world(LEROBOT_WORLD, {}).demonstrations(2, 0)
+    dataset = write_demonstrations(tmp_path / "ds", demos)
+    mapping = import_mapping(demos)
+    mapping["labels"]["a"]["column"] = "no_such_column"
+    path = tmp_path / "mapping.yaml"
+    path.write_text(json.dumps(mapping))
+    output = tmp_path / "demos.hdf5"
+    row = run_import(path, dataset, output, tmp_path / "run", ScaleSettings.quick())
+    assert set(row) == {"error"} and row["error"].startswith("cpmp-import: exit status 2")
+    assert "no_such_column" in row["error"] and not output.exists()

@@ -28,6 +28,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from cpmp.benchmarks.lerobot_data import write_lerobot_v3
 from cpmp.data import list_splits, load_demonstrations
 from cpmp.evaluation import replay_demonstrations
 from cpmp.sequencer import ConcurrentSequencer
@@ -213,7 +214,8 @@ STATE_NAMES = ["hand_x", "hand_z", "gripper", "left_y"]
 def write_lerobot(root: Path, episodes: Sequence[Episode], fps: int = 30) -> Path:
     """A LeRobot v3 dataset (``codebase_version`` v3.0) of ``episodes`` at ``fps``.
 
-    Layout as documented for lerobot v0.4.4 - v0.5.1 (``docs/source/lerobot-dataset-v3.mdx``,
+    Written by :func:`cpmp.benchmarks.lerobot_data.write_lerobot_v3` in the layout documented
+    for lerobot v0.4.4 - v0.5.1 (``docs/source/lerobot-dataset-v3.mdx``,
     ``docs/source/dataset_subtask.mdx``): ``meta/info.json``, ``meta/tasks.parquet``,
     ``meta/subtasks.parquet`` (``subtask_index`` and the ``subtask`` string, pandas' index
     column), ``meta/episodes/chunk-000/file-000.parquet`` and frames in
@@ -222,134 +224,30 @@ def write_lerobot(root: Path, episodes: Sequence[Episode], fps: int = 30) -> Pat
     ``frame_index``, ``episode_index``, ``index``, ``task_index``, ``subtask_index``, and two
     custom per-frame label columns, ``right_arm_mp`` (int ids) and ``left_arm_mp`` (strings).
     """
-    (root / "meta" / "episodes" / "chunk-000").mkdir(parents=True)
-    (root / "data" / "chunk-000").mkdir(parents=True)
-    vector = pa.list_(pa.float32(), 4)
-    schema = pa.schema(
-        [
-            ("observation.state", vector),
-            ("action", vector),
-            ("timestamp", pa.float32()),
-            ("frame_index", pa.int64()),
-            ("episode_index", pa.int64()),
-            ("index", pa.int64()),
-            ("task_index", pa.int64()),
-            ("subtask_index", pa.int64()),
-            ("right_arm_mp", pa.int64()),
-            ("left_arm_mp", pa.string()),
-        ]
-    )
-    rows: list[dict] = []
-    episode_rows = []
-    index = 0
-    half = (len(episodes) + 1) // 2
-    for k, e in enumerate(episodes):
+    frames = []
+    for e in episodes:
         t = np.arange(int(np.floor(e.t_end * fps)) + 1) / fps
         state = e.state(t).astype(np.float32)
         right = e.right_mp(t)
-        ids = np.searchsorted(["grasp", "lift", "reach"], right)  # right_arm_mp: sorted ids
-        subtask = np.array([["reach", "grasp", "lift"].index(m) for m in right])
-        file_index = 0 if k < half else 1
-        episode_rows.append(
+        frames.append(
             {
-                "episode_index": k,
-                "tasks": ["Pick up the box"],
-                "length": len(t),
-                "data/chunk_index": 0,
-                "data/file_index": file_index,
-                "dataset_from_index": index,
-                "dataset_to_index": index + len(t),
+                "observation.state": state,
+                "action": state[np.minimum(np.arange(len(t)) + 1, len(t) - 1)],
+                "subtask_index": np.array([["reach", "grasp", "lift"].index(m) for m in right]),
+                "right_arm_mp": np.searchsorted(["grasp", "lift", "reach"], right),  # sorted ids
+                "left_arm_mp": e.left_mp(t),
             }
         )
-        for i in range(len(t)):
-            rows.append(
-                {
-                    "observation.state": state[i].tolist(),
-                    "action": state[min(i + 1, len(t) - 1)].tolist(),
-                    "timestamp": float(t[i]),
-                    "frame_index": i,
-                    "episode_index": k,
-                    "index": index,
-                    "task_index": 0,
-                    "subtask_index": int(subtask[i]),
-                    "right_arm_mp": int(ids[i]),
-                    "left_arm_mp": str(e.left_mp(t[i])),
-                    "_file": file_index,
-                }
-            )
-            index += 1
-    for file_index in (0, 1):
-        part = [
-            {k: v for k, v in r.items() if k != "_file"} for r in rows if r["_file"] == file_index
-        ]
-        table = pa.Table.from_pylist(part, schema=schema)
-        pq.write_table(table, root / "data" / "chunk-000" / f"file-{file_index:03d}.parquet")
-    pq.write_table(
-        pa.Table.from_pylist(episode_rows),
-        root / "meta" / "episodes" / "chunk-000" / "file-000.parquet",
+    return write_lerobot_v3(
+        root,
+        frames,
+        fps=fps,
+        names={"observation.state": STATE_NAMES, "action": STATE_NAMES},
+        task="Pick up the box",
+        subtasks=LEROBOT_SUBTASKS,
+        episodes_per_file=(len(episodes) + 1) // 2,
+        robot_type="synthetic_bimanual",
     )
-    pq.write_table(_pandas_indexed("task", ["Pick up the box"]), root / "meta" / "tasks.parquet")
-    pq.write_table(_pandas_indexed("subtask", LEROBOT_SUBTASKS), root / "meta" / "subtasks.parquet")
-    scalar = {"shape": [1], "names": None}
-    info = {
-        "codebase_version": "v3.0",
-        "robot_type": "synthetic_bimanual",
-        "total_episodes": len(episodes),
-        "total_frames": index,
-        "total_tasks": 1,
-        "chunks_size": 1000,
-        "data_files_size_in_mb": 100,
-        "video_files_size_in_mb": 200,
-        "fps": fps,
-        "splits": {"train": f"0:{len(episodes)}"},
-        "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
-        "video_path": None,
-        "features": {
-            "observation.state": {"dtype": "float32", "shape": [4], "names": STATE_NAMES},
-            "action": {"dtype": "float32", "shape": [4], "names": STATE_NAMES},
-            "timestamp": {"dtype": "float32", **scalar},
-            "frame_index": {"dtype": "int64", **scalar},
-            "episode_index": {"dtype": "int64", **scalar},
-            "index": {"dtype": "int64", **scalar},
-            "task_index": {"dtype": "int64", **scalar},
-            "subtask_index": {"dtype": "int64", **scalar},
-            "right_arm_mp": {"dtype": "int64", **scalar},
-            "left_arm_mp": {"dtype": "string", **scalar},
-        },
-    }
-    (root / "meta" / "info.json").write_text(json.dumps(info, indent=4))
-    return root
-
-
-def _pandas_indexed(name: str, values: Sequence[str]) -> pa.Table:
-    """``pandas.DataFrame({f"{name}_index": ...}, index=Index(values, name=name))`` as
-    ``DataFrame.to_parquet`` writes it (the index as a column named ``name``)."""
-    table = pa.table(
-        {f"{name}_index": pa.array(range(len(values)), pa.int64()), name: list(values)}
-    )
-    pandas_meta = {
-        "index_columns": [name],
-        "column_indexes": [],
-        "columns": [
-            {
-                "name": f"{name}_index",
-                "field_name": f"{name}_index",
-                "pandas_type": "int64",
-                "numpy_type": "int64",
-                "metadata": None,
-            },
-            {
-                "name": name,
-                "field_name": name,
-                "pandas_type": "unicode",
-                "numpy_type": "object",
-                "metadata": None,
-            },
-        ],
-        "creator": {"library": "pyarrow", "version": pa.__version__},
-        "pandas_version": "2.2.3",
-    }
-    return table.replace_schema_metadata({"pandas": json.dumps(pandas_meta)})
 
 
 LEROBOT_MAPPING = {
