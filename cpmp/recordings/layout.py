@@ -79,17 +79,18 @@ MARK_SIZE = 5.0
 OVERVIEW_NAME = "p(switch), every variable"
 """Name of the grid of every variable's p(switch) plot (small multiples, no clicking)."""
 
-LANE_SHARE = 0.8
+LANE_SHARE = 1.0
 """Share of the middle column per state lane (one per control variable), three at least:
 the lanes' view next to the overview (2 per row of three), the feature tabs (3) and the
 probability tabs (4). Six variables (the simulator) then show every lane unscrolled in a
-1080 px tall viewer; with a fixed share of 3 they showed four."""
+900 px tall viewer; with a fixed share of 3 they showed four at 1080 px."""
 
-EVENT_WIDTH = 78
+EVENT_WIDTH = 58
 """Characters per line of the events log, its time included (:func:`event_lines`). rerun 0.41
 shows the first line of a multi-line text log entry only, so a long event is logged as
-several rows; the log's monospace body column shows about 82 characters in the default layout
-of a 1920 px wide viewer."""
+several rows; the log's monospace body column shows about 60 characters in the default layout
+of a 1440 px wide viewer (a laptop's; a row of 62 lost its last 2) and about 82 at 1920 px, so
+no row is cut at either."""
 
 EVENT_INDENT = 10
 """Continuation lines of an event start below its text, after the time (``"  3.25 s  "``)."""
