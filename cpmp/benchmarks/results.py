@@ -196,7 +196,7 @@ def _about_lerobot(r: Mapping[str, Any]) -> str:
         f" The last row: {row['D']} demonstrations of {row['world']} written as a LeRobot v3 "
         "dataset (float32 `observation.state`, per-frame label columns), imported by "
         "`cpmp-import` and fitted the same way; the import's time and peak memory (its own "
-        "process) follow the table."
+        "process) follow the table." + (f" It was {row['note']}." if row.get("note") else "")
     )
 
 
