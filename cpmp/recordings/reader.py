@@ -122,6 +122,22 @@ def _times_seconds(batch: Any) -> list[float] | None:
     return [math.nan if value is None else value * scale for value in raw]
 
 
+def _timed_rows(entity: str, batch: Any, times: list[float]) -> list[float]:
+    """The times of ``batch``'s rows that count for the episode's duration [s].
+
+    An event's continuation rows in the events log sit a few microseconds after it (the
+    writer's ``ROW_STEP``, so that they sort as written); only the event's own row, the one
+    with its record (a ``cpmp.*`` column), is at its time.
+    """
+    if not entity.startswith("events/"):
+        return times
+    records = [name for name in batch.schema.names if name.startswith("cpmp.")]
+    if not records:
+        return []
+    valid = batch.column(records[0]).is_valid().to_pylist()
+    return [t for t, ok in zip(times, valid, strict=True) if ok]
+
+
 def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
     """``(path, RrdReader)``; :class:`~cpmp.errors.CpmpFileError` for a missing path."""
     file = Path(path)
@@ -187,7 +203,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         entity_paths.add(entity)
         times = _times_seconds(batch)
         if times:
-            finite = [t for t in times if math.isfinite(t)]
+            finite = [t for t in _timed_rows(entity, batch, times) if math.isfinite(t)]
             duration = max([duration, *finite])
         if "tick" in columns:
             ticks[index].update(v for v in batch.column("tick").to_pylist() if v is not None)

@@ -66,6 +66,10 @@ from cpmp.recordings.layout import (
 from cpmp.records import PendingSwitch, StartDecision
 from cpmp.sequencer.inputs import checked_time
 
+ROW_STEP = 1e-6
+"""Time [s] between the rows of one event in the events log (:meth:`EpisodeRecorder._log_event`):
+far below a control tick, so an event's rows stay at its time to the viewer's precision."""
+
 
 @dataclass
 class _Hold:
@@ -253,8 +257,10 @@ class EpisodeRecorder:
         """Log one event at ``t`` [s] to ``path``: its rows of the events log and its record.
 
         The first row (``"  3.25 s  <text>"``) carries the machine-readable ``record``; a long
-        ``text`` continues on indented rows at the same time (:func:`event_lines`). Warnings
-        are drawn in :data:`WARN_COLOR`.
+        ``text`` continues on indented rows (:func:`event_lines`), the ``k``-th
+        :data:`ROW_STEP` ``· k`` after it: rows at one time stamp come back in no set order
+        (rerun 0.41 showed an event's second row above its first), one microsecond apart they
+        sort as written. Warnings are drawn in :data:`WARN_COLOR`.
         """
         self._set_event_time(t, tick)
         color = WARN_COLOR if level == "WARN" else None
@@ -265,7 +271,8 @@ class EpisodeRecorder:
             for line in event_lines(t, text)
         ]
         self._rec.log(path, rows[0], *([record] if record is not None else []))
-        for row in rows[1:]:
+        for k, row in enumerate(rows[1:], start=1):
+            self._rec.set_time("time", duration=t + k * ROW_STEP)
             self._rec.log(path, row)
 
     def _log_status(self, t: float, outcome: str = "") -> None:
