@@ -4,9 +4,11 @@ In every world of ``compare.worlds`` (:mod:`cpmp.compare.worlds`: the simulator 
 harder variants, the synthetic worlds) the rows (:mod:`cpmp.compare.rows`: predictors, the
 ``goal_nearest`` baseline, the support-count axis) run on the same demonstrations, seeds and
 episodes. Each (world, seed, row, D) is one job (:mod:`cpmp.compare.runs`: fit, progress MAE,
-tick time, closed loop), run on ``experiment.workers`` spawned processes (``null``: one per
-core). Every job seeds itself and depends only on its own inputs, so the numbers do not depend
-on the worker count. :mod:`cpmp.compare.pooling` pools the seeds with bootstrap intervals
+tick time, closed loop), run by the executor ``experiment.executor`` names
+(:mod:`cpmp.experiment.executors`: ``local``, ``experiment.workers`` spawned processes, ``null``:
+one per core; ``inline``; ``submitit``: local processes or SLURM jobs). Every job seeds itself
+and depends only on its own inputs, so the numbers do not depend on the executor or the worker
+count. :mod:`cpmp.compare.pooling` pools the seeds with bootstrap intervals
 (:mod:`cpmp.compare.stats`) and tests the differences; :mod:`cpmp.compare.report` and
 :mod:`cpmp.compare.figures` write the table and figures.
 """
@@ -27,8 +29,8 @@ from cpmp.compare.rows import fit_jobs, row_specs
 from cpmp.compare.runs import run_jobs
 from cpmp.compare.settings import CompareJob
 from cpmp.compare.stats import BootstrapOptions
+from cpmp.experiment.executors import job_slots, make_executor
 from cpmp.experiment.output import write_json
-from cpmp.experiment.workers import default_workers
 from cpmp.io import atomic_write_text
 
 log = logging.getLogger(__name__)
@@ -69,16 +71,19 @@ def run_compare(cfg: Any, run_dir: str | Path) -> Path:
     }
     jobs = fit_jobs(specs, worlds)
     tasks = len(jobs) + sum(len(w.seeds) for w in job.worlds if w.kind == "sim")
-    workers = min(job.settings.workers or default_workers(tasks), tasks)
+    name = job.settings.executor
+    workers = job_slots(name, job.executor, job.settings.workers, tasks)
     log.info(
-        "compare: %d rows in %d world(s) (%s), %d fits, %d worker(s)",
+        "compare: %d rows in %d world(s) (%s), %d fits, %s executor, %d at once",
         len(specs),
         len(worlds),
         ", ".join(worlds),
         len(jobs),
+        name,
         workers,
     )
-    collected, results = run_jobs(plain, run_dir, worlds, jobs, workers, started)
+    with make_executor(name, job.executor, workers) as executor:
+        collected, results = run_jobs(plain, run_dir, worlds, jobs, executor, started)
     stats = job.compare.stats
     result = pool(
         specs,
@@ -89,7 +94,9 @@ def run_compare(cfg: Any, run_dir: str | Path) -> Path:
         reference=job.compare.sweep.predictor,
     )
     seconds = time.perf_counter() - started
-    write_json(run_dir / "timings.json", job_timings(collected, results, jobs, seconds, workers))
+    write_json(
+        run_dir / "timings.json", job_timings(collected, results, jobs, seconds, workers, name)
+    )
     write_json(run_dir / "episodes.json", job_episodes(results, jobs))
     path = write_json(run_dir / "compare.json", result)
     plot_c_vs_d(result, run_dir / "compare_c_vs_d.png")

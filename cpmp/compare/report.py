@@ -45,9 +45,11 @@ def job_timings(
     jobs: Mapping[str, FitJob],
     seconds: float,
     workers: int,
+    executor: str = "local",
 ) -> dict[str, Any]:
     """Wall time of the run; wall and CPU seconds of every collection and job stage.
 
+    With the run's executor and its jobs at once (``workers``).
     These scale the run's cost to other episode or seed counts.
     """
     tasks = []
@@ -70,6 +72,7 @@ def job_timings(
         )
     return {
         "seconds": seconds,
+        "executor": executor,
         "workers": workers,
         "collections": [
             {"seed": data.seed, "seconds": data.seconds} for data in collected.values()

@@ -7,9 +7,10 @@ synthetic world's data is made inside each job (it takes milliseconds). Each (wo
 D) is then one job: fit on D training demos, progress MAE on the held-out demos (per
 demonstration, for the intervals), mean ``step()`` time over one held-out demonstration
 replayed open loop, and the closed loop (:func:`run_sim_row`: every reproduction box;
-:func:`run_synthetic_row`: the world's seeded episodes). :func:`run_jobs` runs them serially
-or on spawned worker processes; every job seeds itself and depends only on its own inputs, so
-the numbers do not depend on the worker count or the order.
+:func:`run_synthetic_row`: the world's seeded episodes). :func:`run_jobs` runs them on an
+executor (:mod:`cpmp.experiment.executors`: this process, spawned worker processes, submitit's
+local processes or SLURM jobs); every job seeds itself and depends only on its own inputs, so
+the numbers do not depend on the executor, the worker count or the order.
 """
 
 from __future__ import annotations
@@ -19,8 +20,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,11 +37,11 @@ from cpmp.data.augment import add_feature_noise
 from cpmp.errors import CpmpError
 from cpmp.evaluation.offline import activation_progress
 from cpmp.experiment.collection import SeedData, collect_seed
+from cpmp.experiment.executors import JobExecutor, Submission, run_queue
 from cpmp.experiment.fitting import fit_sequencer
 from cpmp.experiment.reproduction import reproduce_seed
 from cpmp.experiment.settings import ExperimentSettings, to_dict
 from cpmp.experiment.strategies import balanced_subset
-from cpmp.experiment.workers import spawned_pool
 from cpmp.records import FitReport
 
 log = logging.getLogger(__name__)
@@ -345,22 +345,23 @@ def run_jobs(
     run_dir: Path,
     worlds: Mapping[str, World],
     jobs: Mapping[str, FitJob],
-    workers: int,
+    executor: JobExecutor,
     started: float,
 ) -> CompareRuns:
-    """Collect every simulated seed, run every job, in this process or on spawned workers.
+    """Collect every simulated seed, run every job, on ``executor``.
 
-    With one worker everything runs serially in this process; else on ``workers`` spawned
-    processes, each given the next task as it frees up: collections first, then the job
-    expected to take longest (the same world, row and D of an earlier seed tells; rows not
-    yet measured go first, largest D first). The order changes no number.
+    ``executor.slots`` tasks run at once, each slot given the next task as it frees up:
+    collections first, then the job expected to take longest (with several slots the same
+    world, row and D of an earlier seed tells; rows not yet measured go first, largest D
+    first; with one slot the order is fixed: world by world, largest D first). The order
+    changes no number.
 
     Args:
         plain: the job's composed config as plain containers (what the workers get).
         run_dir: where each simulated seed's ``<world>/seed_<s>/demos.h5`` goes.
         worlds: the worlds by name.
         jobs: fit key -> its job, one entry per fit (:func:`~cpmp.compare.rows.fit_jobs`).
-        workers: worker processes (1: everything in this process).
+        executor: an entered executor (:func:`~cpmp.experiment.executors.make_executor`).
         started: ``time.perf_counter()`` at the run's start (for the progress lines).
 
     Returns:
@@ -376,20 +377,13 @@ def run_jobs(
             first.setdefault(needs[key], (world.name, job.seed))
     collected: dict[str, SeedData] = {}
     results: dict[str, RowResult] = {}
-    order = {key: i for i, key in enumerate(sorted(jobs, key=lambda k: -jobs[k].d))}
+    by_size = sorted(jobs, key=lambda k: -jobs[k].d)
+    order = {key: i for i, key in enumerate(by_size)}
+    if executor.slots == 1:  # world by world, largest D first
+        names = list(worlds)
+        fixed = sorted(jobs, key=lambda k: (names.index(jobs[k].spec.world), order[k]))
+        order = {key: i for i, key in enumerate(fixed)}
     done = 0
-
-    def collect_args(ckey: str) -> tuple[Any, ...]:
-        name, seed = first[ckey]
-        return configs[name], run_dir / name, seed
-
-    def row_call(key: str) -> tuple[Callable[..., RowResult], tuple[Any, ...]]:
-        spec, seed, d = jobs[key]
-        world = worlds[spec.world]
-        if world.kind == "sim":
-            data = world_data(collected[needs[key]], world)
-            return run_sim_row, (configs[world.name], spec, data, d)
-        return run_synthetic_row, (plain, spec, world, seed, d)
 
     def report(key: str, result: RowResult) -> None:
         nonlocal done
@@ -406,22 +400,6 @@ def run_jobs(
         elapsed = time.perf_counter() - started
         _say(f"[{done}/{len(jobs)}] seed {seed} D={d} {spec.label()}: {what} ({elapsed:.0f} s)")
 
-    def collected_now(ckey: str) -> None:
-        name, seed = first[ckey]
-        elapsed = time.perf_counter() - started
-        _say(f"{name} seed {seed}: demonstrations collected ({elapsed:.0f} s)")
-
-    if workers <= 1:
-        for key in sorted(jobs, key=lambda k: (list(worlds).index(jobs[k].spec.world), order[k])):
-            ckey = needs.get(key)
-            if ckey is not None and ckey not in collected:
-                collected[ckey] = _collect(*collect_args(ckey))
-                collected_now(ckey)
-            function, args = row_call(key)
-            results[key] = function(*args)
-            report(key, results[key])
-        return CompareRuns(collected, results)
-
     def identity(key: str) -> tuple[Any, ...]:
         spec, _, d = jobs[key]
         return (spec.world, spec.group, spec.predictor, spec.sequencer, spec.point(), d)
@@ -430,40 +408,42 @@ def run_jobs(
     to_collect = list(first)
     ready = [k for k in jobs if k not in needs]
 
-    def next_task() -> _Task | None:
+    def next_job() -> Submission | None:
         if to_collect:
-            return _Task("collect", to_collect.pop(0))
+            ckey = to_collect.pop(0)
+            name, seed = first[ckey]
+            args = (configs[name], run_dir / name, seed)
+            return Submission(_Task("collect", ckey), _collect, args, f"{name} seed {seed}")
         if not ready:
             return None
-        key = min(ready, key=lambda k: (-measured.get(identity(k), math.inf), order[k]))
+        if executor.slots == 1:
+            key = min(ready, key=lambda k: order[k])
+        else:
+            key = min(ready, key=lambda k: (-measured.get(identity(k), math.inf), order[k]))
         ready.remove(key)
-        return _Task("row", key)
+        spec, seed, d = jobs[key]
+        world = worlds[spec.world]
+        label = f"seed {seed} D={d} {spec.label()}"
+        if world.kind == "sim":
+            data = world_data(collected[needs[key]], world)
+            args: tuple[Any, ...] = (configs[world.name], spec, data, d)
+            return Submission(_Task("row", key), run_sim_row, args, label)
+        return Submission(
+            _Task("row", key), run_synthetic_row, (plain, spec, world, seed, d), label
+        )
 
-    pending: dict[Future, _Task] = {}
-    with spawned_pool(workers) as pool:
+    def finished(task: _Task, result: Any) -> None:
+        if task.kind == "row":
+            results[task.key] = result
+            measured.setdefault(identity(task.key), sum(result.seconds.values()))
+            report(task.key, result)
+            return
+        collected[task.key] = result
+        name, seed = first[task.key]
+        _say(
+            f"{name} seed {seed}: demonstrations collected ({time.perf_counter() - started:.0f} s)"
+        )
+        ready.extend(k for k in jobs if needs.get(k) == task.key)
 
-        def fill() -> None:
-            while len(pending) < workers and (task := next_task()) is not None:
-                if task.kind == "collect":
-                    future = pool.submit(_collect, *collect_args(task.key))
-                else:
-                    function, args = row_call(task.key)
-                    future = pool.submit(function, *args)
-                pending[future] = task
-
-        fill()
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in sorted(finished, key=lambda f: pending[f]):
-                task = pending.pop(future)
-                if task.kind == "row":
-                    results[task.key] = future.result()
-                    seconds = sum(results[task.key].seconds.values())
-                    measured.setdefault(identity(task.key), seconds)
-                    report(task.key, results[task.key])
-                    continue
-                collected[task.key] = future.result()
-                collected_now(task.key)
-                ready.extend(k for k in jobs if needs.get(k) == task.key)
-            fill()
+    run_queue(executor, next_job, finished)
     return CompareRuns(collected, results)

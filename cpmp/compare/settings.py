@@ -22,8 +22,8 @@ from cpmp.config import TaskConfig
 from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
-from cpmp.experiment.config import store_schema
-from cpmp.experiment.settings import ExperimentSettings, to_dict
+from cpmp.experiment.config import executor_settings, store_schema
+from cpmp.experiment.settings import ExecutorSettings, ExperimentSettings, to_dict
 
 SCHEMA = "schema_compare"
 """The name of the ``compare`` node's schema in Hydra's ConfigStore."""
@@ -377,12 +377,14 @@ class CompareJob:
         task: the ``task`` group.
         compare: the ``compare`` node.
         worlds: ``compare.worlds`` resolved, in their order.
+        executor: the ``executor`` node (used by ``experiment.executor=submitit``).
     """
 
     settings: ExperimentSettings
     task: TaskConfig
     compare: CompareSettings
     worlds: tuple[World, ...]
+    executor: ExecutorSettings = field(default_factory=ExecutorSettings)
 
     @classmethod
     def from_cfg(cls, cfg: Any) -> CompareJob:
@@ -401,6 +403,7 @@ class CompareJob:
                 f"learned one (e.g. sequencer=coupled); list {kind} in compare.baselines"
             )
         settings = ExperimentSettings.from_cfg(cfg.experiment)
+        executor = executor_settings(settings, cfg.get("executor"))
         task = TaskConfig.from_dict(cfg.task)
         compare = compare_settings(cfg.get("compare"))
         worlds = tuple(
@@ -408,7 +411,7 @@ class CompareJob:
             for name, entry in compare.worlds.items()
         )
         _check_sweep(compare.sweep, worlds)
-        return cls(settings, task, compare, worlds)
+        return cls(settings, task, compare, worlds, executor)
 
 
 def register_compare() -> None:

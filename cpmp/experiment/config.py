@@ -3,9 +3,9 @@
 **Registration** (:func:`register_configs`, run on import): the option dataclasses of
 :mod:`cpmp.config` (and :class:`~cpmp.experiment.settings.ExperimentSettings`) are stored in
 Hydra's ConfigStore as ``schema_task``, ``schema_trainer``, ``schema_sequencer``,
-``schema_experiment``, ``schema_sequencer_goal_nearest`` and ``schema_sequencer_bc`` (each
-baseline's options and its ``kind``) and one ``schema_predictor_<kind>`` per predictor kind (its
-options and ``kind``);
+``schema_experiment``, ``schema_executor``, ``schema_sequencer_goal_nearest`` and
+``schema_sequencer_bc`` (each baseline's options and its ``kind``) and one
+``schema_predictor_<kind>`` per predictor kind (its options and ``kind``);
 :func:`store_schema` stores one more (the comparison registers ``schema_compare`` with it,
 :mod:`cpmp.compare.settings`). Each option of ``conf/`` starts from one of them
 (``defaults: [/schema_..., _self_]``) and holds only what differs from the dataclass's
@@ -47,6 +47,7 @@ from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 from cpmp.experiment.settings import (
+    ExecutorSettings,
     ExperimentJob,
     ExperimentSettings,
     FitSettings,
@@ -56,6 +57,7 @@ from cpmp.experiment.settings import (
 __all__ = [
     "PredictorChoice",
     "PredictorOptions",
+    "executor_settings",
     "experiment_job",
     "fit_settings",
     "job_fit_settings",
@@ -116,6 +118,7 @@ def register_configs() -> None:
         ("schema_trainer", TrainerConfig),
         ("schema_sequencer", SequencerConfig),
         ("schema_experiment", ExperimentSettings),
+        ("schema_executor", ExecutorSettings),
     ):
         store_schema(name, cls)
     store_schema(f"schema_sequencer_{GOAL_NEAREST}", GoalNearestConfig, kind=GOAL_NEAREST)
@@ -251,6 +254,22 @@ def validate_common(cfg: Any) -> PredictorOptions:
     return PredictorOptions(settings.predictor, dataclasses.asdict(settings.fit.predictor_config))
 
 
+def executor_settings(settings: ExperimentSettings, cfg: Any) -> ExecutorSettings:
+    """The ``executor`` node (``None``: its defaults), checked for ``experiment.executor``.
+
+    Args:
+        settings: the job's ``experiment`` group (its ``executor`` names the backend).
+        cfg: the composed config's ``executor`` node, or ``None``.
+
+    Raises:
+        ConfigError: an unknown key or a bad value; the ``submitit`` executor without
+            ``executor.folder``.
+    """
+    executor = ExecutorSettings.from_cfg(cfg)
+    executor.check(settings.executor)
+    return executor
+
+
 def experiment_job(cfg: Any) -> ExperimentJob:
     """The main job's composed config as an :class:`ExperimentJob`, every group validated.
 
@@ -259,8 +278,9 @@ def experiment_job(cfg: Any) -> ExperimentJob:
     if isinstance(cfg, ExperimentJob):
         return cfg
     settings = ExperimentSettings.from_cfg(cfg.experiment)
+    executor = executor_settings(settings, cfg.get("executor"))
     fit = job_fit_settings(cfg)
-    return ExperimentJob(settings, TaskConfig.from_dict(cfg.task), fit)
+    return ExperimentJob(settings, TaskConfig.from_dict(cfg.task), fit, executor)
 
 
 register_configs()

@@ -6,8 +6,9 @@ size D fit
 (:func:`cpmp.evaluation.offline.evaluate_offline`), reproduce
 (:mod:`~cpmp.experiment.reproduction`) and draw the strategy map
 (:mod:`~cpmp.experiment.strategies`); pool the seeds and write the report
-(:mod:`~cpmp.experiment.report`). With ``experiment.workers > 1`` the seeds and training sizes run
-on a process pool (:mod:`~cpmp.experiment.workers`).
+(:mod:`~cpmp.experiment.report`). Each seed's collection and each (seed, D) training size is a
+job, run by the executor ``experiment.executor`` names (:mod:`~cpmp.experiment.executors`:
+this process, spawned worker processes, or submitit's local processes or SLURM jobs).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.collection import SeedData, collect_seed
 from cpmp.experiment.config import experiment_job
 from cpmp.experiment.console import timed
+from cpmp.experiment.executors import JobExecutor, Submission, job_slots, make_executor, run_queue
 from cpmp.experiment.fitting import train_sequencer
 from cpmp.experiment.report import (
     experiment_files,
@@ -37,9 +39,17 @@ from cpmp.experiment.report import (
 from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
 from cpmp.experiment.settings import ExperimentJob
 from cpmp.experiment.strategies import StrategyMap, balanced_subset, strategy_map
-from cpmp.experiment.workers import JobResults, default_workers, run_parallel
 
 log = logging.getLogger(__name__)
+
+
+class JobResults(NamedTuple):
+    """What the main job's stages gave: each seed's collection and each training size's result."""
+
+    collected: dict[int, Any]
+    """What the collection returned, by seed."""
+    results: dict[tuple[int, int], Any]
+    """What each training size returned, by (seed, D)."""
 
 
 @dataclass
@@ -87,22 +97,23 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
     Collect demos in the simulator, train on D = train_sizes, evaluate progress prediction,
     reproduction (Table I) and the strategy map; write the report.
 
-    Each seed's collection and each (seed, D) training size is a job; with
-    ``experiment.workers > 1`` they run in that many worker processes (one torch thread
-    each, logs prefixed with their seed and D), and every number in the report is the same as
-    in a serial run. ``timings.json`` holds the wall time of every stage.
+    Each seed's collection and each (seed, D) training size is a job, run by the executor of
+    ``experiment.executor`` (``local``: ``experiment.workers`` spawned processes, one torch
+    thread each, logs prefixed with their seed and D; ``inline``: this process; ``submitit``:
+    submitit jobs); every number in the report is the same on each. ``timings.json`` holds the
+    wall time of every stage.
     """
     run_dir = Path(run_dir)
     job = experiment_job(cfg)
     settings = job.settings
     started = time.perf_counter()
-    workers = settings.workers or default_workers(len(settings.seeds))
-    workers = min(workers, len(settings.seeds) * len(settings.train_sizes))
-    if workers > 1:
-        log.info("running seeds %s on %d worker processes", settings.seeds, workers)
-        ran = run_parallel(job, run_dir, workers, collect_seed, run_train_size)
-    else:
-        ran = _run_serial(job, run_dir)
+    n_jobs = len(settings.seeds) * len(settings.train_sizes)
+    name = settings.executor
+    workers = job_slots(name, job.executor, settings.workers, n_jobs, len(settings.seeds))
+    if workers > 1 or name != "local":
+        log.info("running seeds %s on the %s executor, %d at once", settings.seeds, name, workers)
+    with make_executor(name, job.executor, workers) as executor:
+        ran = run_jobs(job, run_dir, executor)
     gathered = _gather(job, ran)
 
     files = experiment_files(job)
@@ -117,7 +128,7 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
     report = pool_seeds(job, gathered.per_seed)
     report["files"] = files
     report["seconds"] = time.perf_counter() - started
-    write_timings(run_dir, report["seconds"], workers, gathered.stage_seconds)
+    write_timings(run_dir, report["seconds"], workers, gathered.stage_seconds, name)
     return write_report(report, run_dir)
 
 
@@ -184,13 +195,38 @@ def run_train_size(
     )
 
 
-def _run_serial(job: ExperimentJob, run_dir: Path) -> JobResults:
-    """Every seed's collection and each of its training sizes in this process, in order."""
+def run_jobs(job: ExperimentJob, run_dir: Path, executor: JobExecutor) -> JobResults:
+    """Every seed's collection, then each of its training sizes, on ``executor``.
+
+    The collections are queued first; a seed's training sizes are queued, largest first, as
+    soon as its collection is done. ``executor.slots`` jobs run at once.
+
+    Args:
+        job: the typed job.
+        run_dir: the run directory.
+        executor: an entered executor.
+
+    Returns:
+        The collections by seed and the results by (seed, D).
+    """
+    settings = job.settings
     ran = JobResults({}, {})
-    for seed in job.settings.seeds:
-        ran.collected[seed] = collect_seed(job, run_dir, seed)
-        for d in job.settings.train_sizes:
-            ran.results[seed, d] = run_train_size(job, run_dir, ran.collected[seed], d)
+    queue = [
+        Submission((seed, None), collect_seed, (job, run_dir, seed), f"seed {seed}")
+        for seed in settings.seeds
+    ]
+
+    def finished(key: tuple[int, int | None], result: Any) -> None:
+        seed, d = key
+        if d is not None:
+            ran.results[seed, d] = result
+            return
+        ran.collected[seed] = result
+        for size in sorted(settings.train_sizes, reverse=True):
+            args = (job, run_dir, result, size)
+            queue.append(Submission((seed, size), run_train_size, args, f"seed {seed} D={size}"))
+
+    run_queue(executor, lambda: queue.pop(0) if queue else None, finished)
     return ran
 
 

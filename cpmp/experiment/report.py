@@ -151,7 +151,9 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
     ]
     return jsonable(
         {
-            "experiment": {k: v for k, v in settings.__dict__.items() if k != "workers"},
+            "experiment": {
+                k: v for k, v in settings.__dict__.items() if k not in ("workers", "executor")
+            },
             **_configs(job),
             "progress": {
                 "mae": progress_by_d[largest]["mae"],
@@ -250,9 +252,13 @@ def write_figures(
 
 
 def write_timings(
-    run_dir: Path, seconds: float, workers: int, stage_seconds: Mapping[str, float]
+    run_dir: Path,
+    seconds: float,
+    workers: int,
+    stage_seconds: Mapping[str, float],
+    executor: str = "local",
 ) -> Path:
-    """``timings.json``: the run's wall time [s], its worker count and the seconds per stage.
+    """``timings.json``: the run's wall time [s], executor, jobs at once, seconds per stage.
 
     The stage seconds are wall seconds summed over seeds and training sizes.
     """
@@ -260,6 +266,7 @@ def write_timings(
         run_dir / "timings.json",
         {
             "seconds": seconds,
+            "executor": executor,
             "workers": workers,
             "stages": dict(stage_seconds),
             "note": "stage times are wall seconds summed over seeds and training sizes; with "

@@ -4,7 +4,9 @@
 :class:`FitSettings` the ``predictor``, ``sequencer`` and ``trainer`` groups, and
 :class:`ExperimentJob` all of them with the ``task``. Each validates itself on construction;
 :mod:`cpmp.experiment.config` registers them with Hydra and converts a composed ``cfg`` into
-them. :func:`to_dict` turns a config node into a plain dict.
+them. :class:`ExecutorSettings` is the ``executor`` node: where the jobs of
+``experiment.executor=submitit`` run (:mod:`cpmp.experiment.executors`). :func:`to_dict` turns
+a config node into a plain dict.
 """
 
 from __future__ import annotations
@@ -28,6 +30,14 @@ episode that did not complete, plus the first one per training size), ``all``, `
 first per training size) or ``none``."""
 RECORD_CHOICES: tuple[RecordMode, ...] = get_args(RecordMode)
 """Values of ``experiment.record``."""
+ExecutorName = Literal["inline", "local", "submitit"]
+"""What runs the jobs (``experiment.executor``, :mod:`cpmp.experiment.executors`): ``inline``
+(this process, one job after the other), ``local`` (spawned worker processes; one worker: this
+process) or ``submitit`` (submitit jobs: local processes or SLURM jobs, ``executor`` node)."""
+EXECUTORS: tuple[ExecutorName, ...] = get_args(ExecutorName)
+"""Values of ``experiment.executor``."""
+CLUSTERS = ("local", "slurm")
+"""Values of ``executor.cluster``: where the ``submitit`` executor's jobs run."""
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -68,9 +78,13 @@ class ExperimentSettings:
         feature_noise: std of Gaussian noise added to the training demonstrations' features,
             as a fraction of each feature's range over the training set (0: none); the test
             demonstrations and the closed loop stay noise-free.
-        workers: worker processes running the seeds' collection and training sizes in
-            parallel (``None``: min(cores, seeds); 1: everything in this process). The report's
-            numbers do not depend on it.
+        workers: how many jobs (a seed's collection, a training size) run at once: worker
+            processes of the ``local`` executor (1: everything in this process), jobs in flight
+            of the ``submitit`` one (``None``: min(cores, jobs); on SLURM
+            ``executor.slurm.array_parallelism``). The report's numbers do not depend on it.
+        executor: what runs the jobs (:data:`ExecutorName`): ``local`` (spawned processes),
+            ``inline`` (this process) or ``submitit`` (the ``executor`` node says where). The
+            report's numbers do not depend on it.
     """
 
     name: str = "quick"
@@ -86,6 +100,7 @@ class ExperimentSettings:
     max_time: float | None = None
     feature_noise: float = 0.0
     workers: int | None = None
+    executor: ExecutorName = "local"
 
     def __post_init__(self) -> None:
         for name in ("demos_per_strategy", "train_per_strategy", "n_boxes", "box_seed_offset"):
@@ -140,6 +155,10 @@ class ExperimentSettings:
             raise ConfigError(
                 f"experiment.workers must be an integer >= 1 or null (auto), got {workers!r}"
             )
+        if self.executor not in EXECUTORS:
+            raise ConfigError(
+                f"experiment.executor must be one of {', '.join(EXECUTORS)}, got {self.executor!r}"
+            )
 
     @classmethod
     def from_cfg(cls, cfg: Any) -> ExperimentSettings:
@@ -153,6 +172,113 @@ class ExperimentSettings:
                 f"valid: {', '.join(sorted(known))}"
             )
         return cls(**options)
+
+
+@dataclass
+class SlurmSettings:
+    """The ``executor.slurm`` node: the SLURM job of each cpmp job (``executor.cluster=slurm``).
+
+    Attributes:
+        partition: the partition (``None``: the cluster's default).
+        time: each job's time limit [min] (also the limit of a ``cluster=local`` job).
+        cpus_per_task: CPUs per job (each job runs one torch thread).
+        mem: memory per job, as SLURM writes it (``8G``; ``None``: the cluster's default).
+        array_parallelism: the most jobs queued or running at once (the default of
+            ``experiment.workers`` on SLURM).
+        extra: further ``sbatch`` parameters of submitit's SLURM executor, without their
+            ``slurm_`` prefix (``account``, ``qos``, ``constraint``, ``gpus_per_node``,
+            ``additional_parameters``, ...).
+    """
+
+    partition: str | None = None
+    time: int = 60
+    cpus_per_task: int = 1
+    mem: str | None = None
+    array_parallelism: int = 32
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class ExecutorSettings:
+    """The ``executor`` node: where the ``submitit`` executor runs the jobs.
+
+    Attributes:
+        folder: submitit's folder: each job's pickled call, result and logs
+            (``<job id>_0_log.out`` / ``.err``); on SLURM a folder every node can read.
+            Required by ``experiment.executor=submitit``.
+        cluster: ``local`` (local processes) or ``slurm`` (SLURM jobs), see :data:`CLUSTERS`.
+        slurm: the SLURM parameters of each job (time and cpus_per_task also on ``local``).
+    """
+
+    folder: str | None = None
+    cluster: str = "local"
+    slurm: SlurmSettings = field(default_factory=SlurmSettings)
+
+    def __post_init__(self) -> None:
+        if self.cluster not in CLUSTERS:
+            raise ConfigError(
+                f"executor.cluster must be one of {', '.join(CLUSTERS)}, got {self.cluster!r}"
+            )
+        slurm = self.slurm
+        for name in ("time", "cpus_per_task", "array_parallelism"):
+            value = getattr(slurm, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"executor.slurm.{name} must be an integer >= 1, got {value!r}")
+
+    @classmethod
+    def from_cfg(cls, cfg: Any) -> ExecutorSettings:
+        """From the ``executor`` node (or a mapping; ``None``: the defaults), keys checked.
+
+        Raises:
+            ConfigError: an unknown key or a bad value, naming it.
+        """
+        options = _known(cls, to_dict(cfg), "executor.")
+        slurm = _known(SlurmSettings, to_dict(options.pop("slurm", None)), "executor.slurm.")
+        slurm["extra"] = to_dict(slurm.get("extra"))
+        return cls(**options, slurm=SlurmSettings(**slurm))
+
+    def check(self, executor: str) -> None:
+        """What ``experiment.executor=executor`` needs of this node.
+
+        The ``submitit`` executor needs a folder and takes only the ``extra`` SLURM parameters
+        submitit knows (imports submitit).
+
+        Raises:
+            ConfigError: no ``executor.folder``, or an unknown ``executor.slurm.extra`` key.
+        """
+        if executor != "submitit":
+            return
+        if not self.folder:
+            raise ConfigError(
+                "experiment.executor=submitit needs executor.folder: where submitit keeps each "
+                "job's call, result and logs (on SLURM a folder every node can read), e.g. "
+                "executor.folder=/shared/cpmp_jobs"
+            )
+        from submitit import SlurmExecutor  # lazy: only the submitit executor needs it
+
+        valid = SlurmExecutor._valid_parameters()
+        unknown = sorted(set(self.slurm.extra) - valid)
+        if unknown:
+            raise ConfigError(
+                f"unknown executor.slurm.extra parameter(s) {', '.join(unknown)}; "
+                f"valid: {', '.join(sorted(valid))}"
+            )
+
+
+def _known(cls: type, options: dict[str, Any], path: str) -> dict[str, Any]:
+    """``options`` of the dataclass ``cls`` at ``path``, unknown keys refused.
+
+    Raises:
+        ConfigError: a key ``cls`` does not have, naming the valid ones.
+    """
+    known = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ConfigError(
+            f"unknown option(s) {', '.join(path + k for k in unknown)}; "
+            f"valid: {', '.join(path + k for k in known)}"
+        )
+    return options
 
 
 @dataclass(frozen=True)
@@ -208,8 +334,10 @@ class ExperimentJob:
         settings: the ``experiment`` group.
         task: the ``task`` group.
         fit: the ``predictor``, ``sequencer`` and ``trainer`` groups.
+        executor: the ``executor`` node (used by ``experiment.executor=submitit``).
     """
 
     settings: ExperimentSettings
     task: TaskConfig
     fit: FitSettings
+    executor: ExecutorSettings = field(default_factory=ExecutorSettings)

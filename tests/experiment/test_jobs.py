@@ -20,10 +20,10 @@ from cpmp.data.datafile import load_demonstrations
 from cpmp.errors import ConfigError, DataError
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint, train_from_file
+from cpmp.experiment.executors import default_workers
 from cpmp.experiment.jobs import run_experiment
 from cpmp.experiment.settings import ExperimentSettings
 from cpmp.experiment.strategies import strategy_map, strategy_signatures
-from cpmp.experiment.workers import default_workers
 from cpmp.recordings import read_recording, read_views
 from cpmp.recordings.demos import label_switches, record_demo_rrd
 from cpmp.recordings.layout import blueprint_paths
@@ -369,31 +369,50 @@ def test_default_workers_is_cores_or_seeds():
 
 @pytest.mark.slow
 def test_two_workers_give_the_serial_report(tmp_path, caplog):
-    """Two seeds of ``experiment=tiny`` run serially and on two worker processes: every
-    number of the report and of every episode is the same; the workers' log lines reach
-    this process, prefixed with their job."""
+    """Two seeds of ``experiment=tiny`` run serially, on two worker processes and as submitit
+    jobs (``cluster=local``, two at once): every number of the report and of every episode is
+    the same; the workers' log lines reach this process, prefixed with their job."""
 
     overrides = ["experiment=tiny", "experiment.seeds=[0,1]", "experiment.record=none"]
     runs = {}
-    for workers in (1, 2):
-        cfg = compose_cfg("experiment", [*overrides, f"experiment.workers={workers}"])
+    executors = {
+        1: ["experiment.workers=1"],
+        2: ["experiment.workers=2"],
+        3: [
+            "experiment.workers=2",
+            "experiment.executor=submitit",
+            f"executor.folder={tmp_path / 'submitit'}",
+        ],
+    }
+    for run, more in executors.items():
+        cfg = compose_cfg("experiment", [*overrides, *more])
         with caplog.at_level(logging.INFO, logger="cpmp"):
-            runs[workers] = run_experiment(cfg, tmp_path / f"workers_{workers}").parent
-    reports = [json.loads((runs[w] / "report.json").read_text()) for w in (1, 2)]
+            runs[run] = run_experiment(cfg, tmp_path / f"run_{run}").parent
+        if run == 2:
+            messages = [record.getMessage() for record in caplog.records]
+    reports = [json.loads((runs[w] / "report.json").read_text()) for w in runs]
     assert [r["seed"] for r in reports[1]["per_seed"]] == [0, 1]
     assert without_timings(reports[0]) == without_timings(reports[1])
+    assert without_timings(reports[0]) == without_timings(reports[2])
     assert (runs[1] / "report.md").read_text() == (runs[2] / "report.md").read_text()
-    episodes = [json.loads((runs[w] / "episodes.json").read_text()) for w in (1, 2)]
+    assert (runs[1] / "report.md").read_text() == (runs[3] / "report.md").read_text()
+    episodes = [json.loads((runs[w] / "episodes.json").read_text()) for w in runs]
     assert len(episodes[0]) == 4  # 2 seeds x 2 boxes
     assert without_timings(episodes[0]) == without_timings(episodes[1])
-    timings = [json.loads((runs[w] / "timings.json").read_text()) for w in (1, 2)]
-    assert [t["workers"] for t in timings] == [1, 2]
-    for seed in (0, 1):
-        assert (runs[2] / f"seed_{seed}" / "model_D3.pt").is_file()
-        assert (runs[2] / f"seed_{seed}" / "lightning" / "D3").is_dir()
-    messages = [record.getMessage() for record in caplog.records]
+    assert without_timings(episodes[0]) == without_timings(episodes[2])
+    timings = [json.loads((runs[w] / "timings.json").read_text()) for w in runs]
+    assert [(t["executor"], t["workers"]) for t in timings] == [
+        ("local", 1),
+        ("local", 2),
+        ("submitit", 2),
+    ]
+    for run in (2, 3):
+        for seed in (0, 1):
+            assert (runs[run] / f"seed_{seed}" / "model_D3.pt").is_file()
+            assert (runs[run] / f"seed_{seed}" / "lightning" / "D3").is_dir()
     assert any(m.startswith("[seed 1 D=3] ") and "reproduce" in m for m in messages)
     assert any(m.startswith("[seed 0] ") and "collect" in m for m in messages)
+    assert len(list((tmp_path / "submitit").glob("*_result.pkl"))) == 4  # 2 seeds x (1 + 1 D)
 
 
 def test_a_wrong_start_recording_shows_its_scene_and_its_start_decision(tiny):

@@ -1,0 +1,508 @@
+"""What runs the jobs of the main job and of the comparison: one interface, three backends.
+
+A job is a call of a module-level function on picklable arguments (a seed's collection, a
+(seed, D) training size, a comparison's (world, seed, row, D) fit). :class:`JobExecutor`
+submits it and returns a future (``done()``, ``result()``); :meth:`JobExecutor.wait_first`
+waits for the first of several to finish; :func:`run_queue` keeps ``slots`` jobs in flight,
+handing each result to the scheduler, which may then queue more (a seed's training sizes once
+its collection is done). The backends (``experiment.executor``, :func:`make_executor`):
+
+- ``inline`` (:class:`InlineExecutor`): each job runs in this process when submitted, one
+  after the other (for debugging and tests);
+- ``local`` (:class:`LocalExecutor`): a pool of spawned worker processes on this machine, one
+  torch thread each, every worker's log records sent to this process prefixed with their job
+  (with one worker: in this process, as ``inline``);
+- ``submitit`` (:class:`SubmititExecutor`): one ``submitit`` job per job, as a local process
+  (``executor.cluster=local``) or a SLURM job (``slurm``), its call, result and log in
+  ``executor.folder``.
+
+Every job seeds itself and depends only on its arguments, so the numbers do not depend on the
+backend, the worker count or the order in which jobs finish (tested).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import logging.handlers
+import multiprocessing
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from types import TracebackType
+from typing import Any, NamedTuple, Protocol
+
+from cpmp.errors import ConfigError, CpmpError
+from cpmp.experiment.settings import EXECUTORS, ExecutorSettings
+
+log = logging.getLogger(__name__)
+
+POLL_S = 0.2
+"""How often [s] :class:`SubmititExecutor` looks whether a job finished (a file check; on
+SLURM submitit asks ``sacct`` at most once a minute)."""
+
+
+class JobFuture(Protocol):
+    """A submitted job: ``concurrent.futures.Future``'s ``done`` and ``result``."""
+
+    def done(self) -> bool:
+        """Whether the job finished (with a result or an error)."""
+        ...
+
+    def result(self) -> Any:
+        """The job's result, waiting for it; re-raises the job's exception."""
+        ...
+
+
+class JobExecutor:
+    """Runs jobs; a context manager that releases what it started on exit.
+
+    Attributes:
+        name: the backend (:data:`~cpmp.experiment.settings.EXECUTORS`).
+        slots: how many jobs the schedulers keep in flight at once.
+    """
+
+    name = ""
+
+    def __init__(self, slots: int = 1) -> None:
+        self.slots = max(1, int(slots))
+
+    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+        """Run ``fn(*args)`` as a job.
+
+        Args:
+            fn: a module-level function (pickled to the workers).
+            *args: its picklable arguments.
+            label: the job in words (``seed 0 D=3``): the prefix of its log lines.
+
+        Returns:
+            The job's future.
+        """
+        raise NotImplementedError
+
+    def wait_first(self, futures: Iterable[JobFuture]) -> list[JobFuture]:
+        """Wait until at least one of ``futures`` is done; return every done one."""
+        futures = list(futures)
+        while True:
+            done = [f for f in futures if f.done()]
+            if done or not futures:
+                return done
+            time.sleep(POLL_S)
+
+    def __enter__(self) -> JobExecutor:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        return None
+
+
+class _Done:
+    """The future of a job that already ran: its result or its exception."""
+
+    def __init__(self, value: Any = None, error: BaseException | None = None) -> None:
+        self._value = value
+        self._error = error
+
+    def done(self) -> bool:
+        return True
+
+    def result(self) -> Any:
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
+class InlineExecutor(JobExecutor):
+    """Each job runs in this process when it is submitted (one slot, submission order)."""
+
+    name = "inline"
+
+    def __init__(self) -> None:
+        super().__init__(1)
+
+    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+        """Run ``fn(*args)`` now; its future holds the result or the exception."""
+        try:
+            return _Done(fn(*args))
+        except Exception as err:  # handed back by result(), as a pool's future does
+            return _Done(error=err)
+
+
+# --------------------------------------------------------------- local: spawned processes
+def default_workers(n_jobs: int) -> int:
+    """``min(cores, n_jobs)``: the worker count of ``experiment.workers: null``."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, n_jobs))
+
+
+def one_thread() -> None:
+    """Worker start-up: one torch thread.
+
+    A second busy thread per process on a machine of few cores slows every process down, and
+    one thread everywhere keeps the numbers those of this process.
+    """
+    import torch  # lazy: the executors are chosen before torch is needed
+
+    torch.set_num_threads(1)
+
+
+_JOB_LABEL = ""
+"""In a worker process: the prefix of its log lines (the job's seed and D)."""
+
+
+class _JobPrefix(logging.Filter):
+    """Prefix every record a worker sends to the main process with its job's label."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if _JOB_LABEL:
+            record.msg = f"[{_JOB_LABEL}] {record.getMessage()}"
+            record.args = None
+        return True
+
+
+class _Dispatch(logging.Handler):
+    """Hands a worker's record to the main process's logger of the same name.
+
+    So the record reaches the handlers Hydra configured: console and job log.
+    """
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logger = logging.getLogger(record.name)
+        if logger.isEnabledFor(record.levelno):
+            logger.handle(record)
+
+
+@contextlib.contextmanager
+def _no_bars() -> Iterator[None]:
+    """``TQDM_DISABLE=1`` while jobs start, restored afterwards.
+
+    Jobs show no progress bars (two would overwrite each other; the main process reports their
+    progress): tqdm reads ``TQDM_DISABLE`` when imported, and spawned processes, submitit's
+    local processes and SLURM jobs inherit the environment they are started with.
+    """
+    bars = os.environ.get("TQDM_DISABLE")
+    os.environ["TQDM_DISABLE"] = "1"
+    try:
+        yield
+    finally:
+        if bars is None:
+            os.environ.pop("TQDM_DISABLE", None)
+        else:
+            os.environ["TQDM_DISABLE"] = bars
+
+
+@contextlib.contextmanager
+def spawned_pool(
+    workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
+) -> Iterator[ProcessPoolExecutor]:
+    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, shut down on exit.
+
+    Each worker starts with ``initializer(*initargs)`` (default: one torch thread) and without
+    progress bars (:func:`_no_bars`).
+    """
+    with _no_bars():
+        context = multiprocessing.get_context("spawn")
+        pool = ProcessPoolExecutor(
+            workers, context, initializer=initializer or one_thread, initargs=initargs
+        )
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _init_worker(queue: Any, level: int) -> None:
+    """Worker start-up: one torch thread, every log record sent to the main process."""
+    one_thread()
+    handler = logging.handlers.QueueHandler(queue)
+    handler.addFilter(_JobPrefix())
+    root = logging.getLogger()
+    root.handlers = [handler]
+    root.setLevel(level)
+
+
+def _labelled(label: str, function: Callable[..., Any], *args: Any) -> Any:
+    """In a worker: ``function(*args)`` with every log line prefixed with ``label``."""
+    global _JOB_LABEL
+    _JOB_LABEL = label
+    return function(*args)
+
+
+class LocalExecutor(JobExecutor):
+    """A pool of ``workers`` spawned processes on this machine (the ``local`` backend).
+
+    One torch thread per worker; the workers' log records reach this process's handlers,
+    prefixed with their job's label.
+    """
+
+    name = "local"
+
+    def __init__(self, workers: int) -> None:
+        super().__init__(workers)
+        self._stack = contextlib.ExitStack()
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> LocalExecutor:
+        queue = multiprocessing.get_context("spawn").Queue()
+        listener = logging.handlers.QueueListener(queue, _Dispatch())
+        level = logging.getLogger("cpmp").getEffectiveLevel()
+        listener.start()
+        self._stack.callback(listener.stop)
+        try:
+            self._pool = self._stack.enter_context(
+                spawned_pool(self.slots, _init_worker, (queue, level))
+            )
+        except BaseException:
+            self._stack.close()
+            raise
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self._pool = None
+        self._stack.close()
+
+    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+        """Queue ``fn(*args)`` on the pool, its log lines prefixed with ``label``."""
+        if self._pool is None:
+            raise RuntimeError("submit a job inside `with LocalExecutor(...):`")
+        return self._pool.submit(_labelled, label, fn, *args)
+
+    def wait_first(self, futures: Iterable[JobFuture]) -> list[JobFuture]:
+        """``concurrent.futures.wait`` for the first of the pool's futures."""
+        futures = list(futures)
+        if not futures:
+            return []
+        done, _ = wait(futures, return_when=FIRST_COMPLETED)  # type: ignore[arg-type]
+        return [f for f in futures if f in done]
+
+
+# ----------------------------------------------------------------- submitit: local or SLURM
+class _Raised(NamedTuple):
+    """A :class:`~cpmp.errors.CpmpError` a submitit job raised, re-raised by its future."""
+
+    error: CpmpError
+
+
+def _submitit_call(label: str, level: int, fn: Callable[..., Any], *args: Any) -> Any:
+    """In a submitit job: one torch thread, log lines prefixed with ``label``, ``fn(*args)``.
+
+    The log lines go to the job's standard error (``<folder>/<job id>_0_log.err``).
+    """
+    one_thread()
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(
+        logging.Formatter(f"[%(asctime)s][%(name)s][%(levelname)s] [{label}] %(message)s")
+    )
+    root = logging.getLogger()
+    root.handlers = [handler]
+    root.setLevel(level)
+    try:
+        return fn(*args)
+    except CpmpError as err:  # a user error keeps its type (submitit would wrap it)
+        return _Raised(err)
+
+
+class _SubmititFuture:
+    """A submitit job's future: its ``result()`` re-raises a user error with its own type."""
+
+    def __init__(self, job: Any, label: str) -> None:
+        self.job = job
+        self.label = label
+
+    def done(self) -> bool:
+        return bool(self.job.done())
+
+    def result(self) -> Any:
+        value = self.job.result()
+        if isinstance(value, _Raised):
+            raise value.error
+        return value
+
+
+def _job_name(label: str) -> str:
+    """A SLURM job name for ``label``: ``cpmp_seed_0_D=3``."""
+    return "cpmp_" + re.sub(r"[^\w=.-]+", "_", label).strip("_") if label else "cpmp"
+
+
+def submitit_parameters(settings: ExecutorSettings) -> dict[str, Any]:
+    """``submitit.AutoExecutor.update_parameters``'s arguments for the ``executor`` node.
+
+    ``time`` and ``cpus_per_task`` are submitit's generic ``timeout_min`` and
+    ``cpus_per_task`` (they apply to ``cluster=local`` too); the others are ``slurm_*``.
+    """
+    slurm = settings.slurm
+    out: dict[str, Any] = {
+        "timeout_min": slurm.time,
+        "cpus_per_task": slurm.cpus_per_task,
+        "slurm_array_parallelism": slurm.array_parallelism,
+    }
+    if slurm.partition:
+        out["slurm_partition"] = slurm.partition
+    if slurm.mem:
+        out["slurm_mem"] = slurm.mem
+    out.update({f"slurm_{key}": value for key, value in slurm.extra.items()})
+    return out
+
+
+class SubmititExecutor(JobExecutor):
+    """One submitit job per job: a local process or a SLURM job (the ``submitit`` backend).
+
+    Each job's call, result and log are in ``settings.folder``; a job runs one torch thread
+    and writes its log lines, prefixed with its label, to its ``<job id>_0_log.err``. Jobs
+    still running when the executor exits with an error are cancelled.
+    """
+
+    name = "submitit"
+
+    def __init__(self, settings: ExecutorSettings, slots: int) -> None:
+        super().__init__(slots)
+        settings.check(self.name)
+        import submitit  # lazy: only this backend needs it
+
+        self.folder = Path(str(settings.folder))
+        self.cluster = settings.cluster
+        self._executor = submitit.AutoExecutor(folder=self.folder, cluster=settings.cluster)
+        try:
+            self._executor.update_parameters(**submitit_parameters(settings))
+        except NameError as err:  # submitit's unknown parameter
+            raise ConfigError(f"executor.slurm: {err}") from None
+        self._futures: list[_SubmititFuture] = []
+
+    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+        """Submit ``fn(*args)`` as a submitit job named after ``label``."""
+        level = logging.getLogger("cpmp").getEffectiveLevel()
+        self._executor.update_parameters(name=_job_name(label))
+        with _no_bars():
+            job = self._executor.submit(_submitit_call, label, level, fn, *args)
+        log.info(
+            "%s: submitit job %s (%s), log %s", label, job.job_id, self.cluster, job.paths.stderr
+        )
+        future = _SubmititFuture(job, label)
+        self._futures.append(future)
+        return future
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        for future in self._futures:
+            if not future.done():
+                future.job.cancel(check=False)
+        self._futures.clear()
+
+
+def make_executor(name: str, settings: ExecutorSettings, workers: int) -> JobExecutor:
+    """The backend ``name`` (``experiment.executor``) with ``workers`` jobs at once.
+
+    ``local`` with one worker runs in this process (``inline``).
+
+    Args:
+        name: ``inline``, ``local`` or ``submitit``.
+        settings: the ``executor`` node (``submitit`` only).
+        workers: jobs in flight at once (worker processes of ``local``).
+
+    Raises:
+        ConfigError: an unknown name (naming the valid ones); ``submitit`` without a folder.
+    """
+    if name not in EXECUTORS:
+        raise ConfigError(
+            f"experiment.executor must be one of {', '.join(EXECUTORS)}, got {name!r}"
+        )
+    if name == "submitit":
+        return SubmititExecutor(settings, workers)
+    if name == "local" and workers > 1:
+        return LocalExecutor(workers)
+    return InlineExecutor()
+
+
+def job_slots(
+    name: str,
+    settings: ExecutorSettings,
+    workers: int | None,
+    n_jobs: int,
+    auto: int | None = None,
+) -> int:
+    """How many of ``n_jobs`` jobs run at once: ``experiment.workers`` or its default.
+
+    Args:
+        name: the executor (``experiment.executor``).
+        settings: the ``executor`` node.
+        workers: ``experiment.workers`` (``None``: the default).
+        n_jobs: how many jobs there are (the most that can run at once).
+        auto: the default's cap besides the cores (the main job: its seeds; ``None``:
+            ``n_jobs``).
+
+    Returns:
+        1 for ``inline``; else ``workers``, by default :func:`default_workers` (one per core,
+        at most ``auto``), on SLURM ``executor.slurm.array_parallelism``; at most ``n_jobs``.
+    """
+    if name == "inline":
+        return 1
+    if workers is None:
+        on_slurm = name == "submitit" and settings.cluster == "slurm"
+        cap = n_jobs if auto is None else auto
+        workers = settings.slurm.array_parallelism if on_slurm else default_workers(cap)
+    return max(1, min(workers, n_jobs))
+
+
+class Submission(NamedTuple):
+    """A job for :func:`run_queue`: its key, function, arguments and label."""
+
+    key: Any
+    """What the scheduler calls it (handed back with its result)."""
+    fn: Callable[..., Any]
+    """A module-level function."""
+    args: tuple[Any, ...]
+    """Its picklable arguments."""
+    label: str
+    """The job in words (its log lines' prefix)."""
+
+
+def run_queue(
+    executor: JobExecutor,
+    next_job: Callable[[], Submission | None],
+    finished: Callable[[Any, Any], None],
+) -> None:
+    """Keep ``executor.slots`` jobs in flight until ``next_job`` has none left.
+
+    Args:
+        executor: an entered executor.
+        next_job: the next job to submit, or ``None`` for none now (it may have more after
+            a result came back).
+        finished: ``finished(key, result)`` of every job, as it finishes (the jobs finished
+            at the same time in submission order); it may make ``next_job`` give more.
+
+    Raises:
+        Exception: the first job error, as the job raised it.
+    """
+    pending: dict[Any, tuple[int, Any]] = {}
+    submitted = 0
+    while True:
+        while len(pending) < executor.slots and (job := next_job()) is not None:
+            future = executor.submit(job.fn, *job.args, label=job.label)
+            pending[future] = (submitted, job.key)
+            submitted += 1
+        if not pending:
+            return
+        for future in sorted(executor.wait_first(pending), key=lambda f: pending[f][0]):
+            _, key = pending.pop(future)
+            finished(key, future.result())
