@@ -38,7 +38,7 @@ import pyarrow.parquet as pq
 import yaml
 
 from cpmp.data import Demonstration
-from cpmp.errors import DataError
+from cpmp.errors import ConfigError, DataError
 from cpmp.io import atomic_path, atomic_write_text
 
 CODEBASE_VERSION = "v3.0"
@@ -80,7 +80,7 @@ def _arrow_column(values: np.ndarray, column: str) -> tuple[pa.Array, dict[str, 
             "shape": [1],
             "names": None,
         }
-    raise ValueError(
+    raise DataError(
         f"column {column}: give (n,) numbers or strings or (n, k) numbers, got shape "
         f"{values.shape} of dtype {values.dtype}"
     )
@@ -170,18 +170,18 @@ def write_lerobot_v3(
         ``root``.
 
     Raises:
-        ValueError: no episodes, episodes with other columns or fewer than two frames, a
-            column of another length or kind, a default column given, ``fps`` or
-            ``episodes_per_file`` below 1.
+        DataError: no episodes, episodes with other columns or fewer than two frames, a
+            column of another length or kind, a default column given.
+        ConfigError: ``fps`` or ``episodes_per_file`` below 1.
     """
     root = Path(root)
     if not episodes:
-        raise ValueError("a LeRobot dataset needs at least one episode")
+        raise DataError("a LeRobot dataset needs at least one episode")
     if int(fps) < 1 or int(episodes_per_file) < 1:
-        raise ValueError(f"fps and episodes_per_file must be >= 1, got {fps}, {episodes_per_file}")
+        raise ConfigError(f"fps and episodes_per_file must be >= 1, got {fps}, {episodes_per_file}")
     given = list(episodes[0])
     if set(given) & set(DEFAULT_COLUMNS):
-        raise ValueError(f"the writer adds {', '.join(DEFAULT_COLUMNS)}; do not give them")
+        raise DataError(f"the writer adds {', '.join(DEFAULT_COLUMNS)}; do not give them")
     order = _column_order(given)
     names = dict(names or {})
     files: list[list[pa.Table]] = []
@@ -190,11 +190,11 @@ def write_lerobot_v3(
     index = 0
     for k, frames in enumerate(episodes):
         if list(frames) != given:
-            raise ValueError(f"episode {k} has columns {list(frames)}, episode 0 {given}")
+            raise DataError(f"episode {k} has columns {list(frames)}, episode 0 {given}")
         lengths = {c: len(np.asarray(v)) for c, v in frames.items()}
         n = next(iter(lengths.values()))
         if n < 2 or any(m != n for m in lengths.values()):
-            raise ValueError(f"episode {k}: columns of {lengths} frames; give >= 2, all equal")
+            raise DataError(f"episode {k}: columns of {lengths} frames; give >= 2, all equal")
         frame = np.arange(n, dtype=np.int64)
         columns = {
             **frames,
@@ -210,7 +210,7 @@ def write_lerobot_v3(
             if column in names:
                 entry["names"] = list(names[column])
             if entries.setdefault(column, entry) != entry:
-                raise ValueError(
+                raise DataError(
                     f"column {column}: episode {k} has {entry}, episode 0 {entries[column]}"
                 )
             arrays.append(array)
