@@ -205,18 +205,16 @@ def _no_bars() -> Iterator[None]:
 
 @contextlib.contextmanager
 def spawned_pool(
-    workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
+    workers: int, initializer: Callable[..., None], initargs: tuple
 ) -> Iterator[ProcessPoolExecutor]:
     """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, shut down on exit.
 
-    Each worker starts with ``initializer(*initargs)`` (default: one torch thread) and without
-    progress bars (:func:`_no_bars`).
+    Each worker starts with ``initializer(*initargs)`` and without progress bars
+    (:func:`_no_bars`).
     """
     with _no_bars():
         context = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(
-            workers, context, initializer=initializer or one_thread, initargs=initargs
-        )
+        pool = ProcessPoolExecutor(workers, context, initializer=initializer, initargs=initargs)
         try:
             yield pool
         finally:
