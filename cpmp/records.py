@@ -503,24 +503,10 @@ class FitReport:
         ``warnings``, ``stay_choices`` and ``entry_scale``. Values are as the fit gave them
         (:func:`cpmp.io.to_builtin` makes them plain for a checkpoint).
         """
-        out: dict[str, JsonValue] = {
-            "loss": self.loss,
-            "loss_history": list(self.loss_history),
-            "val_loss": list(self.val_loss),
-            "val_mae": list(self.val_mae),
-            "val_mae_final": self.val_mae_final,
-            "lr_history": list(self.lr_history),
-            "epochs": self.epochs,
-            "max_epochs": self.max_epochs,
-            "stopped_early": self.stopped_early,
-            "monitor": self.monitor,
-            "device": self.device,
-            "seconds": self.seconds,
-            "solver": self.solver,
-            "kind": self.kind,
-            "n_nodes": self.n_nodes,
-            "n_parameters": self.n_parameters,
-        }
+        out: dict[str, JsonValue] = {}
+        for key in _TRAINING_KEYS:  # the histories are tuples here, lists in JSON
+            value = getattr(self, key)
+            out[key] = list(value) if isinstance(value, tuple) else value
         if self.support_counts is not None:
             out["support_counts"] = dict(self.support_counts)
         if self.n_support_total is not None:
