@@ -15,7 +15,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Protocol, TypeVar
 
 import torch
 
@@ -23,9 +23,25 @@ from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.config import TaskConfig
 from cpmp.errors import CpmpError
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
+
+SettingsT = TypeVar("SettingsT")
+SettingsT_co = TypeVar("SettingsT_co", covariant=True)
 
 
-def _print_json(name: str, measure: Callable[[], Any]) -> int:
+class SettingsClass(Protocol[SettingsT_co]):
+    """A benchmark's settings class: built from the options given, or small with ``quick``."""
+
+    def __call__(self, **options: object) -> SettingsT_co:
+        """The settings of ``options`` (each field's default where not given)."""
+        ...
+
+    def quick(self, **options: object) -> SettingsT_co:
+        """The small settings of a test run, with ``options`` over them."""
+        ...
+
+
+def _print_json(name: str, measure: Callable[[], dict[str, JsonValue]]) -> int:
     """Print ``measure()`` as indented JSON and return 0.
 
     When it raises a :class:`CpmpError`, print ``<name>: error: ...`` to stderr and return 2.
@@ -39,8 +55,11 @@ def _print_json(name: str, measure: Callable[[], Any]) -> int:
     return 0
 
 
-def given_options(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, Any]:
-    """The options among ``names`` given on the command line (lists as tuples)."""
+def given_options(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, object]:
+    """The options among ``names`` given on the command line (lists as tuples).
+
+    The values are passed through to a settings class, which checks them.
+    """
     return {
         name: tuple(value) if isinstance(value, list) else value
         for name in names
@@ -51,10 +70,10 @@ def given_options(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str,
 def run_settings_benchmark(
     name: str,
     args: argparse.Namespace,
-    settings_class: Any,
-    options: dict[str, Any],
-    run: Callable[[Any, Callable[[str], None]], dict[str, Any]],
-    markdown: Callable[[dict[str, Any]], str],
+    settings_class: SettingsClass[SettingsT],
+    options: dict[str, object],
+    run: Callable[[SettingsT, Callable[[str], None]], dict[str, JsonValue]],
+    markdown: Callable[[dict[str, JsonValue]], str],
 ) -> int:
     """The command line's end of a benchmark with a settings class (``bench_clock``, ...).
 
@@ -189,7 +208,7 @@ def bench_sequencer_main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.threads)
 
-    def measure() -> dict[str, Any]:
+    def measure() -> dict[str, JsonValue]:
         if args.data:
             demos = load_demonstrations(args.data, split=args.split)
         else:
@@ -222,7 +241,7 @@ def bench_sim_main(argv: list[str] | None = None) -> int:
 
     cfg = TaskConfig()
 
-    def measure() -> dict[str, Any]:
+    def measure() -> dict[str, JsonValue]:
         box = Box(args.width, args.depth, cfg.box_height)
         return benchmark(cfg, box, args.threads, n_demos=args.demos, seed=args.seed)
 

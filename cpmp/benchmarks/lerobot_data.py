@@ -30,7 +30,6 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -40,6 +39,7 @@ import yaml
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError
 from cpmp.io import atomic_path, atomic_write_text
+from cpmp.records import JsonValue
 
 CODEBASE_VERSION = "v3.0"
 """The ``codebase_version`` written to ``meta/info.json``."""
@@ -59,7 +59,7 @@ TIME_TOLERANCE = 1e-6
 """[s] a demonstration's sample ``i`` must lie this close to ``i / fps`` after its first."""
 
 
-def _arrow_column(values: np.ndarray, column: str) -> tuple[pa.Array, dict[str, Any]]:
+def _arrow_column(values: np.ndarray, column: str) -> tuple[pa.Array, dict[str, JsonValue]]:
     """A frame column as an arrow array and its ``info.json`` entry (``names`` left ``None``).
 
     Args:
@@ -185,7 +185,7 @@ def write_lerobot_v3(
     order = _column_order(given)
     names = dict(names or {})
     files: list[list[pa.Table]] = []
-    entries: dict[str, dict[str, Any]] = {}
+    entries: dict[str, dict[str, JsonValue]] = {}
     episode_rows = []
     index = 0
     for k, frames in enumerate(episodes):
@@ -335,7 +335,7 @@ def write_demonstrations(
     )
 
 
-def import_mapping(demos: Sequence[Demonstration]) -> dict[str, Any]:
+def import_mapping(demos: Sequence[Demonstration]) -> dict[str, JsonValue]:
     """The ``cpmp-import`` mapping of a dataset :func:`write_demonstrations` wrote of ``demos``.
 
     It maps ``observation.state`` to the demonstrations' feature names and each ``v_mp``
@@ -355,7 +355,7 @@ def import_mapping(demos: Sequence[Demonstration]) -> dict[str, Any]:
     }
 
 
-def write_import_mapping(path: str | os.PathLike[str], mapping: Mapping[str, Any]) -> Path:
+def write_import_mapping(path: str | os.PathLike[str], mapping: Mapping[str, JsonValue]) -> Path:
     """Write ``mapping`` as the YAML file ``cpmp-import mapping=<path>`` reads (atomically).
 
     Returns:

@@ -10,12 +10,12 @@ import os
 import platform
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import torch
 
 from cpmp.benchmarks.sequencer import TICK_TARGET_MS
 from cpmp.experiment.plots import new_figure, save_figure
+from cpmp.records import JsonValue
 
 
 # ------------------------------------------------------------------------- machine facts
@@ -35,7 +35,7 @@ def load_average() -> list[float] | None:
         return None
 
 
-def machine_facts(threads: int) -> dict[str, Any]:
+def machine_facts(threads: int) -> dict[str, JsonValue]:
     """The machine, for ``bench.json``: cores, threads, versions, platform, load average.
 
     ``threads`` (torch and BLAS), the Python, torch and scikit-learn versions, and the load
@@ -59,7 +59,7 @@ def machine_facts(threads: int) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------ plot, markdown
-def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
+def plot_scaling(scaling: Mapping[str, JsonValue], path: str | Path) -> Path:
     """Log-log plot of the ``scaling`` section; returns ``path``.
 
     Fit time (klr fit, Newton solve, scikit-learn peer) [s] and tick cost (single, batched)
@@ -99,7 +99,7 @@ def plot_scaling(scaling: Mapping[str, Any], path: str | Path) -> Path:
     return save_figure(figure, path)
 
 
-def bench_markdown(result: Mapping[str, Any]) -> str:
+def bench_markdown(result: Mapping[str, JsonValue]) -> str:
     """The benchmark as Markdown tables."""
     m = result["machine"]
     lines = [

@@ -46,13 +46,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
 from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.errors import ConfigError
+from cpmp.records import JsonValue
 
 WORLDS = ("two_point", "relay")
 """The worlds measured by default."""
@@ -185,12 +185,15 @@ class ScaleSettings:
             raise ConfigError(f"--pythonpath {self.pythonpath!r} holds no cpmp package")
 
     @classmethod
-    def quick(cls, **options: Any) -> ScaleSettings:
+    def quick(cls, **options: object) -> ScaleSettings:
         """A small run for the tests: two_point at 4 and 8 demos, 2 held out, 2 episodes.
 
         The ``lerobot`` leg runs at 3 episodes.
+
+        Args:
+            **options: fields of :class:`ScaleSettings` over those (passed through).
         """
-        values: dict[str, Any] = {
+        values: dict[str, object] = {
             "worlds": ("two_point",),
             "sizes": (4, 8),
             "held_out": 2,
@@ -218,7 +221,7 @@ def _failure(done: subprocess.CompletedProcess[str]) -> str:
 
 def measure_size(
     world: str, demos: int, settings: ScaleSettings, demos_file: str | None = None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """One size of one world, measured in a fresh process (see the module docstring).
 
     Args:
@@ -241,7 +244,7 @@ def measure_size(
         "demos_file": demos_file,
     }
     env = _environment(settings)
-    row: dict[str, Any] = {"world": world, "D": demos}
+    row: dict[str, JsonValue] = {"world": world, "D": demos}
     try:
         done = subprocess.run(
             [sys.executable, "-c", _MEASURE, json.dumps(args)],
@@ -262,7 +265,7 @@ def measure_size(
 
 def run_import(
     mapping: Path, dataset: Path, output: Path, run_dir: Path, settings: ScaleSettings
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """``cpmp-import mapping=... input=... output=...`` in a process of its own.
 
     The process calls :data:`IMPORT_ENTRY_POINT` on the command line, as the installed
@@ -310,7 +313,7 @@ def run_import(
     return {"import_s": seconds, "import_rss_gb": measured["rss_gb"]}
 
 
-def measure_lerobot(settings: ScaleSettings) -> dict[str, Any]:
+def measure_lerobot(settings: ScaleSettings) -> dict[str, JsonValue]:
     """The ``lerobot`` leg (see the module docstring): write, ``cpmp-import``, fit, measure.
 
     Everything is written to a temporary folder, removed afterwards.
@@ -323,7 +326,7 @@ def measure_lerobot(settings: ScaleSettings) -> dict[str, Any]:
         ``files``, ``import_s`` [s], ``import_rss_gb`` [GB] and the measures of
         :func:`measure_size`, or ``error`` when a step failed.
     """
-    row: dict[str, Any] = {"world": LEROBOT_WORLD, "D": settings.lerobot, "source": "lerobot"}
+    row: dict[str, JsonValue] = {"world": LEROBOT_WORLD, "D": settings.lerobot, "source": "lerobot"}
     try:
         from cpmp.benchmarks.lerobot_data import (  # lazy: pyarrow, the import extra
             import_mapping,
@@ -376,7 +379,9 @@ def growth_exponent(samples: Sequence[float], values: Sequence[float]) -> float 
     return sum((a - mx) * (b - my) for a, b in zip(x, y, strict=True)) / sxx
 
 
-def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def summarise(
+    rows: Sequence[Mapping[str, JsonValue]],
+) -> dict[str, dict[str, dict[str, JsonValue]]]:
     """Per world the growth exponents and, where their sizes were run, the targets.
 
     Args:
@@ -386,12 +391,12 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
         world -> ``exponents`` (``fit``, ``rss``, ``fit_last``, ``rss_last``) and ``targets``
         (each target's measured value and whether it is met).
     """
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, dict[str, dict[str, JsonValue]]] = {}
     for world in dict.fromkeys(r["world"] for r in rows):
         ok = [r for r in rows if r["world"] == world and "error" not in r]
         samples = [r["samples"] for r in ok]
         last = ok[-2:]
-        exponents = {
+        exponents: dict[str, JsonValue] = {
             "fit": growth_exponent(samples, [r["fit_s"] for r in ok]),
             "rss": growth_exponent(samples, [r["peak_rss_gb"] for r in ok]),
             "fit_last": growth_exponent([r["samples"] for r in last], [r["fit_s"] for r in last]),
@@ -403,10 +408,14 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _targets(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Issue #34's targets on one world's rows (those whose sizes were run)."""
+def _targets(rows: Sequence[Mapping[str, JsonValue]]) -> dict[str, JsonValue]:
+    """Issue #34's targets on one world's rows (those whose sizes were run).
+
+    Returns:
+        target -> ``value`` (measured) and ``met``, for the targets whose sizes were run.
+    """
     by_d = {r["D"]: r for r in rows}
-    out: dict[str, Any] = {}
+    out: dict[str, JsonValue] = {}
     big = by_d.get(768)
     if big is None:
         return out
@@ -430,7 +439,7 @@ def _targets(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def run_scale_benchmark(
     settings: ScaleSettings, log: Callable[[str], None] = lambda line: None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Every world and size, then the exponents and targets (see the module docstring).
 
     Args:
@@ -467,12 +476,12 @@ def run_scale_benchmark(
     }
 
 
-def _label(row: dict[str, Any]) -> str:
+def _label(row: Mapping[str, JsonValue]) -> str:
     """A row's world, and how its demonstrations came (``via LeRobot v3``)."""
     return row["world"] + (" via LeRobot v3" if row.get("source") == "lerobot" else "")
 
 
-def _line(row: dict[str, Any]) -> str:
+def _line(row: Mapping[str, JsonValue]) -> str:
     """One row as a progress line."""
     if "error" in row:
         return f"{_label(row)} D={row['D']}: {row['error']}"
@@ -483,7 +492,7 @@ def _line(row: dict[str, Any]) -> str:
     )
 
 
-def markdown(result: dict[str, Any]) -> str:
+def markdown(result: Mapping[str, JsonValue]) -> str:
     """The rows as a Markdown table, the exponents per world, the ``lerobot`` leg's import.
 
     The ``lerobot`` row (when the result has one) is the table's last.

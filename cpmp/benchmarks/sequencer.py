@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 import torch
 
 from cpmp.benchmarks.settings import BenchSettings, check_count
+from cpmp.data.demonstration import Demonstration
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.two_point import make_demonstrations as two_point_demos
 
@@ -25,12 +26,12 @@ TICK_TARGET_MS = 0.1
 
 
 def bench_sequencer(
-    demos: Sequence[Any],
+    demos: Sequence[Demonstration],
     predictors: Sequence[str],
     n_ticks: int = 500,
     seed: int = 0,
-    options: Mapping[str, Mapping[str, Any]] | None = None,
-) -> dict[str, Any]:
+    options: Mapping[str, Mapping[str, JsonValue]] | None = None,
+) -> dict[str, JsonValue]:
     """Fit each predictor on ``demos`` and time :meth:`ConcurrentSequencer.step`.
 
     The steps run over the first demo's feature stream (``n_ticks`` ticks, cycling).
@@ -40,11 +41,12 @@ def bench_sequencer(
     Returns per predictor: fit time [s], epochs run (the fit summary's ``epochs``), final
     loss, step latency mean/p95 [ms], nodes, support points, parameter count and bytes.
     """
-    out: dict[str, Any] = {
+    rows: dict[str, JsonValue] = {}
+    out: dict[str, JsonValue] = {
         "n_demos": len(demos),
         "n_features": int(demos[0].n_features),
         "torch_threads": torch.get_num_threads(),
-        "predictors": {},
+        "predictors": rows,
     }
     stream = demos[0].features
     for kind in predictors:
@@ -61,7 +63,7 @@ def bench_sequencer(
             times[k] = time.perf_counter() - t0
         n_bytes = sum(t.numel() * t.element_size() for t in seq.predictor.state_dict().values())
         report = seq.fit_summary
-        out["predictors"][kind] = {
+        rows[kind] = {
             "fit_seconds": fit_s,
             "epochs": report.epochs,
             "max_epochs": extra.get("epochs", getattr(seq.predictor.config, "epochs", None)),
@@ -83,7 +85,7 @@ def bench_ticks(
     streams: Sequence[np.ndarray],
     ticks: int,
     dt: float = 0.01,
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Cost of the sequencer per episode-tick, one episode at a time and batched.
 
     ``len(streams)`` episodes of ``ticks`` ticks, episode ``i`` fed ``streams[i] (n_i, d)`` (its
@@ -130,7 +132,7 @@ def bench_ticks(
     }
 
 
-def bench_gradient(settings: BenchSettings) -> dict[str, Any]:
+def bench_gradient(settings: BenchSettings) -> dict[str, JsonValue]:
     """The Adam-trained predictors on ``gradient_demos`` synthetic demonstrations.
 
     As :func:`bench_sequencer`: fit time, epochs run, loss, step cost.

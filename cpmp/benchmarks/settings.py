@@ -6,7 +6,6 @@ They are checked on construction; nothing here runs a measurement.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from cpmp.errors import ConfigError
 
@@ -91,10 +90,13 @@ class BenchSettings:
             )
 
     @classmethod
-    def quick(cls, **overrides: Any) -> BenchSettings:
+    def quick(cls, **overrides: object) -> BenchSettings:
         """Small sizes: 3 demonstrations, 4 episodes, ``experiment=tiny``.
 
         The run time is in docs/benchmarks.md.
+
+        Args:
+            **overrides: fields of :class:`BenchSettings` (passed through; checked there).
         """
         small = {
             "fit_demos": 3,
@@ -112,7 +114,7 @@ class BenchSettings:
         return cls(**{**small, **overrides})
 
 
-def check_count(name: str, value: Any) -> None:
+def check_count(name: str, value: object) -> None:
     """Check that option ``name`` holds a whole number >= 1.
 
     Raises:

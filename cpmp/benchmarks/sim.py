@@ -14,7 +14,6 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -24,6 +23,7 @@ from cpmp.config import TaskConfig
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.experiment.strategies import balanced_subset
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, record_demonstration, sample_box
 from cpmp.sim.collect import sample_boxes
@@ -82,7 +82,7 @@ class SimData:
         return self._boxes
 
 
-def bench_realtime(sim: SimData) -> dict[str, Any]:
+def bench_realtime(sim: SimData) -> dict[str, JsonValue]:
     """Real-time factor of ``batch`` closed-loop episodes, one at a time and batched.
 
     The episodes run the fitted sequencer (:func:`cpmp.benchmarks.sim_speed.time_rollouts`).
@@ -94,16 +94,16 @@ def bench_realtime(sim: SimData) -> dict[str, Any]:
     return {
         "n_episodes": len(boxes),
         "target_real_time_factor": TARGET_REAL_TIME_FACTOR,
-        "single": single,
-        "batched": batched,
-        "speedup": single["wall_time_s"] / batched["wall_time_s"],
-        "same_outcomes": single["outcomes"] == batched["outcomes"],
+        "single": single.to_dict(),
+        "batched": batched.to_dict(),
+        "speedup": single.wall_time_s / batched.wall_time_s,
+        "same_outcomes": single.outcomes == batched.outcomes,
     }
 
 
 def bench_stages(
     experiment: str, threads: int = 1, overrides: Sequence[str] = ()
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Run the main job in a fresh process; its wall time and the seconds of every stage.
 
     ``cpmp-experiment experiment=<experiment> [overrides]`` runs as a user runs it; the

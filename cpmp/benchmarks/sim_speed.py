@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -13,11 +13,11 @@ from cpmp.config import FitConfig
 from cpmp.config.task import TaskConfig
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.records import Policy
+from cpmp.records import BatchedPolicy, JsonValue, Policy
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim.collect import record_demonstration, sample_boxes
 from cpmp.sim.policies import ReplayPolicy
-from cpmp.sim.runner import run_episode, run_episodes
+from cpmp.sim.runner import Outcome, run_episode, run_episodes
 from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import shared_kinematics
 
@@ -25,20 +25,71 @@ TARGET_REAL_TIME_FACTOR = 10.0
 """The speed the simulation issue asks for: >= 10x real time on one core, IK and policy in the
 loop."""
 
-LEARNED_POLICY: dict[str, Any] = {"predictor": FitConfig().predictor}
+LEARNED_POLICY: dict[str, str] = {"predictor": FitConfig().predictor}
 """The main job's default sequencer (``predictor=klr sequencer=coupled``, the defaults
 of :class:`~cpmp.config.FitConfig`; tested) as
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` options."""
 
 
+@dataclass(frozen=True)
+class RolloutTiming:
+    """Closed-loop episodes timed by :func:`time_rollouts`.
+
+    Attributes:
+        n_episodes: the episodes run.
+        batched: run all together (:func:`run_episodes`) rather than one at a time.
+        outcomes: each episode's outcome, in box order.
+        sim_time_s: simulated time [s] summed over the episodes.
+        wall_time_s: wall time [s] of running them.
+        ms_per_tick: wall time [ms] per episode-tick of ``physics``, ``kinematics`` (IK +
+            features), ``policy`` and ``other`` (the rest: bookkeeping).
+        share: the same parts as shares of the wall time (summing to 1).
+    """
+
+    n_episodes: int
+    batched: bool
+    outcomes: list[Outcome]
+    sim_time_s: float
+    wall_time_s: float
+    ms_per_tick: dict[str, float]
+    share: dict[str, float]
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated over wall time."""
+        return self.sim_time_s / self.wall_time_s
+
+    @property
+    def meets_target(self) -> bool:
+        """The real-time factor reaches :data:`TARGET_REAL_TIME_FACTOR`."""
+        return self.real_time_factor >= TARGET_REAL_TIME_FACTOR
+
+    def to_dict(self) -> dict[str, JsonValue]:
+        """The JSON form of the timing (what ``bench.json`` holds).
+
+        The fields in order, ``real_time_factor`` and ``meets_target`` after ``wall_time_s``.
+        """
+        return {
+            "n_episodes": self.n_episodes,
+            "batched": self.batched,
+            "outcomes": list(self.outcomes),
+            "sim_time_s": self.sim_time_s,
+            "wall_time_s": self.wall_time_s,
+            "real_time_factor": self.real_time_factor,
+            "meets_target": self.meets_target,
+            "ms_per_tick": dict(self.ms_per_tick),
+            "share": dict(self.share),
+        }
+
+
 def time_rollouts(
     boxes: Sequence[Box],
-    policy: Any,
+    policy: Policy | BatchedPolicy | Sequence[Policy],
     cfg: TaskConfig,
     expected: Sequence[Demonstration],
     batched: bool = False,
     max_time: float | None = None,
-) -> dict[str, Any]:
+) -> RolloutTiming:
     """Run one closed-loop episode per box and time them.
 
     One at a time with :func:`run_episode`, or all together with :func:`run_episodes`
@@ -50,7 +101,7 @@ def time_rollouts(
 
     Returns simulated and wall time [s] summed over the episodes, the real-time factor, cost
     per episode-tick [ms] and wall-time shares of physics, kinematics (IK + features), policy
-    and the rest (bookkeeping), and the outcomes in box order.
+    and the rest (bookkeeping), and the outcomes in box order (:class:`RolloutTiming`).
     """
     if len(expected) != len(boxes):
         raise ConfigError(
@@ -74,23 +125,24 @@ def time_rollouts(
     timing["other"] = wall - sum(timing.values())
     sim_time = float(sum(r.duration for r in results))
     ticks = max(sum(round(r.duration / cfg.control_dt) for r in results), 1)
-    return {
-        "n_episodes": len(results),
-        "batched": batched,
-        "outcomes": [r.outcome for r in results],
-        "sim_time_s": sim_time,
-        "wall_time_s": wall,
-        "real_time_factor": sim_time / wall,
-        "meets_target": sim_time / wall >= TARGET_REAL_TIME_FACTOR,
-        "ms_per_tick": {k: 1e3 * v / ticks for k, v in timing.items()},
-        "share": {k: v / wall for k, v in timing.items()},
-    }
+    return RolloutTiming(
+        n_episodes=len(results),
+        batched=batched,
+        outcomes=[r.outcome for r in results],
+        sim_time_s=sim_time,
+        wall_time_s=wall,
+        ms_per_tick={k: 1e3 * v / ticks for k, v in timing.items()},
+        share={k: v / wall for k, v in timing.items()},
+    )
 
 
-def _time_episode(box: Box, policy: Policy, cfg: TaskConfig, expected: Any) -> dict[str, Any]:
+def _time_episode(
+    box: Box, policy: Policy, cfg: TaskConfig, expected: Demonstration
+) -> dict[str, JsonValue]:
     """One closed-loop episode timed by :func:`time_rollouts`, with its ``outcome``."""
-    report = time_rollouts([box], policy, cfg, [expected])
-    report["outcome"] = report["outcomes"][0]
+    timing = time_rollouts([box], policy, cfg, [expected])
+    report = timing.to_dict()
+    report["outcome"] = timing.outcomes[0]
     for key in ("n_episodes", "batched", "outcomes"):
         del report[key]
     return report
@@ -102,7 +154,7 @@ def benchmark(
     threads: int = 1,
     n_demos: int = 6,
     seed: int = 1,
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Time the simulation on ``box`` with IK control and a policy in the loop.
 
     Three timings: recording the scripted demonstration (demonstrator FSM as the policy); a
@@ -126,7 +178,7 @@ def benchmark(
     start = time.perf_counter()
     demo = record_demonstration(box, cfg)
     demo_wall = time.perf_counter() - start
-    report: dict[str, Any] = {
+    report: dict[str, JsonValue] = {
         "box": {"width": box.width, "depth": box.depth, "height": box.height},
         "strategy": correct_strategy(box, cfg),
         "torch_threads": threads,

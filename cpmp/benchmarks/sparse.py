@@ -32,10 +32,9 @@ import argparse
 import copy
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -50,6 +49,7 @@ from cpmp.experiment.collection import SeedData
 from cpmp.experiment.reproduction import reproduce_seed, summarize_episodes
 from cpmp.experiment.strategies import balanced_subset, split_by_strategy, strategy_signatures
 from cpmp.io import atomic_write_text, to_builtin
+from cpmp.records import JsonValue
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, record_demonstrations, sample_box
 from cpmp.sim.collect import sample_boxes
@@ -99,7 +99,7 @@ class SparseSettings:
     episodes: int = 20
     sim_boxes: int = 20
     repeats: int = 2
-    options: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, JsonValue] = field(default_factory=dict)
     tasks: int = 10
     cache: str | None = None
 
@@ -116,8 +116,12 @@ class SparseSettings:
             raise ConfigError(f"sizes must be training sizes >= 1, got {self.sizes}")
 
     @classmethod
-    def quick(cls, **options: Any) -> SparseSettings:
-        """A tiny run (the tests): two_point, D = 3, one seed, 4 episodes, one fit each."""
+    def quick(cls, **options: object) -> SparseSettings:
+        """A tiny run (the tests): two_point, D = 3, one seed, 4 episodes, one fit each.
+
+        Args:
+            **options: fields of :class:`SparseSettings` over those (passed through).
+        """
         base = {"worlds": ("two_point",), "sizes": (3,), "seeds": (0,), "held_out": 2}
         base |= {"episodes": 4, "repeats": 1}
         return cls(**{**base, **options})
@@ -131,6 +135,47 @@ class _World:
     test: list[Demonstration]
     complete: Callable[[ConcurrentSequencer], int]
     subset: Callable[[int], list[Demonstration]]
+
+
+@dataclass(frozen=True)
+class SparseRow:
+    """One world, task, D and seed of the benchmark: both predictors measured, and the ratios.
+
+    Attributes:
+        world: the world's name (``sim``: the simulator).
+        task: the member of a family world (0 otherwise).
+        D: training demonstrations.
+        seed: the seed of the demonstrations and fits.
+        default: the default predictor's measures (:func:`measure`).
+        sparse: ``klr_sparse``'s measures.
+        facts: ``klr_sparse``'s chosen ``level``, ``gamma_scale`` and its ``validation``.
+        ratios: sparse / default per measure and the targets met (:func:`ratios`).
+    """
+
+    world: str
+    task: int
+    D: int
+    seed: int
+    default: dict[str, float]
+    sparse: dict[str, float]
+    facts: dict[str, JsonValue]
+    ratios: dict[str, float | dict[str, bool]]
+
+    def to_dict(self) -> dict[str, JsonValue]:
+        """The JSON row (as ``bench_sparse.json`` holds it).
+
+        ``world``, ``task``, ``D``, ``seed``, ``default``, ``sparse`` (the measures, then the
+        facts) and ``ratios``.
+        """
+        return {
+            "world": self.world,
+            "task": self.task,
+            "D": self.D,
+            "seed": self.seed,
+            "default": self.default,
+            "sparse": {**self.sparse, **self.facts},
+            "ratios": self.ratios,
+        }
 
 
 def _synthetic(world: World, seed: int, settings: SparseSettings) -> _World:
@@ -240,8 +285,15 @@ def measure(
     world: _World,
     seed: int,
     settings: SparseSettings,
-) -> dict[str, Any]:
-    """Fit ``kind`` on ``demos`` and measure it (see the module docstring)."""
+) -> tuple[dict[str, float], dict[str, JsonValue]]:
+    """Fit ``kind`` on ``demos`` and measure it (see the module docstring).
+
+    Returns:
+        The measures: ``fit_s`` [s], ``supports`` (the graph nodes'), ``supports_all``
+        (start heads too), held-out ``mae``, the tick costs of :func:`tick_costs` [ms] and
+        ``complete`` (C); and for ``klr_sparse`` the fit's ``level``, ``gamma_scale`` and
+        ``validation`` (empty for the others).
+    """
     options = dict(settings.options) if kind == "klr_sparse" else {}
     times = []
     for _ in range(settings.repeats):
@@ -249,7 +301,7 @@ def measure(
         seq = ConcurrentSequencer.fit(list(demos), kind, seed=seed, logger=None, **options)
         times.append(time.perf_counter() - start)
     report = seq.fit_summary
-    row = {
+    row: dict[str, float] = {
         "fit_s": min(times),
         "supports": sum(seq.predictor.support_counts()[f"{v}/{m}"] for v, m in seq.node_keys),
         "supports_all": int(report.n_support_total),
@@ -257,16 +309,24 @@ def measure(
         **tick_costs(seq, world.test[0]),
         "complete": world.complete(seq),
     }
+    facts: dict[str, JsonValue] = {}
     if kind == "klr_sparse":
-        facts = report.predictor_facts
-        row["level"] = facts.get("sparsity_level")
-        row["gamma_scale"] = facts.get("sparsity_gamma_scale")
-        row["validation"] = facts.get("sparsity_validation")
-    return row
+        predictor_facts = report.predictor_facts
+        facts["level"] = predictor_facts.get("sparsity_level")
+        facts["gamma_scale"] = predictor_facts.get("sparsity_gamma_scale")
+        facts["validation"] = predictor_facts.get("sparsity_validation")
+    return row, facts
 
 
-def ratios(default: dict[str, Any], sparse: dict[str, Any]) -> dict[str, Any]:
-    """Sparse / default per measure (``complete``: sparse − default) and the targets met."""
+def ratios(
+    default: Mapping[str, float], sparse: Mapping[str, float]
+) -> dict[str, float | dict[str, bool]]:
+    """Sparse / default per measure (``complete``: sparse − default) and the targets met.
+
+    Returns:
+        ``mae``, ``supports``, ``supports_all``, ``tick``, ``tick_floor``, ``batch``,
+        ``step``, ``fit``, ``complete``, and ``met``: each target of :data:`TARGETS` met.
+    """
     out = {
         "mae": sparse["mae"] / default["mae"],
         "supports": sparse["supports"] / default["supports"],
@@ -278,16 +338,16 @@ def ratios(default: dict[str, Any], sparse: dict[str, Any]) -> dict[str, Any]:
         "fit": sparse["fit_s"] / default["fit_s"],
         "complete": sparse["complete"] - default["complete"],
     }
-    out["met"] = {
+    met = {
         name: (out[name] >= bound if name == "complete" else out[name] <= bound)
         for name, bound in TARGETS.items()
     }
-    return out
+    return {**out, "met": met}
 
 
 def run_sparse_benchmark(
     settings: SparseSettings, log: Callable[[str], None] | None = None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """The benchmark of ``settings``.
 
     Returns:
@@ -296,7 +356,7 @@ def run_sparse_benchmark(
         (means of the measures, ratios of the means, C as the mean difference) and says
         which targets are met.
     """
-    rows = []
+    rows: list[SparseRow] = []
     for name in settings.worlds:
         seeds = settings.sim_seeds if name == "sim" else settings.seeds
         for seed in seeds:
@@ -307,11 +367,10 @@ def run_sparse_benchmark(
             for task, world in enumerate(worlds):
                 for d in settings.sizes:
                     demos = world.subset(d)
-                    default = measure("klr", demos, world, seed, settings)
-                    sparse = measure("klr_sparse", demos, world, seed, settings)
-                    row = {"world": name, "task": task, "D": d, "seed": seed}
-                    row |= {"default": default, "sparse": sparse}
-                    row["ratios"] = ratios(default, sparse)
+                    default, _ = measure("klr", demos, world, seed, settings)
+                    sparse, facts = measure("klr_sparse", demos, world, seed, settings)
+                    ratio = ratios(default, sparse)
+                    row = SparseRow(name, task, d, seed, default, sparse, facts, ratio)
                     rows.append(row)
                     if log is not None:
                         log(_line(row))
@@ -319,23 +378,28 @@ def run_sparse_benchmark(
         {
             "settings": asdict(settings),
             "targets": TARGETS,
-            "rows": rows,
+            "rows": [row.to_dict() for row in rows],
             "summary": summarise(rows),
         }
     )
 
 
-def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per world and D, the seeds pooled: mean measures and the ratios of the means."""
-    out: dict[str, dict[str, Any]] = {}
+def summarise(rows: Sequence[SparseRow]) -> dict[str, dict[str, dict[str, JsonValue]]]:
+    """Per world and D, the seeds pooled: mean measures and the ratios of the means.
+
+    Returns:
+        world -> D (a string) -> ``seeds``, ``default`` and ``sparse`` (the mean measures)
+        and ``ratios`` (:func:`ratios` of the means).
+    """
+    out: dict[str, dict[str, dict[str, JsonValue]]] = {}
     keys = ("fit_s", "supports", "supports_all", "mae", "predictor_ms", "floor_ms", "batch_ms")
     keys += ("step_ms", "complete")
-    for name in dict.fromkeys(r["world"] for r in rows):
-        for d in dict.fromkeys(r["D"] for r in rows if r["world"] == name):
-            group = [r for r in rows if r["world"] == name and r["D"] == d]
+    for name in dict.fromkeys(r.world for r in rows):
+        for d in dict.fromkeys(r.D for r in rows if r.world == name):
+            group = [r for r in rows if r.world == name and r.D == d]
             mean = {
-                kind: {k: float(np.mean([r[kind][k] for r in group])) for k in keys}
-                for kind in ("default", "sparse")
+                "default": {k: float(np.mean([r.default[k] for r in group])) for k in keys},
+                "sparse": {k: float(np.mean([r.sparse[k] for r in group])) for k in keys},
             }
             out.setdefault(name, {})[str(d)] = {
                 "seeds": len(group),
@@ -345,18 +409,19 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _line(row: dict[str, Any]) -> str:
-    r = row["ratios"]
+def _line(row: SparseRow) -> str:
+    """One row as a progress line."""
+    r = row.ratios
     return (
-        f"{row['world']} D{row['D']} seed {row['seed']}: mae x{r['mae']:.2f}, supports "
+        f"{row.world} D{row.D} seed {row.seed}: mae x{r['mae']:.2f}, supports "
         f"x{r['supports']:.2f} (all x{r['supports_all']:.2f}), tick x{r['tick']:.2f} (floor "
         f"x{r['tick_floor']:.2f}, batch "
         f"x{r['batch']:.2f}, step x{r['step']:.2f}), fit "
-        f"x{r['fit']:.2f}, C {row['sparse']['complete']} vs {row['default']['complete']}"
+        f"x{r['fit']:.2f}, C {row.sparse['complete']} vs {row.default['complete']}"
     )
 
 
-def markdown(result: dict[str, Any]) -> str:
+def markdown(result: Mapping[str, JsonValue]) -> str:
     """The pooled ratios as a Markdown table (a target missed is marked ``!``).
 
     ``tick floor x``: the default bank's call stripped to one support per node over its
@@ -371,7 +436,7 @@ def markdown(result: dict[str, Any]) -> str:
         for d, s in by_d.items():
             r, met = s["ratios"], s["ratios"]["met"]
 
-            def cell(key: str, fmt: str, r: dict[str, Any] = r, met: dict = met) -> str:
+            def cell(key: str, fmt: str, r: Mapping[str, JsonValue] = r, met: dict = met) -> str:
                 return format(r[key], fmt) + ("" if met.get(key, True) else " !")
 
             lines.append(

@@ -15,10 +15,11 @@ Wrong starts are reported per 20 boxes, like Table I.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
+from sklearn.base import ClassifierMixin
 from sklearn.linear_model import LogisticRegression
 from sklearn.neighbors import KNeighborsClassifier
 from sklearn.svm import SVC
@@ -33,13 +34,14 @@ from cpmp.experiment.strategies import (
     strategy_of,
     strategy_signatures,
 )
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
 from cpmp.sim import record_demonstration, sample_box
 from cpmp.sim.collect import sample_boxes
-from cpmp.sim.scene import correct_strategy
+from cpmp.sim.scene import Box, correct_strategy
 from cpmp.sim.simulation import Simulation
 
-SEQUENCER_RULES: dict[str, dict[str, Any]] = {
+SEQUENCER_RULES: dict[str, dict[str, str | bool]] = {
     "cpmp defaults": {},
     "paper (PAPER_OPTIONS)": dict(PAPER_OPTIONS),
     "joint, isotropic start heads": {"start_rule": "joint", "start_kernel": "isotropic"},
@@ -48,7 +50,26 @@ SEQUENCER_RULES: dict[str, dict[str, Any]] = {
 """cpmp start rules scored, as fit options of :meth:`ConcurrentSequencer.fit`."""
 
 
-def _classifiers(seed: int) -> dict[str, Callable[[], Any]]:
+class StartRow(NamedTuple):
+    """The wrong starts of one rule or classifier, for one seed and training size.
+
+    Attributes:
+        seed: the seed of the demonstrations, the scored boxes and the fits.
+        D: training demonstrations.
+        rule: the start rule or classifier (a key of :data:`SEQUENCER_RULES`, or a
+            classifier's name).
+        wrong: wrong starts on the scored boxes.
+        per_20: wrong starts per 20 boxes (as Table I counts them).
+    """
+
+    seed: int
+    D: int
+    rule: str
+    wrong: int
+    per_20: float
+
+
+def _classifiers(seed: int) -> dict[str, Callable[[], ClassifierMixin]]:
     return {
         "oracle size: nearest training box": lambda: KNeighborsClassifier(n_neighbors=1),
         "oracle size: logistic regression": lambda: LogisticRegression(C=1e4, max_iter=5000),
@@ -57,7 +78,7 @@ def _classifiers(seed: int) -> dict[str, Callable[[], Any]]:
     }
 
 
-def _box_size(demo_or_box: Any, scale: tuple[float, float]) -> list[float]:
+def _box_size(demo_or_box: Demonstration | Box, scale: tuple[float, float]) -> list[float]:
     if isinstance(demo_or_box, Demonstration):
         w, d = demo_or_box.metadata["box_width"], demo_or_box.metadata["box_depth"]
     else:
@@ -65,7 +86,7 @@ def _box_size(demo_or_box: Any, scale: tuple[float, float]) -> list[float]:
     return [w / scale[0], d / scale[1]]
 
 
-def _first_features(sim: Any) -> np.ndarray:
+def _first_features(sim: Simulation) -> np.ndarray:
     sim.reset()
     return sim.features()
 
@@ -73,7 +94,7 @@ def _first_features(sim: Any) -> np.ndarray:
 def wrong_starts(
     train: Sequence[Demonstration],
     first_features: np.ndarray,
-    boxes: Sequence[Any],
+    boxes: Sequence[Box],
     correct: Sequence[str],
     seed: int,
     size_scale: tuple[float, float] = (1.0, 1.0),
@@ -119,21 +140,22 @@ def analyse_starts(
     seeds: Sequence[int],
     sizes: Sequence[int],
     n_boxes: int,
-    task: Any = None,
+    task: TaskConfig | None = None,
     demos_per_strategy: int = 5,
     train_per_strategy: int = 3,
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Record each seed's demonstrations like the main job and score the start decision.
 
-    Returns ``{"rows": [{"seed", "D", "rule", "wrong", "per_20"}...], "mean_per_20":
-    {D: {rule: W per 20 averaged over seeds}}, "n_boxes": n_boxes}``.
+    Returns ``{"n_boxes": n_boxes, "seeds": [...], "rows": [{"seed", "D", "rule", "wrong",
+    "per_20"}...], "mean_per_20": {D: {rule: W per 20 averaged over seeds}}}`` (the rows are
+    :class:`StartRow` as dicts; ``D`` as a string key, as JSON writes it).
     """
     task = task if task is not None else TaskConfig()
     scale = (
         task.width_range[1] - task.width_range[0],
         task.depth_range[1] - task.depth_range[0],
     )
-    rows: list[dict[str, Any]] = []
+    rows: list[StartRow] = []
     for seed in seeds:
         rng = np.random.default_rng(seed)
         demo_boxes = sample_boxes(rng, task, 3 * demos_per_strategy, balanced=True)
@@ -148,24 +170,21 @@ def analyse_starts(
         for d in sizes:
             counts = wrong_starts(balanced_subset(train, d), x0, boxes, correct, seed, scale)
             for rule, wrong in counts.items():
-                rows.append(
-                    {
-                        "seed": seed,
-                        "D": d,
-                        "rule": rule,
-                        "wrong": wrong,
-                        "per_20": 20.0 * wrong / n_boxes,
-                    }
-                )
-    mean: dict[int, dict[str, float]] = {}
+                rows.append(StartRow(seed, d, rule, wrong, 20.0 * wrong / n_boxes))
+    mean: dict[str, dict[str, float]] = {}
     for d in sizes:
-        for rule in dict.fromkeys(r["rule"] for r in rows):
-            values = [r["per_20"] for r in rows if r["D"] == d and r["rule"] == rule]
-            mean.setdefault(d, {})[rule] = round(float(np.mean(values)), 2)
-    return {"n_boxes": n_boxes, "seeds": list(seeds), "rows": rows, "mean_per_20": mean}
+        for rule in dict.fromkeys(r.rule for r in rows):
+            values = [r.per_20 for r in rows if r.D == d and r.rule == rule]
+            mean.setdefault(str(d), {})[rule] = round(float(np.mean(values)), 2)
+    return {
+        "n_boxes": n_boxes,
+        "seeds": list(seeds),
+        "rows": [r._asdict() for r in rows],
+        "mean_per_20": mean,
+    }
 
 
-def markdown(result: dict[str, Any]) -> str:
+def markdown(result: Mapping[str, JsonValue]) -> str:
     """The ``mean_per_20`` table as Markdown (rules as rows, D as columns)."""
     sizes = list(result["mean_per_20"])
     rules = list(next(iter(result["mean_per_20"].values())))

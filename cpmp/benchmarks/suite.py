@@ -34,7 +34,6 @@ import logging
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
 
 import torch
 from threadpoolctl import threadpool_limits
@@ -46,6 +45,7 @@ from cpmp.benchmarks.settings import SECTIONS, BenchSettings
 from cpmp.benchmarks.sim import SimData, bench_realtime, bench_stages
 from cpmp.experiment.output import write_json
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.two_point import make_demonstrations
 
@@ -62,11 +62,14 @@ def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(settings.threads)
     started = time.perf_counter()
-    result: dict[str, Any] = {
+    machine = machine_facts(settings.threads)
+    sections: dict[str, JsonValue] = {}
+    result: dict[str, JsonValue] = {
         "settings": asdict(settings),
-        "machine": machine_facts(settings.threads),
-        "sections": {},
+        "machine": machine,
+        "sections": sections,
     }
+    scaling: dict[str, JsonValue] | None = None
     sim = SimData(settings)
     with threadpool_limits(settings.threads):
         result["warm_up_seconds"] = _warm_up(settings.seed)
@@ -88,7 +91,7 @@ def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
                     settings.experiment, settings.threads, settings.experiment_overrides
                 )
             elif name == "scaling":
-                section = bench_scaling(
+                section = scaling = bench_scaling(
                     settings.scaling_demos,
                     settings.scaling_features,
                     settings.seed,
@@ -98,13 +101,13 @@ def run_bench(settings: BenchSettings, out_dir: str | Path) -> Path:
             else:
                 section = bench_gradient(settings)
             section["section_seconds"] = time.perf_counter() - start
-            result["sections"][name] = section
+            sections[name] = section
             log.info("bench section %s: done in %.1f s", name, section["section_seconds"])
     result["seconds"] = time.perf_counter() - started
-    result["machine"]["load_average_end"] = load_average()
-    files = {"bench.json": "every number", "bench.md": "the tables"}
-    if "scaling" in result["sections"]:
-        plot_scaling(result["sections"]["scaling"], out / "bench_scaling.png")
+    machine["load_average_end"] = load_average()
+    files: dict[str, JsonValue] = {"bench.json": "every number", "bench.md": "the tables"}
+    if scaling is not None:
+        plot_scaling(scaling, out / "bench_scaling.png")
         files["bench_scaling.png"] = "log-log: fit time and tick cost against demos and features"
     result["files"] = files
     atomic_write_text(out / "bench.md", bench_markdown(result))

@@ -14,13 +14,12 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
 
 from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.io import to_builtin
-from cpmp.records import Policy
+from cpmp.records import JsonValue, Policy
 from cpmp.sequencer.sequencer import PAPER_OPTIONS, ConcurrentSequencer
 from cpmp.worlds.outcomes import OUTCOMES
 from cpmp.worlds.protocol import World, evaluate
@@ -33,7 +32,7 @@ Make = Callable[[World, Sequence[Demonstration], int], Policy]
 """``make(world, demos, seed)``: a policy fitted on ``demos`` (or the world's own)."""
 
 
-def _sequencer(predictor: str = "klr", **options: Any) -> Make:
+def _sequencer(predictor: str = "klr", **options: str | bool) -> Make:
     """A :class:`ConcurrentSequencer` fitted with ``predictor`` and ``options``."""
 
     def make(world: World, demos: Sequence[Demonstration], seed: int) -> Policy:
@@ -118,20 +117,28 @@ class SyntheticSettings:
             raise ConfigError("sizes, seeds and family_seeds must each name at least one")
 
     @classmethod
-    def quick(cls, **options: Any) -> SyntheticSettings:
-        """Small sizes for a test: D = 3, seed 0, 2 episodes, 2 family members."""
+    def quick(cls, **options: object) -> SyntheticSettings:
+        """Small sizes for a test: D = 3, seed 0, 2 episodes, 2 family members.
+
+        Args:
+            **options: fields of :class:`SyntheticSettings` over those (passed through).
+        """
         quick = {"sizes": (3,), "seeds": (0,), "episodes": 2, "tasks": 2, "family_episodes": 2}
         return cls(**{**quick, **options})
 
 
 def world_rows(
     name: str, settings: SyntheticSettings, log: Callable[[str], None] | None = None
-) -> list[dict[str, Any]]:
-    """One row per (member, D, seed, policy) of the world ``name``: its outcome counts."""
+) -> list[dict[str, str | int]]:
+    """One row per (member, D, seed, policy) of the world ``name``: its outcome counts.
+
+    A row: ``world``, ``task`` (the member), ``D``, ``seed``, ``policy``, the count of each
+    outcome (:data:`~cpmp.worlds.outcomes.OUTCOMES`) and ``n_episodes``.
+    """
     family = entry(name).family
     seeds = settings.family_seeds if family else settings.seeds
     n = settings.family_episodes if family else settings.episodes
-    rows = []
+    rows: list[dict[str, str | int]] = []
     for task, world in enumerate(members(name, settings.tasks)):
         for d in settings.sizes:
             for seed in seeds:
@@ -139,22 +146,36 @@ def world_rows(
                 for policy in settings.policies:
                     made = POLICIES[policy](world, demos, seed)
                     counts = evaluate(world, made, n, HELD_OUT_SEED + seed).counts
-                    row = {"world": name, "task": task, "D": d, "seed": seed, "policy": policy}
+                    row: dict[str, str | int] = {
+                        "world": name,
+                        "task": task,
+                        "D": d,
+                        "seed": seed,
+                        "policy": policy,
+                    }
                     rows.append({**row, **counts, "n_episodes": n})
                     if log is not None:
                         log(f"{name}#{task} D{d} seed {seed} {policy}: {counts['complete']}/{n}")
     return rows
 
 
-def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+def summarise(
+    rows: Sequence[Mapping[str, str | int]],
+) -> dict[str, dict[str, dict[str, dict[str, float]]]]:
     """Per world, policy and D: the outcomes as fractions of the episodes, pooled.
 
-    A world's entry also gives ``vs_scripted``: complete episodes as a fraction of the
-    scripted policy's (where it ran).
+    Args:
+        rows: :func:`world_rows`' rows (or read back from the JSON).
+
+    Returns:
+        world -> policy -> D (a string) -> the summed counts of each outcome and
+        ``n_episodes``, each outcome's ``<outcome>_frac`` of the episodes and, where the
+        scripted policy ran and completed any, ``vs_scripted``: complete episodes as a
+        fraction of the scripted policy's.
     """
-    out: dict[str, Any] = {}
+    out: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     for row in rows:
-        key = (row["world"], row["policy"], str(row["D"]))
+        key = (str(row["world"]), str(row["policy"]), str(row["D"]))
         cell = out.setdefault(key[0], {}).setdefault(key[1], {}).setdefault(key[2], {})
         for k in (*OUTCOMES, "n_episodes"):
             cell[k] = cell.get(k, 0) + int(row[k])
@@ -172,7 +193,7 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
 def run_synthetic_benchmark(
     settings: SyntheticSettings, log: Callable[[str], None] | None = None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """The worlds table of ``settings`` (JSON-ready; the same settings give the same dict).
 
     Returns:
@@ -191,7 +212,7 @@ def run_synthetic_benchmark(
     )
 
 
-def markdown(result: Mapping[str, Any]) -> str:
+def markdown(result: Mapping[str, JsonValue]) -> str:
     """The worlds table: one row per world and policy, ``C / W / I`` in % per D.
 
     A family's rows add its completions as a fraction of the scripted policy's.

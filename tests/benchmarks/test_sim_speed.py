@@ -56,15 +56,15 @@ def test_batched_rollouts_time_the_same_episodes(cfg, demos):
         for b in (False, True)
     ]
     single, batched = reports
-    assert single["outcomes"] == batched["outcomes"] == ["complete", "complete"]
-    assert single["sim_time_s"] == pytest.approx(batched["sim_time_s"], abs=1e-9)
-    assert (single["batched"], batched["batched"]) == (False, True)
+    assert single.outcomes == batched.outcomes == ["complete", "complete"]
+    assert single.sim_time_s == pytest.approx(batched.sim_time_s, abs=1e-9)
+    assert (single.batched, batched.batched) == (False, True)
     for report in reports:
-        assert report["n_episodes"] == 2
-        assert sum(report["share"].values()) == pytest.approx(1.0)
-        ticks = round(report["sim_time_s"] / cfg.control_dt)
-        total = sum(report["ms_per_tick"].values()) * ticks / 1e3
-        assert total == pytest.approx(report["wall_time_s"], rel=1e-6)
+        assert report.n_episodes == 2
+        assert sum(report.share.values()) == pytest.approx(1.0)
+        ticks = round(report.sim_time_s / cfg.control_dt)
+        total = sum(report.ms_per_tick.values()) * ticks / 1e3
+        assert total == pytest.approx(report.wall_time_s, rel=1e-6)
 
 
 def test_rollouts_need_one_expected_demo_per_box(cfg, demos, boxes):

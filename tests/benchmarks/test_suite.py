@@ -67,11 +67,11 @@ def test_sklearn_peer_reaches_klrs_loss(fitted_klr, train_demos):
     """The peer minimises cpmp's loss exactly (C matched to l2, soft labels as two weighted
     copies): both optima agree to 1e-5 relative (both solvers stop at a gradient of 1e-10)."""
     problems = node_kernels(fitted_klr, train_demos)
-    assert len(problems["kernels"]) == len(fitted_klr.predictor.node_keys)
+    assert len(problems.kernels) == len(fitted_klr.predictor.node_keys)
     peer = sklearn_peer(problems)
-    assert peer["converged"] and peer["iterations"] >= 1
+    assert peer.converged and peer.iterations >= 1
     klr_loss = fitted_klr.fit_summary.loss
-    assert problem_loss(problems, peer["solutions"]) == pytest.approx(klr_loss, rel=1e-5)
+    assert problem_loss(problems, peer.solutions) == pytest.approx(klr_loss, rel=1e-5)
     solutions, _ = newton_solve_all(problems)
     assert problem_loss(problems, solutions) == pytest.approx(klr_loss, rel=1e-9)
     # a worse point has a larger loss: the comparison can fail
