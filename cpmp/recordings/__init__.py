@@ -72,35 +72,38 @@ entity path                            content
 =====================================  ===================================================
 
 An event's text longer than :data:`EVENT_WIDTH` characters continues on indented rows of
-the same entity and time (:func:`event_lines`; rerun 0.41's text log shows one line per row);
-the record is in the first row. Warnings (level ``WARN``: recoveries, give-ups, non-finite
+the same entity (:func:`event_lines`; rerun 0.41's text log shows one line per row), each a
+microsecond after the one above it, and an event logged at the time of an earlier one starts
+after that one's rows (rows of one time stamp show in no set order); the record is in the first
+row. Warnings (level ``WARN``: recoveries, give-ups, non-finite
 features, a failed outcome) are drawn in an orange of their own.
 
 Blueprint (the viewer's default layout, sent when the recording is closed, for what it holds):
-the 3D scene above the ``status`` document (the ``start`` document and the start map in tabs
-beside it); a tab per feature group (:func:`group_features`: box, each hand, goal distances,
-touch, ... from the feature names, at most 8 series each), a plot as wide as the column; a tab
-per control variable with its φ (= exit), entry and transition probabilities, an MP in one
-colour in all three and named by φ's legend only; above the feature tabs, a grid of one small
-p(switch) plot per variable (every variable at once, without a click); every p(switch) plot
-with the threshold line and the variable's event marks; the legends in the plots' top-left
-corner, left of the curves (a plot with a legend starts its time axis before t = 0);
-the active MPs as lanes of a state timeline; the events log (start, transitions, notes,
-outcome) in a monospace font, each event starting with its time. Every view lists the entity
-paths it shows (rerun 0.41 matches no wildcard in the middle of a path). An episode that ended
-at its first tick (a wrong start) puts the start decision in the middle instead of the plots
-and the start map on the right. The blueprint and selection panels start collapsed, the time
-panel as one row. :func:`read_views` lists the views.
+the 3D scene above the ``status`` document; a tab per feature group (:func:`group_features`:
+box, each hand, goal distances, touch, ... from the feature names, at most 8 series each), a
+plot as wide as the column; a tab per control variable with its φ (= exit), entry and transition
+probabilities, an MP in one colour in all three and named by φ's legend only; above the feature
+tabs, a grid of one small p(switch) plot per variable (every variable at once, without a click);
+every p(switch) plot with the threshold line and the variable's event marks; the legends in the
+plots' top-left corner, left of the curves (a plot with a legend starts its time axis before
+t = 0); the active MPs as lanes of a state timeline; the events log (start, transitions, notes,
+outcome) in a monospace font, each event starting with its time, and beside it in tabs the
+``start`` document and the start map (the right column is the wider side one: the start's tables
+fit it at 1440 px). Every view lists the entity paths it shows (rerun 0.41 matches no wildcard
+in the middle of a path). An episode that ended at its first tick (a wrong start) puts the start
+decision in the middle instead of the plots and the start map on the right. The blueprint and
+selection panels start collapsed, the time panel as one row. :func:`read_views` lists the views.
 
 Machine-readable encoding. Transitions and outcomes are logged, in the same row as their
 ``TextLog``, as ``rr.DynamicArchetype`` records whose columns read back as
 ``cpmp.Transition:{variable,source,target,probability,kind}`` (strings, and a float64
-probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s], ``count``,
-``ended_by`` and ``then``), ``cpmp.Outcome:{outcome,reason,cause}`` (``cause``: the
-:class:`~cpmp.records.PendingSwitch` as JSON, if any) and
-``cpmp.Start:{rule,chosen,options}`` (strings; ``chosen`` and ``options`` as JSON); their time
-is the ``time`` timeline of the row. The episode name is the recording
-name (``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,
+probability), ``cpmp.Note:{kind,variable,text}`` (a hold's also ``held``, ``until`` [s],
+``count``, ``ended_by`` and ``then``), ``cpmp.Outcome:{outcome,reason,cause}`` (``cause``: the
+:class:`~cpmp.records.PendingSwitch` as JSON, if any) and ``cpmp.Start:{rule,chosen,options}``
+(strings; ``chosen`` and ``options`` as JSON), each with the event's time ``t`` [s] (float64;
+its row's time on the ``time`` timeline may be a few microseconds later, after the rows of an
+event logged before it at that time). The episode name is the recording name
+(``RecordingInfo:name`` property) and the recording property ``cpmp`` holds ``episode``,
 ``feature_names``, ``feature_groups``, ``mp_names`` and ``metadata`` (all but the first as JSON
 text; metadata values that JSON cannot encode are stored as ``str``).
 

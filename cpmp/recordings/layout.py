@@ -92,6 +92,20 @@ several rows; the log's monospace body column shows about 60 characters in the d
 of a 1440 px wide viewer (a laptop's; a row of 62 lost its last 2) and about 82 at 1920 px, so
 no row is cut at either."""
 
+COLUMN_SHARES = (2.0, 4.0, 3.0)
+"""Shares of the viewer's width: the scene above the ``status`` document | the lanes and plots
+| the events log, with the ``start`` document and the start map in tabs beside it (a wrong
+start's layout: the start document in the middle). Of a 1440 px wide viewer (a laptop's) the
+left column gets 320 px, the right 480 px."""
+
+START_TABLE_WIDTH = 360
+"""Pixels the ``start`` document's tables need in rerun 0.41's web viewer, the panel's margins
+and some room for longer MP names included: the simulator's training starts (box width and
+depth [m], distance, start number) take about 320 px, its three demonstrated starts (a column
+each) about 290 px. The column holding the start tabs is at least this wide at 1440 px: beside
+the ``status`` document (the left column, 320 px) the training starts lost their last column;
+in the right column (480 px) both tables show whole at 1440×900 and 1920×1080."""
+
 EVENT_INDENT = 10
 """Continuation lines of an event start below its text, after the time (``"  3.25 s  "``)."""
 
@@ -790,15 +804,16 @@ def blueprint(
 ) -> Any:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
-    Scene above the ``status`` document (and, with ``start``, the start decision and its 2D
-    plot in tabs beside it) | the active MPs as state lanes (:data:`LANE_SHARE` of the
+    Scene above the ``status`` document | the active MPs as state lanes (:data:`LANE_SHARE` of the
     column's height per variable, so that every lane shows unscrolled) above a tab per feature
     panel (one
     per group of ``feature_groups``: a plot the column's width, whose legend covers little of
     it; six small plots side by side had their legends over a third of their curves) above a
     tab per control variable of ``series`` with its φ (= exit), entry (1 - φ) and transition
     probabilities (one legend, φ's: an MP has its colour in all three) | the events log the
-    column's height (monospace, its rows :data:`EVENT_WIDTH` characters at most). Every view's
+    column's height (monospace, its rows :data:`EVENT_WIDTH` characters at most) and, with
+    ``start``, the start decision and its 2D map in tabs beside it (the widest side column,
+    :data:`START_TABLE_WIDTH`); the columns' widths are :data:`COLUMN_SHARES`. Every view's
     contents are the logged entity paths themselves (rerun 0.41 matches no wildcard in the
     middle of a path). Between the lanes and the feature tabs, :data:`OVERVIEW_NAME`: a grid
     with a small p(switch) plot per variable (no legend; the variable's tab has it), so the
@@ -828,7 +843,7 @@ def blueprint(
         focus: the variable whose tab the probability tabs open on (``None``: the first).
         focus_time: (start, end) [s] selected on the time panel (``None``: no selection).
         scene: whether there is a 3D scene (geoms or body poses logged); without one the
-            status and start tabs take the left column (a synthetic world).
+            status document takes the left column (a synthetic world).
 
     Returns:
         The blueprint.
@@ -875,7 +890,7 @@ def blueprint(
     )
     status = rrb.TextDocumentView(origin=STATUS_ENTITY, name="status")
     lanes = rrb.StateTimelineView(origin="active", name="active MPs")
-    logs = rrb.Tabs(
+    logs = [
         rrb.TextLogView(
             origin="events",
             contents=[f"+ {path}" for path in events] or ["+ events/outcome"],
@@ -886,21 +901,18 @@ def blueprint(
         rrb.TextLogView(
             origin="active", name="active MP log", columns=_TEXT_FIRST, format_options=_MONOSPACE
         ),
-    )
+    ]
     view3d = rrb.Spatial3DView(origin="world", name="scene")
     if start_focus and start:
         left = rrb.Vertical(view3d, status, row_shares=[1, 1]) if scene else status
         middle = start_doc  # the whole column: every feature at the start without scrolling
-        right = rrb.Vertical(lanes, start_plot, logs, row_shares=[3, 3, 2])
+        right = rrb.Vertical(lanes, start_plot, rrb.Tabs(*logs), row_shares=[3, 3, 2])
     else:
-        lower_left: Any = status
-        if start:
-            lower_left = rrb.Tabs(status, start_doc, start_plot, active_tab=0)
-        # the start document's tab shows its tables and the features' heading unscrolled
+        # the status document (with the start line) unscrolled below the scene at 900 px
         left = (
-            rrb.Vertical(view3d, lower_left, row_shares=[2, 3] if start else [1, 1])
+            rrb.Vertical(view3d, status, row_shares=[2, 3] if start else [1, 1])
             if scene
-            else lower_left
+            else status
         )
         parts: list[Any] = [lanes]
         shares = [max(3.0, LANE_SHARE * len(series))]
@@ -914,9 +926,10 @@ def blueprint(
             parts.append(rrb.Tabs(*variable_tabs, name="probabilities", active_tab=focus_tab))
             shares.append(4.0)
         middle = rrb.Vertical(*parts, row_shares=shares)
-        right = logs
+        # the start tabs the column's width and height: its tables uncut (START_TABLE_WIDTH)
+        right = rrb.Tabs(*logs, *([start_doc, start_plot] if start else []), active_tab=0)
     return rrb.Blueprint(
-        rrb.Horizontal(left, middle, right, column_shares=[2, 4, 3]),
+        rrb.Horizontal(left, middle, right, column_shares=list(COLUMN_SHARES)),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(

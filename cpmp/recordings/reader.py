@@ -127,15 +127,32 @@ def _timed_rows(entity: str, batch: Any, times: list[float]) -> list[float]:
 
     An event's continuation rows in the events log sit a few microseconds after it (the
     writer's ``ROW_STEP``, so that they sort as written); only the event's own row, the one
-    with its record (a ``cpmp.*`` column), is at its time.
+    with its record (a ``cpmp.*`` column), counts, at the time its record holds
+    (:func:`_event_times`).
     """
     if not entity.startswith("events/"):
         return times
     records = [name for name in batch.schema.names if name.startswith("cpmp.")]
     if not records:
         return []
+    archetype = records[0].partition(":")[0]
     valid = batch.column(records[0]).is_valid().to_pylist()
-    return [t for t, ok in zip(times, valid, strict=True) if ok]
+    own = _event_times(batch, archetype, times)
+    return [t for t, ok in zip(own, valid, strict=True) if ok]
+
+
+def _event_times(batch: Any, archetype: str, times: list[float]) -> list[float]:
+    """The time [s] of each row's ``archetype`` record: its ``t`` field, else the row's time.
+
+    The writer logs an event after the rows of one logged before it at the same time, a few
+    microseconds later (its ``ROW_STEP``), and keeps the event's time in its record (files
+    written before have no ``t``: there the row's time is the event's).
+    """
+    column = f"{archetype}:t"
+    if column not in batch.schema.names:
+        return times
+    own = [_first(value) for value in batch.column(column).to_pylist()]
+    return [t if value is None else float(value) for t, value in zip(times, own, strict=True)]
 
 
 def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
@@ -220,7 +237,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                 if kind_column in columns
                 else [None] * len(times)
             )
-            for row, t in enumerate(times):
+            for row, t in enumerate(_event_times(batch, TRANSITION_ARCHETYPE, times)):
                 if _first(fields["variable"][row]) is None:
                     continue
                 transitions.append(
@@ -240,7 +257,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                 else [None] * len(times)
                 for name in ("kind", "variable", "text", "until", "count", "ended_by", "then")
             }
-            for row, t in enumerate(times):
+            for row, t in enumerate(_event_times(batch, NOTE_ARCHETYPE, times)):
                 if _first(cells["kind"][row]) is not None:
                     note = SequencerNote(
                         t,
@@ -262,7 +279,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                     if f"{START_ARCHETYPE}:{name}" in columns
                     else [None] * len(times)
                 )
-            for row, t in enumerate(times):
+            for row, t in enumerate(_event_times(batch, START_ARCHETYPE, times)):
                 if _first(cells["rule"][row]) is not None:
                     start_correct = json.loads(_first(cells["correct"][row]) or "{}")
                     start_references = json.loads(_first(cells["references"][row]) or "[]")
@@ -281,7 +298,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
                 else [None] * len(times)
                 for name in ("reason", "cause")
             )
-            for row, t in enumerate(times):
+            for row, t in enumerate(_event_times(batch, OUTCOME_ARCHETYPE, times)):
                 outcome = _first(outcome_column[row])
                 if outcome is not None:
                     reason = _first(reason_column[row])

@@ -67,8 +67,9 @@ from cpmp.records import PendingSwitch, StartDecision
 from cpmp.sequencer.inputs import checked_time
 
 ROW_STEP = 1e-6
-"""Time [s] between the rows of one event in the events log (:meth:`EpisodeRecorder._log_event`):
-far below a control tick, so an event's rows stay at its time to the viewer's precision."""
+"""Time [s] between the rows of one event in the events log (:meth:`EpisodeRecorder._log_event`),
+and after the last row of an event at the same time: far below a control tick, so an event's
+rows stay at its time to the viewer's precision."""
 
 
 @dataclass
@@ -177,6 +178,7 @@ class EpisodeRecorder:
         """The outcome's cause (:meth:`log_outcome`): the blueprint opens on its variable."""
         self._holds: dict[str, _Hold] = {}
         self._events: set[str] = set()
+        self._event_rows: dict[float, int] = {}  # event time -> rows of the events log there
         self._progress_mps: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._targets: dict[str, set[str]] = {v: set() for v in self.mp_names}
         self._last_p: dict[str, dict[str, float]] = {}
@@ -251,17 +253,28 @@ class EpisodeRecorder:
         t: float,
         text: str,
         level: str = "INFO",
-        record: Any = None,
+        record: tuple[str, Mapping[str, Any]] | None = None,
         tick: int | None = None,
-    ) -> None:
+        first: int | None = None,
+    ) -> int:
         """Log one event at ``t`` [s] to ``path``: its rows of the events log and its record.
 
-        The first row (``"  3.25 s  <text>"``) carries the machine-readable ``record``; a long
-        ``text`` continues on indented rows (:func:`event_lines`), the ``k``-th
-        :data:`ROW_STEP` ``· k`` after it: rows at one time stamp come back in no set order
-        (rerun 0.41 showed an event's second row above its first), one microsecond apart they
-        sort as written. Warnings are drawn in :data:`WARN_COLOR`.
+        The first row (``"  3.25 s  <text>"``) carries the machine-readable ``record`` (its
+        archetype's name and components, to which ``t`` is added: the row may sit later); a long
+        ``text`` continues on indented rows (:func:`event_lines`), each :data:`ROW_STEP` after
+        the one above it: rows at one time stamp come back in no set order (rerun 0.41 showed
+        an event's second row above its first, and two events of one time with their rows
+        interleaved), one microsecond apart they sort as written. So an event logged at the
+        time of one logged before starts after that one's rows: its ``first`` row is
+        ``ROW_STEP · first`` after ``t`` (``None``: the next free row at ``t``; another entity
+        with the same rows, e.g. a variable's own copy, passes the value returned). Warnings
+        are drawn in :data:`WARN_COLOR`.
+
+        Returns:
+            ``first``: how many rows of the events log were at ``t`` before this event's.
         """
+        if first is None:
+            first = self._event_rows.get(t, 0)
         self._set_event_time(t, tick)
         color = WARN_COLOR if level == "WARN" else None
         rows = [
@@ -270,10 +283,17 @@ class EpisodeRecorder:
             self._rr.TextLog.from_fields(clear_unset=True, text=line, level=level, color=color)
             for line in event_lines(t, text)
         ]
-        self._rec.log(path, rows[0], *([record] if record is not None else []))
-        for k, row in enumerate(rows[1:], start=1):
-            self._rec.set_time("time", duration=t + k * ROW_STEP)
-            self._rec.log(path, row)
+        self._event_rows[t] = max(self._event_rows.get(t, 0), first + len(rows))
+        for k, row in enumerate(rows, start=first):
+            if k:
+                self._rec.set_time("time", duration=t + k * ROW_STEP)
+            extra: list[Any] = []
+            if record is not None and k == first:
+                name, components = record
+                archetype = self._rr.DynamicArchetype(name, components={**components, "t": t})
+                extra.append(archetype)
+            self._rec.log(path, row, *extra)
+        return first
 
     def _log_status(self, t: float, outcome: str = "") -> None:
         """The ``status`` document at ``t`` [s] (event time already set)."""
@@ -436,9 +456,9 @@ class EpisodeRecorder:
         check_mp(self.mp_names, variable, target)
         probability = float(probability)
         text = transition_text(variable, source, target, probability, str(kind))
-        record = self._rr.DynamicArchetype(
+        record = (
             TRANSITION_ARCHETYPE,
-            components={
+            {
                 "variable": variable,
                 "source": source,
                 "target": target,
@@ -451,8 +471,8 @@ class EpisodeRecorder:
         level = "WARN" if kind == "recovery" else "INFO"
         self._log_mark(variable, str(kind), t, probability)
         self._events.add("events/transitions")
-        self._log_event("events/transitions", t, text, level, record)
-        self._log_event(entity("events", "transitions", variable), t, text, level)
+        first = self._log_event("events/transitions", t, text, level, record)
+        self._log_event(entity("events", "transitions", variable), t, text, level, first=first)
         self._last_transition = f"{text} at {t:.2f} s"
         self._set_event_time(t)
         self._log_status(t)
@@ -489,9 +509,9 @@ class EpisodeRecorder:
             self._log_mark(variable, "hold", t, p)
             self._events.add("events/notes")
         else:
-            record = self._rr.DynamicArchetype(
+            record = (
                 NOTE_ARCHETYPE,
-                components={"kind": str(kind), "variable": str(variable), "text": str(text)},
+                {"kind": str(kind), "variable": str(variable), "text": str(text)},
             )
             level = "WARN" if kind in ("recovery", "nonfinite", "give_up") else "INFO"
             self._events.add("events/notes")
@@ -508,9 +528,9 @@ class EpisodeRecorder:
         ended it, :func:`~cpmp.recordings.layout.hold_text`).
         """
         hold = self._holds.pop(variable)
-        record = self._rr.DynamicArchetype(
+        record = (
             NOTE_ARCHETYPE,
-            components={
+            {
                 "kind": "hold",
                 "variable": variable,
                 "text": hold.text,
@@ -578,9 +598,9 @@ class EpisodeRecorder:
                 f"start axes must be features or given values, and in every reference: "
                 f"unknown {unknown}, references without them {missing}"
             )
-        record = self._rr.DynamicArchetype(
+        record = (
             START_ARCHETYPE,
-            components={
+            {
                 "rule": decision.rule,
                 "chosen": json.dumps(decision.chosen, sort_keys=True),
                 "options": json.dumps(
@@ -659,7 +679,7 @@ class EpisodeRecorder:
             components = {**components, "reason": reason, "cause": json.dumps(cause.to_dict())}
             self._log_cause(t, cause, level)
         text = outcome_text(str(outcome), reason)
-        record = self._rr.DynamicArchetype(OUTCOME_ARCHETYPE, components=components)
+        record = (OUTCOME_ARCHETYPE, components)
         self._end_holds(t)
         self._events.add("events/outcome")
         self._log_event("events/outcome", t, text, level, record)

@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import rerun.blueprint as rrb
 
 from cpmp.errors import ConfigError, DataError, UnknownMPError
 from cpmp.recordings.columns import ColumnBuffer
 from cpmp.recordings.layout import (
+    COLUMN_SHARES,
     LANE_SHARE,
+    START_TABLE_WIDTH,
     VariableSeries,
     blueprint,
     check_feature_groups,
@@ -180,3 +183,40 @@ def test_the_state_lanes_grow_with_the_variables(n: int) -> None:
     assert shares[0] == pytest.approx(max(3.0, LANE_SHARE * n))
     rows = -(-n // 3)  # the overview grid: three plots a row
     assert shares[1:] == pytest.approx([2.0 * rows, 3.0, 4.0])
+
+
+def _widths(bp: object, viewer: float) -> list[float]:
+    """The columns' widths [px] of a blueprint's root in a ``viewer`` px wide viewer."""
+    shares = list(bp.root_container.column_shares)  # type: ignore[attr-defined]
+    return [viewer * share / sum(shares) for share in shares]
+
+
+def _names(container: object) -> list[str]:
+    """The names of the views in ``container`` (a view: its own), depth first."""
+    if not isinstance(container, rrb.Container):
+        return [container.name]  # type: ignore[attr-defined]
+    return [name for child in container.contents for name in _names(child)]
+
+
+@pytest.mark.parametrize("scene", [True, False])
+def test_the_start_tables_fit_their_column_at_1440_px(scene: bool) -> None:
+    """A laptop's 1440 px wide viewer: the start document (its tables START_TABLE_WIDTH px) and
+    the start map are tabs beside the events log, the right column, wide enough for them; the
+    left column (the status document), where they cut the training starts' last column, is
+    not. A wrong start's start document has the middle column, wider still."""
+    series = {f"v{i}": VariableSeries(["a", "b"], ["b"]) for i in range(6)}
+    bp = blueprint({"x": ["x0"]}, series, start=True, scene=scene)
+    left, _, right = bp.root_container.contents
+    assert list(bp.root_container.column_shares) == list(COLUMN_SHARES)
+    assert _names(right) == ["events", "active MP log", "start", "start map"]
+    assert right.active_tab == 0  # the events log shows as the recording opens
+    assert _names(left) == (["scene", "status"] if scene else ["status"])
+    widths = _widths(bp, 1440)
+    assert widths[2] >= START_TABLE_WIDTH > widths[0]
+    wrong = blueprint({"x": ["x0"]}, series, start=True, start_focus=True, scene=scene)
+    middle = wrong.root_container.contents[1]
+    assert _names(middle) == ["start"]
+    assert _widths(wrong, 1440)[1] >= START_TABLE_WIDTH
+    # without a start decision: the events log and its neighbour tab alone
+    plain = blueprint({"x": ["x0"]}, series, scene=scene)
+    assert _names(plain.root_container.contents[2]) == ["events", "active MP log"]

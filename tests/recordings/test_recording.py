@@ -309,6 +309,41 @@ def test_recovery_transitions_and_notes_round_trip(tmp_path: Path) -> None:
     assert "hold" in format_summary(summary) and "[recovery]" in format_summary(summary)
 
 
+def test_events_of_one_time_keep_their_rows_together(tmp_path: Path) -> None:
+    """Two events at one time, each of several rows: the second's rows follow the first's, one
+    ROW_STEP apart (rerun 0.41 sorts rows of one time stamp either way: it showed a note's
+    second row below the first row of a transition at its time), and each reads back at its
+    own time, which its record holds."""
+    path = tmp_path / "same.rrd"
+    with EpisodeRecorder(path, feature_names=FEATURES, mp_names=MP_NAMES) as recorder:
+        for tick in range(3):
+            recorder.log_tick(tick * DT, [tick, 0.0], {}, {"left_pos": "approach"})
+        recorder.log_note(0.2, "recovery", "left_pos", "a stall of 1 s resolved: " * 3)
+        recorder.log_transition(0.2, "left_pos", "approach", "grasp", 0.4, kind="recovery")
+        recorder.log_outcome(0.2, "incomplete", "deadlock; " * 8, success=False)
+    step = recording_writer.ROW_STEP
+    note_times, notes = _column(path, "events/notes", "TextLog:text")
+    move_times, moves = _column(path, "events/transitions", "TextLog:text")
+    end_times, ends = _column(path, "events/outcome", "TextLog:text")
+    assert len(notes) > 1 and len(moves) == 1 and len(ends) > 1
+    rows = len(notes) + len(moves) + len(ends)
+    assert note_times + move_times + end_times == pytest.approx(
+        [0.2 + k * step for k in range(rows)], abs=step / 10
+    )
+    assert notes[0][0].startswith("  0.20 s  recovery: a stall")
+    assert moves[0][0].startswith("  0.20 s  left_pos: approach -> grasp")
+    assert ends[0][0].startswith("  0.20 s  outcome: incomplete")
+    # a variable's own copy of the transition sits where the events log's does
+    own_times, own = _column(path, "events/transitions/left_pos", "TextLog:text")
+    assert own == moves and own_times == pytest.approx(move_times, abs=step / 10)
+    _, record_times = _column(path, "events/transitions", "cpmp.Transition:t")
+    assert record_times == [[pytest.approx(0.2, abs=TIME_TOL)]]
+    summary = read_recording(path)
+    assert summary.notes[0].t == pytest.approx(0.2, abs=TIME_TOL)
+    assert summary.transitions[0].t == pytest.approx(0.2, abs=TIME_TOL)
+    assert summary.duration == pytest.approx(0.2, abs=TIME_TOL)
+
+
 # Feature names shaped like the simulator's (box, each hand, touch flags, goal distances), made
 # up here: the grouping rule must find the panels from the names alone.
 ROBOT_FEATURES = [
