@@ -22,17 +22,19 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import yaml
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
+from omegaconf import DictConfig
 
 from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.experiment.output import jsonable, write_json
-from cpmp.experiment.plots import plot_sweep
+from cpmp.experiment.plots import Cell, plot_sweep
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 
 log = logging.getLogger(__name__)
 
@@ -76,12 +78,12 @@ class SweepTable:
     """
 
     sweep_dir: Path
-    rows: list[dict[str, Any]]
+    rows: list[dict[str, Cell]]
     columns: list[str]
     override_keys: list[str]
     swept: list[str]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """The table as JSON-ready data (``aggregate.json``)."""
         return jsonable(
             {
@@ -94,7 +96,7 @@ class SweepTable:
         )
 
 
-def _natural_key(path: Path) -> list[Any]:
+def _natural_key(path: Path) -> list[tuple[int, int | str]]:
     return [(0, int(tok)) if tok.isdigit() else (1, tok) for tok in re.split(r"(\d+)", str(path))]
 
 
@@ -122,7 +124,7 @@ def find_job_dirs(sweep_dir: str | Path) -> list[Path]:
     return sorted(jobs, key=lambda p: _natural_key(p.relative_to(root)))
 
 
-def read_overrides(job_dir: str | Path) -> dict[str, Any]:
+def read_overrides(job_dir: str | Path) -> dict[str, Cell]:
     """The job's command-line overrides (``.hydra/overrides.yaml``) as key -> value.
 
     Values are parsed as Hydra does (``0.5`` -> float, ``klr`` -> str, ``null`` -> None);
@@ -138,7 +140,7 @@ def read_overrides(job_dir: str | Path) -> dict[str, Any]:
         parsed = OverridesParser.create().parse_overrides([str(line) for line in lines])
     except (yaml.YAMLError, HydraException, TypeError) as err:
         raise CpmpFileError(f"cannot parse overrides in {path}: {err}") from err
-    out: dict[str, Any] = {}
+    out: dict[str, Cell] = {}
     for override in parsed:
         key = override.get_key_element().lstrip("+~")
         value = override.value()
@@ -148,7 +150,7 @@ def read_overrides(job_dir: str | Path) -> dict[str, Any]:
     return out
 
 
-def _read_report(job_dir: Path) -> dict[str, Any]:
+def _read_report(job_dir: Path) -> dict[str, JsonValue]:
     path = job_dir / "report.json"
     try:
         report = json.loads(path.read_text(encoding="utf-8"))
@@ -162,7 +164,7 @@ def _read_report(job_dir: Path) -> dict[str, Any]:
     return report
 
 
-def report_rows(report: Mapping[str, Any]) -> list[dict[str, Any]]:
+def report_rows(report: Mapping[str, JsonValue]) -> list[dict[str, Cell]]:
     """The metric columns (:data:`METRIC_COLUMNS`) of one report, one row per D (ascending)."""
     smap = report.get("strategy_map") or {}
     map_d = smap.get("train_size")
@@ -231,13 +233,15 @@ def plot_axes(table: SweepTable) -> PlotAxes:
     return PlotAxes(x, "D" if len(sizes) > 1 else None, None)
 
 
-def plot_table(table: SweepTable, x: str, hue: str | None, only_d: int | None) -> list[dict]:
+def plot_table(
+    table: SweepTable, x: str, hue: str | None, only_d: int | None
+) -> list[dict[str, Cell]]:
     """Rows for :func:`~cpmp.experiment.plots.plot_sweep`: C (mean, std) per (x, hue) cell.
 
     A cell with several jobs (the same x and hue, other overrides differing) plots the mean
     of their C and the std between them.
     """
-    cells: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    cells: dict[tuple[str, str], list[dict[str, Cell]]] = {}
     for row in table.rows:
         if only_d is None or row["D"] == only_d:
             key = (repr(row[x]), repr(row[hue]) if hue else "")
@@ -256,14 +260,14 @@ def plot_table(table: SweepTable, x: str, hue: str | None, only_d: int | None) -
     return out
 
 
-def _plot_value(value: Any) -> Any:
+def _plot_value(value: Cell) -> str | int | float:
     """Numbers stay numbers (a numeric x axis); everything else becomes text (``None`` -> ``-``)."""
     if value is None:
         return "-"
     return value if isinstance(value, int | float) and not isinstance(value, bool) else str(value)
 
 
-def _cell(value: Any, std: Any = None, digits: int = 2, percent: bool = False) -> str:
+def _cell(value: Cell, std: Cell = None, digits: int = 2, percent: bool = False) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -323,7 +327,7 @@ def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Pat
     out = Path(out_dir) if out_dir is not None else table.sweep_dir
     x, hue, only_d = plot_axes(table)
     plot_rows = plot_table(table, x, hue, only_d)
-    plot: dict[str, Any] = {"x": x, "y": "C", "hue": hue, "D": only_d, "file": None}
+    plot: dict[str, Cell] = {"x": x, "y": "C", "hue": hue, "D": only_d, "file": None}
     if plot_rows:
         title = "complete episodes C (mean ± std)"
         if only_d is not None:
@@ -337,7 +341,7 @@ def write_aggregate(table: SweepTable, out_dir: str | Path | None = None) -> Pat
     return write_json(out / "aggregate.json", {**table.to_dict(), "plot": plot})
 
 
-def aggregate_sweep(cfg: Any, run_dir: str | Path) -> Path:
+def aggregate_sweep(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Job of ``scripts/aggregate.py``: aggregate ``cfg.sweep_dir``; returns aggregate.json.
 
     The files are written into the sweep directory (``run_dir``, the aggregate job's own

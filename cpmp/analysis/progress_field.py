@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.experiment.plots import plot_progress_field
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.two_point import curved_trajectories
 
@@ -21,8 +22,8 @@ def progress_field_example(
     n_trajectories: int,
     seed: int,
     predictor: str,
-    predictor_options: dict[str, Any] | None = None,
-) -> dict[str, Any]:
+    predictor_options: Mapping[str, object] | None = None,
+) -> dict[str, JsonValue]:
     """The paper's Fig. 3: a progress predictor's field over the plane, supports marked.
 
     The predictor is fitted on curved 2-D trajectories; its predicted progress is plotted over
@@ -50,7 +51,7 @@ def progress_field_example(
         bounds=((0.0, 1.0), (0.0, 1.0)),
         title=f"{predictor}: predicted progress of 'move' ({n_trajectories} trajectories)",
     )
-    result = {
+    result: dict[str, JsonValue] = {
         "predictor": predictor,
         "n_trajectories": n_trajectories,
         "n_support": None if support is None else len(support),

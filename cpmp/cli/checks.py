@@ -16,8 +16,8 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from hydra.core.override_parser.types import Override
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
@@ -31,6 +31,7 @@ from cpmp.cli.compose import (
     sweep_jobs,
 )
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
+from cpmp.records import JsonValue
 
 
 @dataclass(frozen=True)
@@ -53,8 +54,8 @@ class Command:
 
     name: str
     summary: str
-    job: Callable[[Any, Path], Path]
-    check: Callable[[Any], None] | None = None
+    job: Callable[[DictConfig, Path], Path]
+    check: Callable[[DictConfig], None] | None = None
     required: tuple[str, ...] = ()
     files: tuple[str, ...] = ()
     dirs: tuple[str, ...] = ()
@@ -73,7 +74,7 @@ _ACCEPTS = {
 }
 
 
-def _kind(value: Any) -> str | None:
+def _kind(value: object) -> str | None:
     """The kind of a config value (``None`` for null).
 
     A YAML default written as an integer is an integer option, one written with a decimal
@@ -88,7 +89,7 @@ def _kind(value: Any) -> str | None:
     return next((name for types, name in _KINDS if isinstance(value, types)), None)
 
 
-def _check_type(key: str, value: Any, default: Any) -> None:
+def _check_type(key: str, value: object, default: JsonValue) -> None:
     """``value`` (set on the command line) must be of the kind of ``default``.
 
     An integer where the default is an integer, a number where it is a float, and so on; null
@@ -114,9 +115,9 @@ def _check_type(key: str, value: Any, default: Any) -> None:
                     )
 
 
-def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
+def _select(cfg: dict[str, JsonValue], key: str) -> tuple[bool, JsonValue]:
     """``(found, value)`` of the dotted ``key`` in ``cfg``."""
-    node: Any = cfg
+    node: JsonValue = cfg
     for part in key.split("."):
         if not isinstance(node, dict) or part not in node:
             return False, None
@@ -124,7 +125,7 @@ def _select(cfg: dict[str, Any], key: str) -> tuple[bool, Any]:
     return True, node
 
 
-def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
+def _check_types(base: dict[str, JsonValue], parsed: list[Override]) -> None:
     """The overridden values, as written on the command line, against the kinds of the defaults.
 
     ``base`` is the config composed with the same group options and no value override,
@@ -142,7 +143,7 @@ def _check_types(base: dict[str, Any], parsed: list[Any]) -> None:
             _check_type(key, value, default)
 
 
-def _check_values(command: Command, job: dict[str, Any]) -> None:
+def _check_values(command: Command, job: dict[str, JsonValue]) -> None:
     """The seed and counts of the composed job, then the command's required paths.
 
     Raises:
@@ -181,7 +182,7 @@ class CheckedJob:
     """
 
     overrides: list[str]
-    cfg: Any
+    cfg: DictConfig
 
 
 def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob]:
@@ -214,7 +215,7 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
     )
     jobs = sweep_jobs(parsed) if multirun else [overrides]
     checked: list[CheckedJob] = []
-    bases: dict[tuple[str, ...], dict[str, Any]] = {}
+    bases: dict[tuple[str, ...], dict[str, JsonValue]] = {}
     group_names: set[str] | None = None
     for job_overrides in jobs:
         try:

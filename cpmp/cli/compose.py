@@ -14,13 +14,13 @@ import difflib
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from hydra import compose, initialize_config_module
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra._internal.utils import get_args_parser
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.override_parser.types import Override
 from hydra.errors import HydraException, MissingConfigException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -30,6 +30,7 @@ from cpmp.config.paths import CONF_PACKAGE, conf_dir
 from cpmp.config.predictors import REMOVED_OPTIONS
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.experiment.config import register_configs
+from cpmp.records import JsonValue
 
 CONF_DIR = conf_dir()
 """The Hydra config directory: the checkout's ``conf/`` (editable install) or its installed copy
@@ -77,7 +78,7 @@ def one_line(text: str) -> str:
     return "; ".join(lines)
 
 
-def parse_overrides(overrides: Sequence[str]) -> list[Any]:
+def parse_overrides(overrides: Sequence[str]) -> list[Override]:
     """``overrides`` parsed by Hydra's override parser (one ``Override`` each).
 
     Raises:
@@ -97,7 +98,7 @@ def parse_overrides(overrides: Sequence[str]) -> list[Any]:
 
 
 def _composition_error(
-    err: Exception, overrides: Sequence[Any], config_name: str, config_dir: str | None
+    err: Exception, overrides: Sequence[Override], config_name: str, config_dir: str | None
 ) -> ConfigError:
     """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
     text = str(err)
@@ -180,7 +181,9 @@ def _close_key(key: str, config_name: str, groups: list[str], config_dir: str | 
     return ".".join([*filter(None, [parent]), close[0]]) if close else None
 
 
-def compose_config(config_name: str, overrides: Sequence[str], config_dir: str | None) -> Any:
+def compose_config(
+    config_name: str, overrides: Sequence[str], config_dir: str | None
+) -> DictConfig:
     """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``.
 
     Raises:
@@ -215,7 +218,7 @@ def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:
     return [*rest, f"hydra.searchpath=[{entries}]"]
 
 
-def resolved_job(cfg: Any) -> dict[str, Any]:
+def resolved_job(cfg: DictConfig) -> dict[str, JsonValue]:
     """The job's part of ``cfg`` (without ``hydra``) with every interpolation resolved.
 
     Raises:
@@ -234,7 +237,7 @@ def resolved_job(cfg: Any) -> dict[str, Any]:
         hydra_config.cfg = previous
 
 
-def sweep_jobs(parsed: list[Any]) -> list[list[str]]:
+def sweep_jobs(parsed: list[Override]) -> list[list[str]]:
     """The job override lists of a multirun (Hydra's basic sweeper: every combination).
 
     Raises:

@@ -21,7 +21,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+
+from omegaconf import DictConfig
 
 from cpmp.cli.checks import Command
 from cpmp.errors import ConfigError, CpmpFileError
@@ -36,7 +37,7 @@ SKIPPED_STATUS = 3
 (``on_error=skip``); 0: everything imported, 2: an error and no file."""
 
 
-def _inputs(cfg: Any) -> list[str]:
+def _inputs(cfg: DictConfig) -> list[str]:
     """``input`` as a list of paths (one path, or a list of bags)."""
     value = cfg.get("input")
     if isinstance(value, str):
@@ -46,7 +47,7 @@ def _inputs(cfg: Any) -> list[str]:
     raise ConfigError(f"input={value!r}: give a path (or a list of bag paths)")
 
 
-def split_from_cfg(cfg: Any) -> SplitSpec:
+def split_from_cfg(cfg: DictConfig) -> SplitSpec:
     """The job's ``test_fraction``, ``seed`` and ``test`` as a :class:`SplitSpec`."""
     test = cfg.get("test") or ()
     return SplitSpec(
@@ -56,7 +57,7 @@ def split_from_cfg(cfg: Any) -> SplitSpec:
     )
 
 
-def on_error_from_cfg(cfg: Any) -> str | None:
+def on_error_from_cfg(cfg: DictConfig) -> str | None:
     """The job's ``on_error`` (``raise`` or ``skip``), or ``None`` for the mapping's.
 
     Raises:
@@ -71,7 +72,7 @@ def on_error_from_cfg(cfg: Any) -> str | None:
     return value
 
 
-def check_import(cfg: Any) -> None:
+def check_import(cfg: DictConfig) -> None:
     """The mapping parses, every input exists, ``on_error`` and the split are valid.
 
     Raises:
@@ -88,7 +89,7 @@ def check_import(cfg: Any) -> None:
     split_from_cfg(cfg)
 
 
-def import_job(cfg: Any, run_dir: Path) -> Path:
+def import_job(cfg: DictConfig, run_dir: Path) -> Path:
     """Import ``cfg.input`` with ``cfg.mapping`` into ``run_dir / cfg.output``.
 
     Returns:

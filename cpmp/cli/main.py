@@ -38,10 +38,10 @@ import logging
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
 
 from cpmp.cli.checks import CheckedJob, Command, check_command_line, check_jobs
 from cpmp.cli.compose import CONF_DIR  # noqa: F401 (re-exported: where the configs are)
@@ -61,12 +61,12 @@ log = logging.getLogger("cpmp")
 
 
 # ------------------------------------------------------------------------------- the jobs
-def _is_compare(cfg: Any) -> bool:
+def _is_compare(cfg: DictConfig) -> bool:
     """Whether a composed config is the comparison's (it has a ``compare`` node)."""
     return cfg.get("compare") is not None
 
 
-def _experiment_job(cfg: Any, run_dir: Path) -> Path:
+def _experiment_job(cfg: DictConfig, run_dir: Path) -> Path:
     """The main job (:func:`~cpmp.experiment.jobs.run_experiment`), or the comparison's alias."""
     if _is_compare(cfg):
         return _compare_job(cfg, run_dir)
@@ -75,35 +75,35 @@ def _experiment_job(cfg: Any, run_dir: Path) -> Path:
     return run_experiment(cfg, run_dir)
 
 
-def _compare_job(cfg: Any, run_dir: Path) -> Path:
+def _compare_job(cfg: DictConfig, run_dir: Path) -> Path:
     """The comparison (:func:`~cpmp.compare.job.run_compare`); returns ``compare.json``."""
     from cpmp.compare.job import run_compare  # lazy: torch, MuJoCo after the checks
 
     return run_compare(cfg, run_dir)
 
 
-def _train_job(cfg: Any, run_dir: Path) -> Path:
+def _train_job(cfg: DictConfig, run_dir: Path) -> Path:
     """Train a sequencer from a demonstration file; returns the checkpoint's path."""
     from cpmp.experiment.checkpoint_jobs import train_from_file  # lazy: torch after the checks
 
     return train_from_file(cfg, run_dir)
 
 
-def _evaluate_job(cfg: Any, run_dir: Path) -> Path:
+def _evaluate_job(cfg: DictConfig, run_dir: Path) -> Path:
     """Evaluate a checkpoint offline; returns the report's path."""
     from cpmp.experiment.checkpoint_jobs import evaluate_checkpoint  # lazy: torch after checks
 
     return evaluate_checkpoint(cfg, run_dir)
 
 
-def _aggregate_job(cfg: Any, run_dir: Path) -> Path:
+def _aggregate_job(cfg: DictConfig, run_dir: Path) -> Path:
     """One table and plot of a multirun; returns the table's path."""
     from cpmp.analysis.aggregate import aggregate_sweep  # lazy: matplotlib after the checks
 
     return aggregate_sweep(cfg, run_dir)
 
 
-def _collect_job(cfg: Any, run_dir: Path) -> Path:
+def _collect_job(cfg: DictConfig, run_dir: Path) -> Path:
     """Record ``n_demos`` scripted demonstrations into ``run_dir / output`` (HDF5)."""
     from cpmp.sim.collect import collect_demonstrations  # lazy: MuJoCo after the checks
 
@@ -113,7 +113,7 @@ def _collect_job(cfg: Any, run_dir: Path) -> Path:
     return path
 
 
-def _progress_field_job(cfg: Any, run_dir: Path) -> Path:
+def _progress_field_job(cfg: DictConfig, run_dir: Path) -> Path:
     """The paper's Fig. 3 on synthetic trajectories; returns the PNG path."""
     from cpmp.analysis.progress_field import progress_field_example  # lazy: torch, matplotlib
 
@@ -132,7 +132,7 @@ def _progress_field_job(cfg: Any, run_dir: Path) -> Path:
 # ------------------------------------------------------------------ the jobs' own checks
 # Each converts the config into the typed configs the job will build from it, which validate
 # themselves (cpmp.experiment.config); only the goal_nearest baseline's options import torch.
-def _check_experiment(cfg: Any) -> None:
+def _check_experiment(cfg: DictConfig) -> None:
     """The main job's settings, predictor, sequencer, trainer and task (or the comparison's)."""
     if _is_compare(cfg):
         _check_compare(cfg)
@@ -140,23 +140,23 @@ def _check_experiment(cfg: Any) -> None:
         experiment_job(cfg)
 
 
-def _check_compare(cfg: Any) -> None:
+def _check_compare(cfg: DictConfig) -> None:
     """The comparison's settings, task and ``compare`` node, and the groups its rows share."""
     CompareJob.from_cfg(cfg)
     job_fit_settings(cfg)
 
 
-def _check_train(cfg: Any) -> None:
+def _check_train(cfg: DictConfig) -> None:
     """The predictor, sequencer and trainer groups."""
     job_fit_settings(cfg)
 
 
-def _check_collect(cfg: Any) -> None:
+def _check_collect(cfg: DictConfig) -> None:
     """The task."""
     TaskConfig.from_dict(cfg.task)
 
 
-def _check_progress_field(cfg: Any) -> None:
+def _check_progress_field(cfg: DictConfig) -> None:
     """The predictor group."""
     predictor_from_cfg(cfg.predictor)
 
@@ -234,7 +234,7 @@ def _fail(err: CpmpError) -> None:
     sys.exit(2)
 
 
-def run_job(job: Callable[[Any, Path], Path], cfg: Any, run_dir: str | Path) -> Path:
+def run_job(job: Callable[[DictConfig, Path], Path], cfg: DictConfig, run_dir: str | Path) -> Path:
     """Run ``job(cfg, run_dir)``; print its output path last.
 
     A user error (:class:`CpmpError`) ends the job with one ``error:`` line on stderr and exit
@@ -307,7 +307,7 @@ class _Task:
         self.name = name
         self.__module__ = name
 
-    def __call__(self, cfg: Any) -> Path:
+    def __call__(self, cfg: DictConfig) -> Path:
         """Run the command's job on ``cfg`` in Hydra's output directory."""
         return run_job(COMMANDS[self.name].job, cfg, HydraConfig.get().runtime.output_dir)
 

@@ -8,26 +8,29 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from matplotlib import colormaps
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter, ScalarFormatter
 
+from cpmp.compare.pooling import CompareResult, RowRecord
+from cpmp.compare.stats import IntervalRecord
 from cpmp.experiment.output import PAPER_TABLE_I
 from cpmp.experiment.plots import new_figure, save_figure
 
 _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "<", ">", "*")
 
 
-def _colours(n: int) -> list[Any]:
+def _colours(n: int) -> list[tuple[float, float, float, float]]:
     """``n`` distinguishable colours (tab10, then tab20)."""
     cmap = colormaps["tab10" if n <= 10 else "tab20"]
     return [cmap(i % cmap.N) for i in range(n)]
 
 
-def _bars(value: Mapping[str, Any] | None, scale: float = 1.0) -> tuple[float, float, float]:
+def _bars(value: IntervalRecord | None, scale: float = 1.0) -> tuple[float, float, float]:
     """``(estimate, below, above)`` of an interval record times ``scale`` (nan for none)."""
     if value is None:
         return math.nan, math.nan, math.nan
@@ -35,7 +38,7 @@ def _bars(value: Mapping[str, Any] | None, scale: float = 1.0) -> tuple[float, f
     return est, est - scale * value["low"], scale * value["high"] - est
 
 
-def _grid(n: int, width: float, height: float) -> tuple[Any, list[Any]]:
+def _grid(n: int, width: float, height: float) -> tuple[Figure, list[Axes]]:
     """A figure with ``n`` panels in rows of at most three."""
     ncols = min(n, 3)
     nrows = math.ceil(n / ncols)
@@ -46,7 +49,7 @@ def _grid(n: int, width: float, height: float) -> tuple[Any, list[Any]]:
     return figure, axes[:n]
 
 
-def plot_c_vs_d(result: Mapping[str, Any], path: Path) -> Path:
+def plot_c_vs_d(result: CompareResult, path: Path) -> Path:
     """Complete episodes [%] against D, one line per row, one panel per world.
 
     Error bars are the 95 % intervals; the paper's Table I is dashed in the default simulated
@@ -92,7 +95,7 @@ def plot_c_vs_d(result: Mapping[str, Any], path: Path) -> Path:
     return save_figure(figure, path)
 
 
-def plot_claims(result: Mapping[str, Any], path: Path) -> Path:
+def plot_claims(result: CompareResult, path: Path) -> Path:
     """Each claim's paired difference a − b in C [pp] and in MAE, per world and D.
 
     One row of points per (claim, world, D), its 95 % interval as a bar; a filled point is a
@@ -134,7 +137,7 @@ def plot_claims(result: Mapping[str, Any], path: Path) -> Path:
     return save_figure(figure, path)
 
 
-def plot_supports(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
+def plot_supports(rows: Sequence[RowRecord], path: Path) -> Path:
     """The support-count axis: MAE, complete episodes and tick cost against support points.
 
     One line per world, D and predictor (its points sorted by supports; the predictor's own

@@ -18,7 +18,6 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
@@ -47,7 +46,7 @@ OUTPUT_FILES = (
 """The files :func:`run_compare` writes into its run directory (besides ``<world>/seed_<s>/``)."""
 
 
-def run_compare(cfg: Any, run_dir: str | Path) -> Path:
+def run_compare(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Run the comparison (see the module doc); returns the path of ``compare.json``.
 
     Writes :data:`OUTPUT_FILES` into ``run_dir`` (plus ``<world>/seed_<s>/demos.h5`` of the

@@ -16,23 +16,26 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
+from typing_extensions import NotRequired, TypedDict  # NotRequired needs their TypedDict < 3.11
 
-from cpmp.compare.rows import RowSpec
+from cpmp.compare.rows import RowGroup, RowSpec
 from cpmp.compare.runs import RowResult, table_outcome
 from cpmp.compare.settings import ClaimSettings
 from cpmp.compare.stats import (
     BootstrapOptions,
     Interval,
+    IntervalRecord,
     SeedUnits,
     interval,
     paired_difference,
     sign_flip_p,
 )
-from cpmp.compare.worlds import World
+from cpmp.compare.worlds import World, WorldKind
 from cpmp.experiment.output import jsonable
+from cpmp.records import JsonValue
 
 Metric = Literal["W", "I", "C", "mae", "fit_s", "tick_ms", "supports"]
 """A number of a row: the rates of wrong starts, incomplete and complete episodes (fractions
@@ -43,6 +46,126 @@ PER_SEED: tuple[Metric, ...] = ("fit_s", "tick_ms", "supports")
 """Numbers with one value per seed (their interval resamples seeds only)."""
 COMPARED: tuple[Metric, ...] = ("W", "I", "C", "mae")
 """The numbers paired differences are taken of."""
+
+
+class DifferenceRecord(IntervalRecord):
+    """A paired difference a − b (:func:`difference_record`): its interval, test and verdict."""
+
+    p: float
+    """The paired sign-flip test's p-value (:func:`~cpmp.compare.stats.sign_flip_p`)."""
+    significant: bool
+    """Whether the interval excludes 0 and ``p`` is below ``1 - level``."""
+
+
+class Differences(TypedDict):
+    """Row a minus row b in every :data:`COMPARED` number (``None``: no seed has it)."""
+
+    W: DifferenceRecord | None
+    I: DifferenceRecord | None  # noqa: E741 - Table I's name
+    C: DifferenceRecord | None
+    mae: DifferenceRecord | None
+
+
+class PerSeedRecord(TypedDict):
+    """A row's numbers seed by seed (``None``: the seed's fit was refused)."""
+
+    seed: list[int]
+    W: list[int | None]
+    I: list[int | None]  # noqa: E741 - Table I's name
+    C: list[int | None]
+    mae: list[float | None]
+    fit_s: list[float | None]
+    tick_ms: list[float | None]
+    supports: list[int | None]
+    sparsity: NotRequired[list[dict[str, JsonValue]]]
+    """What each seed's learned-sparsity fit chose (only where one did)."""
+
+
+class ReferenceRecord(Differences):
+    """A support-axis point minus the swept predictor's own row (``vs_reference``)."""
+
+    reference: str
+    """The reference row's name."""
+
+
+class RowRecord(TypedDict):
+    """``compare.json``'s record of one row (:func:`row_record`); rates as fractions."""
+
+    world: str
+    group: RowGroup
+    predictor: str
+    sequencer: str
+    D: int
+    option: str | None
+    value: float | None
+    name: str
+    seeds: list[int]
+    episodes: int
+    W: IntervalRecord | None
+    I: IntervalRecord | None  # noqa: E741 - Table I's name
+    C: IntervalRecord | None
+    mae: IntervalRecord | None
+    fit_s: IntervalRecord | None
+    tick_ms: IntervalRecord | None
+    supports: IntervalRecord | None
+    diverged: int
+    per_seed: PerSeedRecord
+    errors: list[str]
+    vs_reference: NotRequired[ReferenceRecord]
+    """A support-axis point's difference to the reference row (where that row exists)."""
+
+
+class PairRecord(Differences):
+    """Two rows of one world and D and their paired differences (:func:`pair_rows`)."""
+
+    world: str
+    D: int
+    a: str
+    b: str
+
+
+class ClaimRecord(Differences):
+    """A claim's paired differences in one world (:func:`claim_rows`)."""
+
+    claim: str
+    a: str
+    b: str
+    world: str
+    D: int | str
+    """The training size, or ``"all"``: every D pooled."""
+
+
+class WorldRecord(TypedDict):
+    """``compare.json``'s record of one world."""
+
+    name: str
+    label: str
+    kind: WorldKind
+    world: str | None
+    options: dict[str, JsonValue]
+    feature_noise: float
+    seeds: list[int]
+    train_sizes: list[int]
+    episodes: int
+    test_demos: int | None
+
+
+class BootstrapRecord(TypedDict):
+    """The bootstrap's settings."""
+
+    samples: int
+    level: float
+    seed: int
+
+
+class CompareResult(TypedDict):
+    """``compare.json`` (:func:`pool`)."""
+
+    worlds: list[WorldRecord]
+    bootstrap: BootstrapRecord
+    rows: list[RowRecord]
+    pairs: list[PairRecord]
+    claims: list[ClaimRecord]
 
 
 @dataclass(frozen=True)
@@ -100,7 +223,7 @@ def _interval(
     return interval(seeds, options) if seeds else None
 
 
-def row_record(row: PooledRow, options: BootstrapOptions) -> dict[str, Any]:
+def row_record(row: PooledRow, options: BootstrapOptions) -> RowRecord:
     """``compare.json``'s record of one row: every :data:`Metric` with its interval.
 
     Rates are fractions of the episodes; ``per_seed`` keeps each seed's counts and numbers,
@@ -108,7 +231,7 @@ def row_record(row: PooledRow, options: BootstrapOptions) -> dict[str, Any]:
     """
     ok = [r for _, r in row.ok]
     spec = row.spec
-    record: dict[str, Any] = {
+    record: dict[str, object] = {
         "world": row.world.name,
         "group": spec.group,
         "predictor": spec.predictor,
@@ -124,13 +247,14 @@ def row_record(row: PooledRow, options: BootstrapOptions) -> dict[str, Any]:
         found = _interval(ok, metric, options)
         record[metric] = None if found is None else found.to_dict()
     record["diverged"] = sum(sum(o == "diverged" for o in r.outcomes) for r in ok)
-    record["per_seed"] = {
+    per_seed: dict[str, object] = {
         "seed": [s for s, _ in row.results],
         **{k: [r.count(k) if not r.error else None for _, r in row.results] for k in RATES},
         **{k: [getattr(r, k) for _, r in row.results] for k in ("mae", *PER_SEED)},
     }
+    record["per_seed"] = per_seed
     if any(r.sparsity for _, r in row.results):
-        record["per_seed"]["sparsity"] = [r.sparsity for _, r in row.results]
+        per_seed["sparsity"] = [r.sparsity for _, r in row.results]
     record["errors"] = [f"seed {s}: {r.error}" for s, r in row.results if r.error]
     return jsonable(record)
 
@@ -146,7 +270,7 @@ def difference_record(
     a: PooledRow | Sequence[PooledRow],
     b: PooledRow | Sequence[PooledRow],
     options: BootstrapOptions,
-) -> dict[str, Any]:
+) -> Differences:
     """Row ``a`` minus row ``b`` in every :data:`COMPARED` number, paired, with intervals.
 
     A sequence of rows (one per D) pools their episodes and demonstrations per seed, each
@@ -159,7 +283,7 @@ def difference_record(
     """
     rows_a = [a] if isinstance(a, PooledRow) else list(a)
     rows_b = [b] if isinstance(b, PooledRow) else list(b)
-    out: dict[str, Any] = {}
+    out: dict[str, DifferenceRecord | None] = {}
     for metric in COMPARED:
         paired = _paired_units(rows_a, rows_b, metric)
         if paired is None:
@@ -169,7 +293,7 @@ def difference_record(
         p = sign_flip_p(*paired, options.samples, options.seed)
         significant = found.excludes(0.0) and p < 1.0 - options.level
         out[metric] = {**found.to_dict(), "p": p, "significant": significant}
-    return out
+    return Differences(W=out["W"], I=out["I"], C=out["C"], mae=out["mae"])
 
 
 def _paired_units(
@@ -191,7 +315,7 @@ def _paired_units(
     return (left, right) if left else None
 
 
-def pair_rows(rows: Sequence[PooledRow], options: BootstrapOptions) -> list[dict[str, Any]]:
+def pair_rows(rows: Sequence[PooledRow], options: BootstrapOptions) -> list[PairRecord]:
     """Every pair of compared rows (predictors and baselines) of one world and D.
 
     Returns:
@@ -212,7 +336,7 @@ def pair_rows(rows: Sequence[PooledRow], options: BootstrapOptions) -> list[dict
 
 def claim_rows(
     rows: Sequence[PooledRow], claims: Sequence[ClaimSettings], options: BootstrapOptions
-) -> list[dict[str, Any]]:
+) -> list[ClaimRecord]:
     """Each claim's difference ``a - b`` in every world that runs both rows.
 
     Per D, and over all of the world's D together (``D`` = ``"all"``: each seed's episodes and
@@ -257,7 +381,7 @@ def pool(
     claims: Sequence[ClaimSettings],
     options: BootstrapOptions,
     reference: str | None = None,
-) -> dict[str, Any]:
+) -> CompareResult:
     """``compare.json``: the worlds, every row, every pair's and every claim's differences.
 
     Rates are fractions of the episodes (``W``, ``I``, ``C``), the MAE in [0, 1]; every

@@ -8,18 +8,27 @@ every difference between them, the support-count axis, refused fits and the file
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
 
-from cpmp.compare.pooling import RATES
+from cpmp.compare.pooling import (
+    RATES,
+    ClaimRecord,
+    CompareResult,
+    DifferenceRecord,
+    PairRecord,
+    RowRecord,
+    WorldRecord,
+)
 from cpmp.compare.rows import FitJob
 from cpmp.compare.runs import RowResult
+from cpmp.compare.stats import IntervalRecord
 from cpmp.experiment.collection import SeedData
 from cpmp.experiment.output import PAPER_TABLE_I
+from cpmp.records import JsonValue
 
 
 def job_episodes(
     results: Mapping[str, RowResult], jobs: Mapping[str, FitJob]
-) -> list[dict[str, Any]]:
+) -> list[dict[str, object]]:
     """Every closed-loop episode of every job, labelled with its world, row, seed and D.
 
     A fit shared by two rows is listed once, under the first.
@@ -46,7 +55,7 @@ def job_timings(
     seconds: float,
     workers: int,
     executor: str = "local",
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Wall time of the run; wall and CPU seconds of every collection and job stage.
 
     With the run's executor and its jobs at once (``workers``).
@@ -99,7 +108,7 @@ def seeds_text(seeds: Sequence[int]) -> str:
     return ", ".join(parts)
 
 
-def interval_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
+def interval_text(value: IntervalRecord | None, scale: float = 1.0, digits: int = 1) -> str:
     """``estimate [low, high]`` of an interval record, times ``scale`` (``–`` for none)."""
     if value is None:
         return "–"
@@ -107,7 +116,7 @@ def interval_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: i
     return f"{est:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
-def difference_text(value: Mapping[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
+def difference_text(value: DifferenceRecord | None, scale: float = 1.0, digits: int = 1) -> str:
     """A signed difference ``+a [lo, hi]``, bold when significant (``–`` for none)."""
     if value is None:
         return "–"
@@ -128,7 +137,7 @@ _ROW_HEADER = (
 )
 
 
-def _row_line(row: Mapping[str, Any]) -> str:
+def _row_line(row: RowRecord) -> str:
     """One row of a world's table: every number with its interval."""
     cells = [interval_text(row[k], 100.0, 0) for k in RATES]
     return (
@@ -139,7 +148,7 @@ def _row_line(row: Mapping[str, Any]) -> str:
     )
 
 
-def _paper_line(world: Mapping[str, Any], sizes: Sequence[int]) -> list[str]:
+def _paper_line(world: WorldRecord, sizes: Sequence[int]) -> list[str]:
     """The paper's Table I as rates, under the default simulated world (else nothing)."""
     if world["kind"] != "sim" or world["options"] or world["feature_noise"]:
         return []
@@ -152,7 +161,7 @@ def _paper_line(world: Mapping[str, Any], sizes: Sequence[int]) -> list[str]:
     return out
 
 
-def _pairs_table(pairs: Sequence[Mapping[str, Any]]) -> list[str]:
+def _pairs_table(pairs: Sequence[PairRecord]) -> list[str]:
     """Every pair's paired differences; bold cells exclude 0."""
     lines = [
         "| D | a − b | ΔW [pp] | ΔI [pp] | ΔC [pp] | ΔMAE |",
@@ -168,7 +177,7 @@ def _pairs_table(pairs: Sequence[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
-def _claims_table(claims: Sequence[Mapping[str, Any]]) -> list[str]:
+def _claims_table(claims: Sequence[ClaimRecord]) -> list[str]:
     """Each claim's paired differences in every world and D."""
     lines = [
         "| claim (a − b) | world | D | ΔC [pp] | ΔI [pp] | ΔW [pp] | ΔMAE |",
@@ -183,7 +192,7 @@ def _claims_table(claims: Sequence[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
-def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+def _supports_table(rows: Sequence[RowRecord]) -> list[str]:
     """The support-count axis: every point's supports, MAE, C, tick and fit time."""
     lines = [
         "| world | D | predictor | point | supports | MAE | C [%] | tick [ms] | fit [s] "
@@ -191,7 +200,7 @@ def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
 
-    def order(r: Mapping[str, Any]) -> tuple[Any, ...]:
+    def order(r: RowRecord) -> tuple[str, int, str, float]:
         supports = r["supports"]["estimate"] if r["supports"] else 0.0
         return (r["world"], r["D"], r["predictor"], supports)
 
@@ -211,7 +220,7 @@ def _supports_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
-def render_compare(result: Mapping[str, Any], name: str, seconds: float, workers: int) -> str:
+def render_compare(result: CompareResult, name: str, seconds: float, workers: int) -> str:
     """``compare.md`` from ``compare.json``'s content (:func:`cpmp.compare.pooling.pool`).
 
     Args:

@@ -21,12 +21,13 @@ row, D) whose fit no earlier row shares is one :class:`FitJob`.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 from hydra import compose, initialize_config_module
 from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig
 
 from cpmp.compare.settings import CompareJob, CompareSettings
 from cpmp.compare.worlds import World
@@ -38,6 +39,7 @@ from cpmp.errors import ConfigError
 from cpmp.experiment.config import predictor_options
 from cpmp.experiment.settings import to_dict
 from cpmp.predictors import PREDICTORS
+from cpmp.records import JsonValue
 
 NO_PREDICTOR = "none"
 """The ``predictor`` of a baseline row that uses no progress predictor."""
@@ -73,8 +75,8 @@ class RowSpec:
     group: RowGroup
     predictor: str
     sequencer: str
-    predictor_cfg: Mapping[str, Any]
-    sequencer_cfg: Mapping[str, Any]
+    predictor_cfg: Mapping[str, JsonValue]
+    sequencer_cfg: Mapping[str, JsonValue]
     train_sizes: tuple[int, ...]
     option: str | None = None
     value: float | None = None
@@ -125,14 +127,14 @@ def fit_jobs(specs: list[RowSpec], worlds: Mapping[str, World]) -> dict[str, Fit
 
 
 # --------------------------------------------------------------------------- config groups
-def group_options(group: str) -> dict[str, dict[str, Any]]:
+def group_options(group: str) -> dict[str, dict[str, JsonValue]]:
     """Every option of config group ``group`` (``predictor``, ``sequencer``), composed, by name.
 
     The options come from the running Hydra app's search path (or ``conf/`` outside one),
     each composed with its defaults.
     """
 
-    def compose_all() -> dict[str, dict[str, Any]]:
+    def compose_all() -> dict[str, dict[str, JsonValue]]:
         loader = GlobalHydra.instance().config_loader()
         names = loader.get_group_options(group)
         return {
@@ -146,14 +148,16 @@ def group_options(group: str) -> dict[str, dict[str, Any]]:
         return compose_all()
 
 
-def option_name(options: Mapping[str, Any], group: Mapping[str, Mapping[str, Any]]) -> str:
+def option_name(
+    options: Mapping[str, JsonValue], group: Mapping[str, Mapping[str, JsonValue]]
+) -> str:
     """The name of the group option equal to ``options`` (``custom`` if none is)."""
     return next((name for name, value in group.items() if dict(value) == dict(options)), "custom")
 
 
 def _chosen_predictors(
-    names: Any, predictors: Mapping[str, dict[str, Any]], path: str
-) -> dict[str, dict[str, Any]]:
+    names: str | Sequence[str], predictors: Mapping[str, dict[str, JsonValue]], path: str
+) -> dict[str, dict[str, JsonValue]]:
     """The predictor options a world's rows run (``all``: every option and unused kind)."""
     if names == "all":
         kinds = {options.get("kind") for options in predictors.values()}
@@ -172,9 +176,9 @@ def _chosen_predictors(
 def _sweep_specs(
     world: World,
     compare: CompareSettings,
-    predictors: Mapping[str, dict[str, Any]],
+    predictors: Mapping[str, dict[str, JsonValue]],
     sequencer: str,
-    sequencer_cfg: Mapping[str, Any],
+    sequencer_cfg: Mapping[str, JsonValue],
 ) -> list[RowSpec]:
     """The support axis's rows in ``world``: the swept ``support_scale`` and every series."""
     sweep = compare.sweep
@@ -213,7 +217,7 @@ def _sweep_specs(
     return specs
 
 
-def row_specs(cfg: Any, job: CompareJob) -> list[RowSpec]:
+def row_specs(cfg: DictConfig, job: CompareJob) -> list[RowSpec]:
     """The compared configurations of every world, in report order (checked before any work).
 
     Raises:

@@ -24,11 +24,13 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypeAlias
 
 import torch
 from omegaconf import OmegaConf
 
+from cpmp.baselines.bc import BCSequencer
+from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.compare.rows import FitJob, RowSpec
 from cpmp.compare.worlds import EPISODE_SEED_OFFSET, TEST_SEED_OFFSET, World, synthetic_run
 from cpmp.config import TaskConfig
@@ -42,9 +44,14 @@ from cpmp.experiment.fitting import fit_sequencer
 from cpmp.experiment.reproduction import reproduce_seed
 from cpmp.experiment.settings import ExperimentSettings, to_dict
 from cpmp.experiment.strategies import balanced_subset
-from cpmp.records import FitReport
+from cpmp.records import FitReport, JsonValue
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 log = logging.getLogger(__name__)
+
+Fitted: TypeAlias = "ConcurrentSequencer | GoalNearestSequencer | BCSequencer"
+"""A row's fitted sequencer: the learned one or a baseline
+(:func:`~cpmp.experiment.fitting.fit_sequencer`)."""
 
 
 @dataclass(frozen=True)
@@ -92,8 +99,8 @@ class RowResult:
     tick_ms: float | None = None
     supports: int | None = None
     error: str | None = None
-    sparsity: dict[str, Any] = field(default_factory=dict)
-    episodes: list[dict[str, Any]] = field(default_factory=list)
+    sparsity: dict[str, JsonValue] = field(default_factory=dict)
+    episodes: list[dict[str, object]] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     cpu_seconds: dict[str, float] = field(default_factory=dict)
 
@@ -132,7 +139,7 @@ class CompareRuns(NamedTuple):
 
 
 # ------------------------------------------------------------------------ simulated worlds
-def world_config(plain: Mapping[str, Any], world: World) -> dict[str, Any]:
+def world_config(plain: Mapping[str, JsonValue], world: World) -> dict[str, JsonValue]:
     """The job's config (plain containers) as a simulated ``world`` runs it.
 
     Its ``task`` options over the job's, its seeds, sizes and boxes in the ``experiment`` group;
@@ -148,7 +155,7 @@ def world_config(plain: Mapping[str, Any], world: World) -> dict[str, Any]:
     return {**plain, "experiment": experiment, "task": {**plain["task"], **world.options}}
 
 
-def collection_key(plain: Mapping[str, Any], world: World, seed: int) -> str:
+def collection_key(plain: Mapping[str, JsonValue], world: World, seed: int) -> str:
     """What a simulated world's seed collects: equal keys, one collection."""
     cfg = world_config(plain, world)
     sizes = {k: cfg["experiment"][k] for k in ("demos_per_strategy", "train_per_strategy")}
@@ -158,7 +165,7 @@ def collection_key(plain: Mapping[str, Any], world: World, seed: int) -> str:
     )
 
 
-def _collect(cfg: dict[str, Any], run_dir: Path, seed: int) -> SeedData:
+def _collect(cfg: dict[str, JsonValue], run_dir: Path, seed: int) -> SeedData:
     """One seed's demonstrations and reproduction boxes (``cfg``: plain containers)."""
     return collect_seed(OmegaConf.create(cfg), run_dir, seed)
 
@@ -175,7 +182,7 @@ def world_data(data: SeedData, world: World) -> SeedData:
     return dataclasses.replace(data, train=train)
 
 
-def tick_ms(seq: Any, demo: Demonstration) -> float:
+def tick_ms(seq: Fitted, demo: Demonstration) -> float:
     """Mean wall time [ms] of one ``step()`` over ``demo``'s feature stream replayed open loop.
 
     The sequencer is ``reset`` on the demonstration's first sample first.
@@ -189,7 +196,7 @@ def tick_ms(seq: Any, demo: Demonstration) -> float:
     return 1e3 * elapsed / max(len(demo.time) - 1, 1)
 
 
-def demo_errors(seq: Any, demos: Sequence[Demonstration]) -> list[DemoError]:
+def demo_errors(seq: Fitted, demos: Sequence[Demonstration]) -> list[DemoError]:
     """The progress error of each of ``demos``, in their order.
 
     From :func:`~cpmp.evaluation.offline.activation_progress`; their sample-weighted mean is
@@ -223,13 +230,13 @@ class _Stages:
 
 
 def _fit_and_score(
-    cfg: Mapping[str, Any],
+    cfg: Mapping[str, JsonValue],
     spec: RowSpec,
     train: Sequence[Demonstration],
     test: Sequence[Demonstration],
     seed: int,
     out: RowResult,
-) -> Any:
+) -> Fitted | None:
     """Fit ``spec`` on ``train``, score it on ``test`` into ``out``; the sequencer or ``None``.
 
     A refused fit (:class:`~cpmp.errors.CpmpError`) is ``out.error`` and returns ``None``.
@@ -256,7 +263,7 @@ def _fit_and_score(
     return seq
 
 
-def run_sim_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -> RowResult:
+def run_sim_row(cfg: Mapping[str, JsonValue], spec: RowSpec, data: SeedData, d: int) -> RowResult:
     """One (simulated world, seed, row, D) job: fit, MAE, tick time, every reproduction box.
 
     Args:
@@ -289,7 +296,7 @@ def run_sim_row(cfg: Mapping[str, Any], spec: RowSpec, data: SeedData, d: int) -
 
 
 def run_synthetic_row(
-    cfg: Mapping[str, Any], spec: RowSpec, world: World, seed: int, d: int
+    cfg: Mapping[str, JsonValue], spec: RowSpec, world: World, seed: int, d: int
 ) -> RowResult:
     """One (synthetic world, seed, row, D) job: fit, MAE, tick time, the world's episodes.
 
@@ -341,7 +348,7 @@ class _Task(NamedTuple):
 
 
 def run_jobs(
-    plain: dict[str, Any],
+    plain: dict[str, JsonValue],
     run_dir: Path,
     worlds: Mapping[str, World],
     jobs: Mapping[str, FitJob],
@@ -400,15 +407,15 @@ def run_jobs(
         elapsed = time.perf_counter() - started
         _say(f"[{done}/{len(jobs)}] seed {seed} D={d} {spec.label()}: {what} ({elapsed:.0f} s)")
 
-    def identity(key: str) -> tuple[Any, ...]:
+    def identity(key: str) -> tuple[str, str, str, str, str, int]:
         spec, _, d = jobs[key]
         return (spec.world, spec.group, spec.predictor, spec.sequencer, spec.point(), d)
 
-    measured: dict[tuple[Any, ...], float] = {}
+    measured: dict[tuple[str, str, str, str, str, int], float] = {}
     to_collect = list(first)
     ready = [k for k in jobs if k not in needs]
 
-    def next_job() -> Submission | None:
+    def next_job() -> Submission[_Task, SeedData | RowResult] | None:
         if to_collect:
             ckey = to_collect.pop(0)
             name, seed = first[ckey]
@@ -426,18 +433,20 @@ def run_jobs(
         label = f"seed {seed} D={d} {spec.label()}"
         if world.kind == "sim":
             data = world_data(collected[needs[key]], world)
-            args: tuple[Any, ...] = (configs[world.name], spec, data, d)
+            args: tuple[object, ...] = (configs[world.name], spec, data, d)
             return Submission(_Task("row", key), run_sim_row, args, label)
         return Submission(
             _Task("row", key), run_synthetic_row, (plain, spec, world, seed, d), label
         )
 
-    def finished(task: _Task, result: Any) -> None:
+    def finished(task: _Task, result: SeedData | RowResult) -> None:
         if task.kind == "row":
+            assert isinstance(result, RowResult)  # a row's job
             results[task.key] = result
             measured.setdefault(identity(task.key), sum(result.seconds.values()))
             report(task.key, result)
             return
+        assert isinstance(result, SeedData)  # a collection
         collected[task.key] = result
         name, seed = first[task.key]
         _say(

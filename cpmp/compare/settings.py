@@ -12,9 +12,11 @@ Hydra composes anything).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+from omegaconf import DictConfig
 
 from cpmp.compare.stats import BootstrapOptions
 from cpmp.compare.worlds import SYNTHETIC_WORLDS, WORLD_KINDS, World, synthetic_run
@@ -23,7 +25,7 @@ from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 from cpmp.experiment.config import executor_settings, store_schema
-from cpmp.experiment.settings import ExecutorSettings, ExperimentSettings, to_dict
+from cpmp.experiment.settings import ConfigNode, ExecutorSettings, ExperimentSettings, to_dict
 
 SCHEMA = "schema_compare"
 """The name of the ``compare`` node's schema in Hydra's ConfigStore."""
@@ -92,7 +94,7 @@ class WorldSettings:
 
     kind: str = "sim"
     world: str | None = None
-    task: dict[str, Any] = field(default_factory=dict)
+    task: dict[str, Any] = field(default_factory=dict)  # OmegaConf's schema: Any
     feature_noise: float | None = None
     seeds: list[int] | None = None
     train_sizes: list[int] | None = None
@@ -156,7 +158,7 @@ class CompareSettings:
         stats: the bootstrap.
     """
 
-    predictors: Any = "all"
+    predictors: Any = "all"  # OmegaConf's schema: a string or a list, no union of the two
     baselines: list[str] = field(default_factory=lambda: ["goal_nearest"])
     sweep: SweepSettings = field(default_factory=SweepSettings)
     worlds: dict[str, WorldSettings] = field(default_factory=lambda: {"sim": WorldSettings()})
@@ -164,7 +166,7 @@ class CompareSettings:
     stats: StatsSettings = field(default_factory=StatsSettings)
 
 
-def _node(cls: type, cfg: Any, path: str) -> dict[str, Any]:
+def _node(cls: type, cfg: object, path: str) -> dict[str, Any]:
     """The options of a node of dataclass ``cls`` at ``path`` as a dict, unknown keys refused.
 
     Raises:
@@ -181,7 +183,7 @@ def _node(cls: type, cfg: Any, path: str) -> dict[str, Any]:
     return options
 
 
-def _names(value: Any, path: str) -> list[str] | None:
+def _names(value: object, path: str) -> list[str] | None:
     """A list of option names (``None`` stays ``None``), or a :class:`ConfigError`."""
     if value is None:
         return None
@@ -190,7 +192,7 @@ def _names(value: Any, path: str) -> list[str] | None:
     return [str(v) for v in value]
 
 
-def _numbers(values: Any, path: str) -> list[float]:
+def _numbers(values: Iterable[object] | None, path: str) -> list[float]:
     """Positive, distinct numbers, or a :class:`ConfigError` naming ``path``."""
     values = list(values or [])
     for value in values:
@@ -201,7 +203,7 @@ def _numbers(values: Any, path: str) -> list[float]:
     return [float(v) for v in values]
 
 
-def _sweep(cfg: Any) -> SweepSettings:
+def _sweep(cfg: ConfigNode) -> SweepSettings:
     """The ``compare.sweep`` node, its keys and values checked."""
     options = _node(SweepSettings, cfg, "sweep.")
     if "predictor" in options:
@@ -217,7 +219,7 @@ def _sweep(cfg: Any) -> SweepSettings:
     return SweepSettings(**options, series=series)
 
 
-def _world(name: str, cfg: Any) -> WorldSettings:
+def _world(name: str, cfg: ConfigNode) -> WorldSettings:
     """One ``compare.worlds`` entry, its keys and kind checked."""
     out = WorldSettings(**_node(WorldSettings, cfg, f"worlds.{name}."))
     if out.kind not in WORLD_KINDS:
@@ -239,7 +241,7 @@ def _world(name: str, cfg: Any) -> WorldSettings:
     return out
 
 
-def _stats(cfg: Any) -> StatsSettings:
+def _stats(cfg: ConfigNode) -> StatsSettings:
     """The ``compare.stats`` node, checked by :class:`~cpmp.compare.stats.BootstrapOptions`."""
     out = StatsSettings(**_node(StatsSettings, cfg, "stats."))
     try:
@@ -249,7 +251,7 @@ def _stats(cfg: Any) -> StatsSettings:
     return out
 
 
-def compare_settings(cfg: Any) -> CompareSettings:
+def compare_settings(cfg: ConfigNode) -> CompareSettings:
     """The ``compare`` node (or a mapping; missing keys take the defaults), keys checked.
 
     Raises:
@@ -278,7 +280,7 @@ def compare_settings(cfg: Any) -> CompareSettings:
     return out
 
 
-def _integers(values: Any, path: str, low: int) -> tuple[int, ...]:
+def _integers(values: Iterable[object], path: str, low: int) -> tuple[int, ...]:
     """Distinct integers ``>= low``, or a :class:`ConfigError` naming ``path``."""
     out = list(values)
     if not out or any(isinstance(v, bool) or not isinstance(v, int) or v < low for v in out):
@@ -387,7 +389,7 @@ class CompareJob:
     executor: ExecutorSettings = field(default_factory=ExecutorSettings)
 
     @classmethod
-    def from_cfg(cls, cfg: Any) -> CompareJob:
+    def from_cfg(cls, cfg: DictConfig) -> CompareJob:
         """From a composed config (``experiment``, ``task`` and ``compare`` nodes), validated.
 
         The job's ``sequencer`` must be a learned one: the predictor rows run with it.

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -103,6 +103,17 @@ class BootstrapOptions:
             raise ConfigError(f"bootstrap seed must be a non-negative integer, got {self.seed!r}")
 
 
+class IntervalRecord(TypedDict):
+    """An :class:`Interval` as ``compare.json`` holds it (:meth:`Interval.to_dict`)."""
+
+    estimate: float
+    low: float
+    high: float
+    level: float
+    seeds: int
+    units: int
+
+
 @dataclass(frozen=True)
 class Interval:
     """A number with its bootstrap interval.
@@ -138,7 +149,7 @@ class Interval:
             self.units,
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> IntervalRecord:
         """``{"estimate", "low", "high", "level", "seeds", "units"}`` for JSON."""
         return {
             "estimate": self.estimate,

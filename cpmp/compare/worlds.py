@@ -22,11 +22,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Literal, get_args
 
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.records import Policy
+from cpmp.records import JsonValue, Policy
 from cpmp.worlds.outcomes import Outcome
 from cpmp.worlds.protocol import evaluate as evaluate_world
 from cpmp.worlds.registry import make_world, world_names
@@ -82,7 +82,9 @@ SYNTHETIC_WORLDS: tuple[str, ...] = world_names()
 world of :mod:`cpmp.worlds.registry`."""
 
 
-def synthetic_run(name: str, options: Mapping[str, Any], seed: int, n_demos: int) -> SyntheticRun:
+def synthetic_run(
+    name: str, options: Mapping[str, JsonValue], seed: int, n_demos: int
+) -> SyntheticRun:
     """The synthetic world ``name`` at ``seed`` with ``n_demos`` demonstrations.
 
     Its closed loop is :func:`cpmp.worlds.protocol.evaluate` (batched where the policy
@@ -126,20 +128,21 @@ class World:
         episodes: closed-loop episodes (``sim``: random boxes) per D and seed.
         test_demos: ``synthetic``: held-out demonstrations per seed (``sim``: the
             ``experiment`` group's split).
-        predictors: the ``predictor`` options of its rows (``None``: ``compare.predictors``).
+        predictors: the ``predictor`` options of its rows: ``all`` or their names
+            (``compare.predictors`` unless the entry names its own).
         baselines: the ``sequencer`` baselines of its rows.
     """
 
     name: str
     kind: WorldKind
     world: str | None
-    options: dict[str, Any]
+    options: dict[str, JsonValue]
     feature_noise: float
     seeds: tuple[int, ...]
     train_sizes: tuple[int, ...]
     episodes: int
     test_demos: int
-    predictors: Any
+    predictors: str | list[str]
     baselines: tuple[str, ...]
 
     def label(self) -> str:

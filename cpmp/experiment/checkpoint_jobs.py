@@ -7,12 +7,16 @@ evaluates a checkpoint offline on one and writes ``evaluation.json`` and ``evalu
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
+
+from omegaconf import DictConfig
 
 from cpmp.baselines.bc import BCSequencer
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.data.datafile import list_splits, load_demonstrations
+from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError, DataError
 from cpmp.evaluation.checkpoints import load_sequencer
 from cpmp.evaluation.offline import evaluate_offline
@@ -22,8 +26,26 @@ from cpmp.experiment.fitting import train_sequencer
 from cpmp.experiment.plots import plot_progress_curves
 from cpmp.experiment.report import predictor_entry, write_json
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
+from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 log = logging.getLogger(__name__)
+
+
+class UnknownMP(TypedDict):
+    """An MP labelled in the evaluated demonstrations that the model has no node for."""
+
+    variable: str
+    """Its control variable."""
+    mp: str
+    """Its name."""
+    known_variable: bool
+    """Whether the model knows the variable (a renamed MP) or not (a variable not trained on)."""
+    activations: int
+    """How many activations of it the demonstrations hold."""
+    demos: list[str]
+    """The demonstrations with one, in their order."""
+
 
 ALL_DEMOS_WARNING = (
     "every demonstration of the file was scored (no held-out split: the file has no "
@@ -35,7 +57,7 @@ ALL_DEMOS_WARNING = (
 """What the evaluation says when it scored every demonstration of a file."""
 
 
-def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
+def _demo_file(cfg: DictConfig, auto_split: str) -> tuple[Path, str | None]:
     """The ``data`` group's file (checked to exist) and split.
 
     Args:
@@ -61,7 +83,7 @@ def _demo_file(cfg: Any, auto_split: str) -> tuple[Path, str | None]:
     return path, split
 
 
-def _load_split(path: Path, split: str | None, use: str) -> list[Any]:
+def _load_split(path: Path, split: str | None, use: str) -> list[Demonstration]:
     """The demonstrations of ``split`` (every one for ``None``), refusing an empty split.
 
     Args:
@@ -86,7 +108,7 @@ def _load_split(path: Path, split: str | None, use: str) -> list[Any]:
     return demos
 
 
-def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
+def train_from_file(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Train a sequencer from a demonstration file and save ``model.pt`` into ``run_dir``.
 
     The file's ``mask/train`` split trains when present (else every demonstration); when it
@@ -120,7 +142,7 @@ def train_from_file(cfg: Any, run_dir: str | Path) -> Path:
     return out
 
 
-def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
+def evaluate_checkpoint(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Evaluate a checkpoint offline on a file's test split.
 
     Progress MAE per node, replay of the recorded feature streams, Fig. 6 plot; writes
@@ -170,7 +192,9 @@ def evaluate_checkpoint(cfg: Any, run_dir: str | Path) -> Path:
     return json_path
 
 
-def _model_entry(seq: Any) -> dict[str, Any]:
+def _model_entry(
+    seq: ConcurrentSequencer | GoalNearestSequencer | BCSequencer,
+) -> dict[str, object]:
     """What an evaluated checkpoint is.
 
     Returns:
@@ -191,7 +215,7 @@ def _model_entry(seq: Any) -> dict[str, Any]:
     }
 
 
-def predictor_description(model: dict[str, Any]) -> str:
+def predictor_description(model: Mapping[str, object]) -> str:
     """How the reports name a learned sequencer's predictor: its kind and feature weighting.
 
     ``klr`` with ``path`` weighting is ``predictor=klr`` (cpmp's default), with ``none`` the
@@ -215,7 +239,9 @@ def predictor_description(model: dict[str, Any]) -> str:
     return f"predictor `{model['predictor']}`" + (f" ({', '.join(extra)})" if extra else "")
 
 
-def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
+def _unknown_mps(
+    seq: ConcurrentSequencer | GoalNearestSequencer | BCSequencer, demos: list[Demonstration]
+) -> list[UnknownMP]:
     """MPs labelled in ``demos`` that ``seq`` has no node for.
 
     A renamed MP, or every MP of a variable the model was not trained on.
@@ -228,7 +254,7 @@ def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
         ``[{"variable", "mp", "known_variable", "activations", "demos"}]`` sorted by
         variable and MP.
     """
-    found: dict[tuple[str, str], dict[str, Any]] = {}
+    found: dict[tuple[str, str], UnknownMP] = {}
     for m, demo in enumerate(demos):
         for v in demo.variables:
             graph = seq.graphs.get(v)
@@ -252,7 +278,7 @@ def _unknown_mps(seq: Any, demos: list[Any]) -> list[dict[str, Any]]:
     return [found[k] for k in sorted(found)]
 
 
-def _evaluation_markdown(out: dict[str, Any]) -> str:
+def _evaluation_markdown(out: Mapping[str, JsonValue]) -> str:
     p, r = out["progress"], out["replay"]
     lines = [
         f"# Offline evaluation of `{out['checkpoint']}`",

@@ -10,9 +10,9 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+from omegaconf import DictConfig
 
 from cpmp.config.task import TaskConfig
 from cpmp.data.augment import add_feature_noise
@@ -52,7 +52,7 @@ class SeedData:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def collect_seed(job: ExperimentJob | Any, run_dir: str | Path, seed: int) -> SeedData:
+def collect_seed(job: ExperimentJob | DictConfig, run_dir: str | Path, seed: int) -> SeedData:
     """Stage 1 of one seed: its demonstrations and the demonstrator on every reproduction box.
 
     The demonstrations are saved as ``seed_<s>/demos.h5`` with the train/test split.

@@ -26,9 +26,10 @@ from __future__ import annotations
 import dataclasses
 import typing
 from dataclasses import field
-from typing import Any, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 from hydra.core.config_store import ConfigStore
+from omegaconf import DictConfig
 
 from cpmp.config import (
     PREDICTOR_CONFIGS,
@@ -47,12 +48,14 @@ from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
 from cpmp.experiment.settings import (
+    ConfigNode,
     ExecutorSettings,
     ExperimentJob,
     ExperimentSettings,
     FitSettings,
     to_dict,
 )
+from cpmp.records import JsonValue
 
 __all__ = [
     "PredictorChoice",
@@ -73,7 +76,7 @@ __all__ = [
 
 
 # ----------------------------------------------------------------------------- registration
-def schema_of(cls: type, **first: Any) -> type:
+def schema_of(cls: type, **first: str) -> type:
     """Hydra's schema of the dataclass ``cls``: a plain dataclass with the same fields.
 
     The fields ``first`` (name -> default string) come first. The schema has no validation of
@@ -90,7 +93,9 @@ def schema_of(cls: type, **first: Any) -> type:
         The schema dataclass, named as ``cls``.
     """
     hints = typing.get_type_hints(cls)
-    fields: list[tuple[str, Any, Any]] = [(k, str, field(default=v)) for k, v in first.items()]
+    fields: list[tuple[str, object, object]] = [
+        (k, str, field(default=v)) for k, v in first.items()
+    ]
     for f in dataclasses.fields(cls):
         hint = hints[f.name]
         if typing.get_origin(hint) is Literal:
@@ -103,7 +108,7 @@ def schema_of(cls: type, **first: Any) -> type:
     return dataclasses.make_dataclass(cls.__name__, fields)
 
 
-def store_schema(name: str, cls: type, **first: Any) -> None:
+def store_schema(name: str, cls: type, **first: str) -> None:
     """Store :func:`schema_of` ``(cls, **first)`` in Hydra's ConfigStore as ``name``."""
     ConfigStore.instance().store(name=name, node=schema_of(cls, **first))
 
@@ -142,11 +147,11 @@ class PredictorOptions(NamedTuple):
 
     kind: str
     """The predictor kind."""
-    options: dict[str, Any]
-    """Every option of the kind (defaults filled in)."""
+    options: dict[str, object]
+    """Every option of the kind (defaults filled in; numbers, strings, tuples)."""
 
 
-def predictor_from_cfg(cfg: Any) -> PredictorChoice:
+def predictor_from_cfg(cfg: ConfigNode) -> PredictorChoice:
     """The kind and typed options of a ``predictor`` group entry (``kind`` plus its options).
 
     Raises:
@@ -162,7 +167,7 @@ def predictor_from_cfg(cfg: Any) -> PredictorChoice:
     return PredictorChoice(kind, predictor_config(kind, **options))
 
 
-def predictor_options(cfg: Any) -> PredictorOptions:
+def predictor_options(cfg: ConfigNode) -> PredictorOptions:
     """The kind and every option of a ``predictor`` group entry, validated.
 
     Raises:
@@ -173,7 +178,10 @@ def predictor_options(cfg: Any) -> PredictorOptions:
 
 
 def fit_settings(
-    predictor_cfg: Any, sequencer_cfg: Any = None, trainer_cfg: Any = None, logger_cfg: Any = None
+    predictor_cfg: ConfigNode,
+    sequencer_cfg: ConfigNode = None,
+    trainer_cfg: ConfigNode = None,
+    logger_cfg: ConfigNode = None,
 ) -> FitSettings:
     """Typed :class:`FitSettings` from the ``predictor``, ``sequencer``, ``trainer`` groups.
 
@@ -216,7 +224,7 @@ def fit_settings(
     )
 
 
-def logger_spec(cfg: Any) -> dict[str, Any] | None:
+def logger_spec(cfg: ConfigNode) -> dict[str, JsonValue] | None:
     """The ``logger`` group as a plain mapping, or ``None`` for no logger.
 
     Args:
@@ -239,12 +247,12 @@ def logger_spec(cfg: Any) -> dict[str, Any] | None:
     return spec
 
 
-def job_fit_settings(cfg: Any) -> FitSettings:
+def job_fit_settings(cfg: DictConfig) -> FitSettings:
     """:func:`fit_settings` of a job's composed config."""
     return fit_settings(cfg.predictor, cfg.get("sequencer"), cfg.get("trainer"), cfg.get("logger"))
 
 
-def validate_common(cfg: Any) -> PredictorOptions:
+def validate_common(cfg: DictConfig) -> PredictorOptions:
     """Check the predictor, sequencer and trainer groups of a composed config.
 
     Returns:
@@ -254,7 +262,7 @@ def validate_common(cfg: Any) -> PredictorOptions:
     return PredictorOptions(settings.predictor, dataclasses.asdict(settings.fit.predictor_config))
 
 
-def executor_settings(settings: ExperimentSettings, cfg: Any) -> ExecutorSettings:
+def executor_settings(settings: ExperimentSettings, cfg: ConfigNode) -> ExecutorSettings:
     """The ``executor`` node (``None``: its defaults), checked for ``experiment.executor``.
 
     Args:
@@ -270,7 +278,7 @@ def executor_settings(settings: ExperimentSettings, cfg: Any) -> ExecutorSetting
     return executor
 
 
-def experiment_job(cfg: Any) -> ExperimentJob:
+def experiment_job(cfg: DictConfig | ExperimentJob) -> ExperimentJob:
     """The main job's composed config as an :class:`ExperimentJob`, every group validated.
 
     The settings are validated first; an :class:`ExperimentJob` is returned as it is.

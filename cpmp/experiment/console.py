@@ -6,14 +6,16 @@ import logging
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import TypeVar
 
 from tqdm import tqdm
 
 log = logging.getLogger(__name__)
 
+T = TypeVar("T")
 
-def progress_bar(items: list, desc: str) -> Any:
+
+def progress_bar(items: list[T], desc: str) -> tqdm[T]:
     """A tqdm progress bar over ``items`` on stderr (cleared when done)."""
     return tqdm(items, desc=desc, leave=False, dynamic_ncols=True)
 

@@ -26,34 +26,47 @@ import contextlib
 import logging
 import logging.handlers
 import multiprocessing
+import multiprocessing.queues
 import os
 import re
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Generic, NamedTuple, NoReturn, Protocol, TypeVar
+
+if TYPE_CHECKING:
+    import submitit
 
 from cpmp.errors import ConfigError, CpmpError
 from cpmp.experiment.settings import EXECUTORS, ExecutorSettings
+from cpmp.records import JsonValue
 
 log = logging.getLogger(__name__)
+
+R = TypeVar("R")
+"""A job's result."""
+R_co = TypeVar("R_co", covariant=True)
+"""A future's result."""
+K = TypeVar("K", bound=Hashable)
+"""What a scheduler calls its jobs (:class:`Submission`)."""
 
 POLL_S = 0.2
 """How often [s] :class:`SubmititExecutor` looks whether a job finished (a file check; on
 SLURM submitit asks ``sacct`` at most once a minute)."""
 
 
-class JobFuture(Protocol):
+class JobFuture(Protocol[R_co]):
     """A submitted job: ``concurrent.futures.Future``'s ``done`` and ``result``."""
 
     def done(self) -> bool:
         """Whether the job finished (with a result or an error)."""
         ...
 
-    def result(self) -> Any:
+    def result(self) -> R_co:
         """The job's result, waiting for it; re-raises the job's exception."""
         ...
 
@@ -71,7 +84,7 @@ class JobExecutor:
     def __init__(self, slots: int = 1) -> None:
         self.slots = max(1, int(slots))
 
-    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+    def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
         """Run ``fn(*args)`` as a job.
 
         Args:
@@ -84,7 +97,7 @@ class JobExecutor:
         """
         raise NotImplementedError
 
-    def wait_first(self, futures: Iterable[JobFuture]) -> list[JobFuture]:
+    def wait_first(self, futures: Iterable[JobFuture[R]]) -> list[JobFuture[R]]:
         """Wait until at least one of ``futures`` is done; return every done one."""
         futures = list(futures)
         while True:
@@ -105,20 +118,30 @@ class JobExecutor:
         return None
 
 
-class _Done:
-    """The future of a job that already ran: its result or its exception."""
+class _Done(Generic[R]):
+    """The future of a job that already ran and returned ``value``."""
 
-    def __init__(self, value: Any = None, error: BaseException | None = None) -> None:
+    def __init__(self, value: R) -> None:
         self._value = value
+
+    def done(self) -> bool:
+        return True
+
+    def result(self) -> R:
+        return self._value
+
+
+class _Failed:
+    """The future of a job that already ran and raised ``error``."""
+
+    def __init__(self, error: BaseException) -> None:
         self._error = error
 
     def done(self) -> bool:
         return True
 
-    def result(self) -> Any:
-        if self._error is not None:
-            raise self._error
-        return self._value
+    def result(self) -> NoReturn:
+        raise self._error
 
 
 class InlineExecutor(JobExecutor):
@@ -129,12 +152,12 @@ class InlineExecutor(JobExecutor):
     def __init__(self) -> None:
         super().__init__(1)
 
-    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+    def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
         """Run ``fn(*args)`` now; its future holds the result or the exception."""
         try:
             return _Done(fn(*args))
         except Exception as err:  # handed back by result(), as a pool's future does
-            return _Done(error=err)
+            return _Failed(err)
 
 
 # --------------------------------------------------------------- local: spawned processes
@@ -221,7 +244,7 @@ def spawned_pool(
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _init_worker(queue: Any, level: int) -> None:
+def _init_worker(queue: multiprocessing.queues.Queue[logging.LogRecord], level: int) -> None:
     """Worker start-up: one torch thread, every log record sent to the main process."""
     one_thread()
     handler = logging.handlers.QueueHandler(queue)
@@ -231,7 +254,7 @@ def _init_worker(queue: Any, level: int) -> None:
     root.setLevel(level)
 
 
-def _labelled(label: str, function: Callable[..., Any], *args: Any) -> Any:
+def _labelled(label: str, function: Callable[..., R], *args: object) -> R:
     """In a worker: ``function(*args)`` with every log line prefixed with ``label``."""
     global _JOB_LABEL
     _JOB_LABEL = label
@@ -276,13 +299,13 @@ class LocalExecutor(JobExecutor):
         self._pool = None
         self._stack.close()
 
-    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+    def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
         """Queue ``fn(*args)`` on the pool, its log lines prefixed with ``label``."""
         if self._pool is None:
             raise RuntimeError("submit a job inside `with LocalExecutor(...):`")
         return self._pool.submit(_labelled, label, fn, *args)
 
-    def wait_first(self, futures: Iterable[JobFuture]) -> list[JobFuture]:
+    def wait_first(self, futures: Iterable[JobFuture[R]]) -> list[JobFuture[R]]:
         """``concurrent.futures.wait`` for the first of the pool's futures."""
         futures = list(futures)
         if not futures:
@@ -298,7 +321,7 @@ class _Raised(NamedTuple):
     error: CpmpError
 
 
-def _submitit_call(label: str, level: int, fn: Callable[..., Any], *args: Any) -> Any:
+def _submitit_call(label: str, level: int, fn: Callable[..., R], *args: object) -> R | _Raised:
     """In a submitit job: one torch thread, log lines prefixed with ``label``, ``fn(*args)``.
 
     The log lines go to the job's standard error (``<folder>/<job id>_0_log.err``).
@@ -317,17 +340,17 @@ def _submitit_call(label: str, level: int, fn: Callable[..., Any], *args: Any) -
         return _Raised(err)
 
 
-class _SubmititFuture:
+class _SubmititFuture(Generic[R_co]):
     """A submitit job's future: its ``result()`` re-raises a user error with its own type."""
 
-    def __init__(self, job: Any, label: str) -> None:
+    def __init__(self, job: submitit.Job[R_co | _Raised], label: str) -> None:
         self.job = job
         self.label = label
 
     def done(self) -> bool:
         return bool(self.job.done())
 
-    def result(self) -> Any:
+    def result(self) -> R_co:
         value = self.job.result()
         if isinstance(value, _Raised):
             raise value.error
@@ -339,14 +362,14 @@ def _job_name(label: str) -> str:
     return "cpmp_" + re.sub(r"[^\w=.-]+", "_", label).strip("_") if label else "cpmp"
 
 
-def submitit_parameters(settings: ExecutorSettings) -> dict[str, Any]:
+def submitit_parameters(settings: ExecutorSettings) -> dict[str, JsonValue]:
     """``submitit.AutoExecutor.update_parameters``'s arguments for the ``executor`` node.
 
     ``time`` and ``cpus_per_task`` are submitit's generic ``timeout_min`` and
     ``cpus_per_task`` (they apply to ``cluster=local`` too); the others are ``slurm_*``.
     """
     slurm = settings.slurm
-    out: dict[str, Any] = {
+    out: dict[str, JsonValue] = {
         "timeout_min": slurm.time,
         "cpus_per_task": slurm.cpus_per_task,
         "slurm_array_parallelism": slurm.array_parallelism,
@@ -381,9 +404,9 @@ class SubmititExecutor(JobExecutor):
             self._executor.update_parameters(**submitit_parameters(settings))
         except NameError as err:  # submitit's unknown parameter
             raise ConfigError(f"executor.slurm: {err}") from None
-        self._futures: list[_SubmititFuture] = []
+        self._futures: list[_SubmititFuture[object]] = []
 
-    def submit(self, fn: Callable[..., Any], *args: Any, label: str = "") -> JobFuture:
+    def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
         """Submit ``fn(*args)`` as a submitit job named after ``label``."""
         level = logging.getLogger("cpmp").getEffectiveLevel()
         self._executor.update_parameters(name=_job_name(label))
@@ -392,7 +415,7 @@ class SubmititExecutor(JobExecutor):
         log.info(
             "%s: submitit job %s (%s), log %s", label, job.job_id, self.cluster, job.paths.stderr
         )
-        future = _SubmititFuture(job, label)
+        future: _SubmititFuture[R] = _SubmititFuture(job, label)
         self._futures.append(future)
         return future
 
@@ -462,14 +485,15 @@ def job_slots(
     return max(1, min(workers, n_jobs))
 
 
-class Submission(NamedTuple):
+@dataclass(frozen=True)
+class Submission(Generic[K, R]):
     """A job for :func:`run_queue`: its key, function, arguments and label."""
 
-    key: Any
+    key: K
     """What the scheduler calls it (handed back with its result)."""
-    fn: Callable[..., Any]
+    fn: Callable[..., R]
     """A module-level function."""
-    args: tuple[Any, ...]
+    args: tuple[object, ...]
     """Its picklable arguments."""
     label: str
     """The job in words (its log lines' prefix)."""
@@ -477,8 +501,8 @@ class Submission(NamedTuple):
 
 def run_queue(
     executor: JobExecutor,
-    next_job: Callable[[], Submission | None],
-    finished: Callable[[Any, Any], None],
+    next_job: Callable[[], Submission[K, R] | None],
+    finished: Callable[[K, R], None],
 ) -> None:
     """Keep ``executor.slots`` jobs in flight until ``next_job`` has none left.
 
@@ -492,7 +516,7 @@ def run_queue(
     Raises:
         Exception: the first job error, as the job raised it.
     """
-    pending: dict[Any, tuple[int, Any]] = {}
+    pending: dict[JobFuture[R], tuple[int, K]] = {}
     submitted = 0
     while True:
         while len(pending) < executor.slots and (job := next_job()) is not None:

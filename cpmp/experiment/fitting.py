@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
@@ -21,11 +20,12 @@ from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.experiment.config import fit_settings
-from cpmp.experiment.settings import FitSettings
+from cpmp.experiment.settings import ConfigNode, FitSettings
+from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 
-def make_logger(spec: Mapping[str, Any] | None, log_dir: str | Path | None) -> Logger | None:
+def make_logger(spec: Mapping[str, JsonValue] | None, log_dir: str | Path | None) -> Logger | None:
     """The Lightning logger a ``logger`` group entry describes, writing into ``log_dir``.
 
     Args:
@@ -93,9 +93,9 @@ def train_sequencer(
 
 def fit_sequencer(
     demos: Sequence[Demonstration],
-    predictor_cfg: Any,
-    sequencer_cfg: Any = None,
-    trainer_cfg: Any = None,
+    predictor_cfg: ConfigNode,
+    sequencer_cfg: ConfigNode = None,
+    trainer_cfg: ConfigNode = None,
     seed: int = 0,
     log_dir: str | Path | None = None,
 ) -> ConcurrentSequencer | GoalNearestSequencer | BCSequencer:

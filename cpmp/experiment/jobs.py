@@ -18,9 +18,10 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
+from omegaconf import DictConfig
 
 from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.collection import SeedData, collect_seed
@@ -29,6 +30,8 @@ from cpmp.experiment.console import timed
 from cpmp.experiment.executors import JobExecutor, Submission, job_slots, make_executor, run_queue
 from cpmp.experiment.fitting import train_sequencer
 from cpmp.experiment.report import (
+    SeedRow,
+    TrainSizeRow,
     experiment_files,
     pool_seeds,
     write_figures,
@@ -46,9 +49,9 @@ log = logging.getLogger(__name__)
 class JobResults(NamedTuple):
     """What the main job's stages gave: each seed's collection and each training size's result."""
 
-    collected: dict[int, Any]
+    collected: dict[int, SeedData]
     """What the collection returned, by seed."""
-    results: dict[tuple[int, int], Any]
+    results: dict[tuple[int, int], TrainSizeResult]
     """What each training size returned, by (seed, D)."""
 
 
@@ -66,9 +69,9 @@ class TrainSizeResult:
         seconds: wall time [s] per stage.
     """
 
-    row: dict[str, Any]
+    row: TrainSizeRow
     pairs: list[tuple[np.ndarray, np.ndarray]]
-    episodes: list[dict[str, Any]]
+    episodes: list[dict[str, object]]
     strategy_map: StrategyMap | None
     train_boxes: list[tuple[float, float]]
     seconds: dict[str, float] = field(default_factory=dict)
@@ -85,13 +88,13 @@ class _Gathered:
         stage_seconds: wall seconds per stage, summed over seeds and training sizes.
     """
 
-    per_seed: list[dict[str, Any]]
+    per_seed: list[SeedRow]
     pairs_by_d: dict[int, list[tuple[np.ndarray, np.ndarray]]]
-    episodes: list[dict[str, Any]]
+    episodes: list[dict[str, object]]
     stage_seconds: dict[str, float]
 
 
-def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
+def run_experiment(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Run the main job; returns the path of ``report.json``.
 
     Collect demos in the simulator, train on D = train_sizes, evaluate progress prediction,
@@ -133,7 +136,7 @@ def run_experiment(cfg: Any, run_dir: str | Path) -> Path:
 
 
 def run_train_size(
-    job: ExperimentJob | Any, run_dir: str | Path, data: SeedData, d: int
+    job: ExperimentJob | DictConfig, run_dir: str | Path, data: SeedData, d: int
 ) -> TrainSizeResult:
     """Stage 2 of one seed and training size ``d``: train, evaluate, reproduce, map.
 
@@ -171,7 +174,7 @@ def run_train_size(
             train=subset,
         )
     fit = {} if seq.fit_summary is None else seq.fit_summary.to_dict()
-    row = {
+    row: TrainSizeRow = {
         "progress": {k: offline["progress"][k] for k in ("mae", "mae_first", "mae_last")},
         "replay": {
             k: offline["replay"][k]
@@ -216,11 +219,13 @@ def run_jobs(job: ExperimentJob, run_dir: Path, executor: JobExecutor) -> JobRes
         for seed in settings.seeds
     ]
 
-    def finished(key: tuple[int, int | None], result: Any) -> None:
+    def finished(key: tuple[int, int | None], result: SeedData | TrainSizeResult) -> None:
         seed, d = key
         if d is not None:
+            assert isinstance(result, TrainSizeResult)  # a training size's job
             ran.results[seed, d] = result
             return
+        assert isinstance(result, SeedData)  # a collection job
         ran.collected[seed] = result
         for size in sorted(settings.train_sizes, reverse=True):
             args = (job, run_dir, result, size)
@@ -233,14 +238,14 @@ def run_jobs(job: ExperimentJob, run_dir: Path, executor: JobExecutor) -> JobRes
 def _gather(job: ExperimentJob, ran: JobResults) -> _Gathered:
     """The jobs' results in seed and D order, with the wall seconds per stage summed."""
     collected, results = ran
-    per_seed: list[dict[str, Any]] = []
+    per_seed: list[SeedRow] = []
     pairs_by_d: dict[int, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
-    episodes: list[dict[str, Any]] = []
+    episodes: list[dict[str, object]] = []
     stage_seconds: dict[str, float] = defaultdict(float)
     for seed in job.settings.seeds:
         for key, value in collected[seed].seconds.items():
             stage_seconds[key] += value
-        seed_row: dict[str, Any] = {"seed": seed, "by_train_size": {}}
+        seed_row: SeedRow = {"seed": seed, "by_train_size": {}}
         for d in job.settings.train_sizes:
             result = results[seed, d]
             pairs_by_d[d] += result.pairs

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -27,7 +26,7 @@ jsonable = to_builtin
 """Recursively convert numpy values and tuples to JSON types (NaN -> None)."""
 
 
-def write_json(path: str | Path, obj: Any) -> Path:
+def write_json(path: str | Path, obj: object) -> Path:
     """Write ``obj`` as indented JSON, atomically; returns the path."""
     atomic_write_text(path, json.dumps(jsonable(obj), indent=2) + "\n")
     return Path(path)

@@ -14,9 +14,11 @@ import numbers
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypeAlias
 
 import numpy as np
+import numpy.typing as npt
+from matplotlib.artist import Artist
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
@@ -27,6 +29,9 @@ from matplotlib.patches import Patch, Rectangle
 
 from cpmp.errors import ConfigError, DataError
 from cpmp.io import atomic_path
+
+Cell: TypeAlias = "str | int | float | bool | None"
+"""A value of a table cell (:func:`plot_sweep`): a number, a text, a flag or missing."""
 
 CURVE_KEYS = ("time", "predicted_mean", "predicted_std", "expected_mean")
 """Keys :func:`plot_progress_curves` needs in each curves dict (see
@@ -52,7 +57,7 @@ def save_figure(figure: Figure, path: str | os.PathLike[str]) -> Path:
     return Path(path)
 
 
-def _points(value: Any, name: str) -> np.ndarray:
+def _points(value: npt.ArrayLike, name: str) -> np.ndarray:
     """``value`` as (n, 2) float array; a single (2,) point becomes (1, 2)."""
     array = np.asarray(value, dtype=float)
     if array.ndim == 1 and array.size == 2:
@@ -149,7 +154,7 @@ def plot_progress_field(
 
 
 def plot_progress_curves(
-    curves_by_label: Mapping[str, Mapping[str, Any]],
+    curves_by_label: Mapping[str, Mapping[str, npt.ArrayLike]],
     path: str | os.PathLike[str],
     title: str | None = None,
 ) -> Path:
@@ -212,7 +217,7 @@ def _region_boundaries(
     return segments
 
 
-def _axis_values(values: Any, name: str) -> np.ndarray:
+def _axis_values(values: npt.ArrayLike, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.ndim != 1 or len(array) < 2:
         raise DataError(f"{name} must have shape (n,) with n >= 2, got {array.shape}")
@@ -296,7 +301,7 @@ def plot_strategy_map(
     if len(boxes):
         ax.scatter(boxes[:, 0], boxes[:, 1], marker="x", color="k", s=60, linewidths=2)
 
-    handles: list[Any] = [
+    handles: list[Artist] = [
         Patch(facecolor=colour, label=name)
         for colour, name in zip(colours[:other], strategies, strict=True)
     ]
@@ -321,12 +326,12 @@ def plot_strategy_map(
     return save_figure(figure, path)
 
 
-def _is_number(value: Any) -> bool:
+def _is_number(value: object) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def plot_sweep(
-    table: Sequence[Mapping[str, Any]],
+    table: Sequence[Mapping[str, Cell]],
     x: str,
     y: str,
     hue: str | None,
@@ -342,7 +347,7 @@ def plot_sweep(
     if not table:
         raise DataError("plot_sweep needs a non-empty table")
     required = [x, y] + ([hue] if hue is not None else [])
-    series: dict[Any, dict[Any, tuple[float, float]]] = {}
+    series: dict[Cell, dict[Cell, tuple[float, float]]] = {}
     for i, row in enumerate(table):
         missing = [key for key in required if key not in row]
         if missing:

@@ -9,18 +9,20 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+from typing_extensions import NotRequired, TypedDict  # NotRequired needs their TypedDict < 3.11
 
 from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.evaluation.offline import progress_curves
 from cpmp.experiment.output import PAPER_TABLE_I, jsonable, mean_std, write_json
 from cpmp.experiment.plots import plot_progress_curves, plot_strategy_map
+from cpmp.experiment.reproduction import ReproductionSummary
 from cpmp.experiment.settings import ExperimentJob
 from cpmp.experiment.strategies import StrategyMap
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 
 
 def _fmt(mean: float | None, std: float | None = None, digits: int = 2) -> str:
@@ -53,20 +55,20 @@ NEAREST_PROGRESS_NOTE = nearest_progress_note()
 """What the progress numbers of a ``goal_nearest`` run are."""
 
 
-def is_goal_nearest(sequencer: Mapping[str, Any] | None) -> bool:
+def is_goal_nearest(sequencer: Mapping[str, object] | None) -> bool:
     """Whether a ``sequencer`` config (a mapping, maybe empty) selects the goal-nearest baseline."""
     return bool(sequencer) and sequencer.get("kind") == GOAL_NEAREST
 
 
-def baseline_kind(sequencer: Mapping[str, Any] | None) -> str | None:
+def baseline_kind(sequencer: Mapping[str, object] | None) -> str | None:
     """The baseline (one of :data:`BASELINES`) a ``sequencer`` config selects, else ``None``."""
     kind = sequencer.get("kind") if sequencer else None
-    return kind if kind in BASELINES else None
+    return kind if isinstance(kind, str) and kind in BASELINES else None
 
 
 def predictor_entry(
-    kind: str, predictor: Mapping[str, Any], sequencer: Mapping[str, Any] | None
-) -> dict[str, Any]:
+    kind: str, predictor: Mapping[str, object], sequencer: Mapping[str, object] | None
+) -> dict[str, object]:
     """The report's ``predictor`` entry: ``kind`` and the options of the predictor that ran.
 
     For a baseline (``sequencer=goal_nearest`` or ``bc``, which run none) it is
@@ -85,7 +87,35 @@ def predictor_entry(
 
 
 # ------------------------------------------------------------------------- seed pooling
-def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+class TrainSizeRow(TypedDict):
+    """The report's numbers of one seed at one training size D.
+
+    As :func:`cpmp.experiment.jobs.run_train_size` makes them.
+    """
+
+    progress: dict[str, float]
+    """The offline progress MAE: ``mae``, ``mae_first``, ``mae_last``."""
+    replay: dict[str, JsonValue]
+    """The open-loop replay: ``all_match``, ``sequence_match`` (per variable),
+    ``distance_mean``, ``distance_std``."""
+    reproduction: ReproductionSummary
+    """Table I of the seed's reproduction episodes."""
+    fit: dict[str, JsonValue]
+    """The fit report's ``loss``, ``seconds``, ``n_support_total`` and ``warnings``."""
+    strategy_map_accuracy: NotRequired[float]
+    """The strategy map's accuracy (at the largest D only)."""
+
+
+class SeedRow(TypedDict):
+    """One seed's rows of the report (``per_seed``)."""
+
+    seed: int
+    """The seed."""
+    by_train_size: dict[str, TrainSizeRow]
+    """Its numbers by ``str(D)``."""
+
+
+def pool_seeds(job: ExperimentJob, per_seed: list[SeedRow]) -> dict[str, JsonValue]:
     """The report of the main job from its per-seed rows.
 
     Every number is the mean ± std over seeds; distances are pooled over all complete
@@ -97,11 +127,11 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
             :func:`cpmp.experiment.jobs.run_train_size` returns it.
     """
     settings = job.settings
-    reproduction: dict[str, Any] = {}
-    progress_by_d: dict[str, Any] = {}
+    reproduction: dict[str, dict[str, JsonValue]] = {}
+    progress_by_d: dict[str, dict[str, float | None]] = {}
     for d in map(str, settings.train_sizes):
         rows = [s["by_train_size"][d] for s in per_seed]
-        rep: dict[str, Any] = {}
+        rep: dict[str, JsonValue] = {}
         for key in ("W", "I", "C", "diverged"):
             rep[key], rep[f"{key}_std"] = mean_std([r["reproduction"][key] for r in rows])
         rep["per_seed"] = {key: [r["reproduction"][key] for r in rows] for key in ("W", "I", "C")}
@@ -135,7 +165,7 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
         rep["n_boxes"] = settings.n_boxes
         rep["paper"] = PAPER_TABLE_I.get(d)
         reproduction[d] = rep
-        prog: dict[str, Any] = {}
+        prog: dict[str, float | None] = {}
         for key in ("mae", "mae_first", "mae_last"):
             prog[key], prog[f"{key}_std"] = mean_std([r["progress"][key] for r in rows])
         prog["replay_all_match"], _ = mean_std([r["replay"]["all_match"] for r in rows])
@@ -175,7 +205,7 @@ def pool_seeds(job: ExperimentJob, per_seed: list[dict[str, Any]]) -> dict[str, 
     )
 
 
-def _configs(job: ExperimentJob) -> dict[str, Any]:
+def _configs(job: ExperimentJob) -> dict[str, object]:
     """The report's ``predictor``, ``sequencer`` and ``task`` sections: every option used."""
     fit = job.fit
     if fit.baseline is not None:
@@ -276,7 +306,7 @@ def write_timings(
 
 
 # ----------------------------------------------------------------------------- markdown
-def _method_line(report: Mapping[str, Any]) -> str:
+def _method_line(report: Mapping[str, JsonValue]) -> str:
     """The sentence saying which predictor and sequencer ran, with their options."""
     seq = report.get("sequencer") or {}
     if is_goal_nearest(seq):
@@ -313,7 +343,7 @@ def _method_line(report: Mapping[str, Any]) -> str:
     )
 
 
-def render_markdown(report: Mapping[str, Any]) -> str:
+def render_markdown(report: Mapping[str, JsonValue]) -> str:
     """The human-readable report: Table I beside the paper's, progress errors, strategy map.
 
     The header names what ran: the predictor and the learned sequencer's rules, or the
@@ -405,7 +435,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(report: Mapping[str, Any], run_dir: str | Path) -> Path:
+def write_report(report: Mapping[str, JsonValue], run_dir: str | Path) -> Path:
     """Write ``report.json`` and ``report.md`` into ``run_dir``; returns the JSON path."""
     run_dir = Path(run_dir)
     write_json(run_dir / "report.json", report)

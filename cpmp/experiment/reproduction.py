@@ -12,7 +12,7 @@ import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from cpmp.experiment.settings import RecordMode
 from cpmp.experiment.strategies import classify_start
 from cpmp.recordings import EpisodeRecorder, StartReference
 from cpmp.records import TickInfo, count_recoveries
+from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sim import Box, Simulation, correct_strategy
 from cpmp.sim.runner import Outcome, run_episodes
@@ -70,9 +71,9 @@ class EpisodeRecord:
     give_ups: int = 0
     holds: int = 0
     rrd: str | None = None
-    cause: dict[str, Any] | None = None
+    cause: dict[str, str | float | None] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """The fields as a dict (``episodes.json``)."""
         return dict(self.__dict__)
 
@@ -119,8 +120,8 @@ class EpisodeLogger:
 
     Args:
         recorder: the episode's :class:`~cpmp.recordings.EpisodeRecorder`.
-        seq: the sequencer episode driving the episode (its start decision, events and notes
-            are logged).
+        seq: the sequencer (or the episode of a batched one) driving the episode (its start
+            decision, events and notes are logged).
         references: the training demonstrations' starts.
         axes: what to compare the starts in (features or keys of ``values``).
         correct: the initial MPs the demonstrator uses for the episode's box.
@@ -129,8 +130,8 @@ class EpisodeLogger:
 
     def __init__(
         self,
-        recorder: Any,
-        seq: Any,
+        recorder: EpisodeRecorder,
+        seq: ConcurrentSequencer | SequencerEpisode,
         references: Sequence[StartReference] = (),
         axes: Sequence[str] = (),
         *,
@@ -211,7 +212,7 @@ def reproduce(
     references = start_references(train)
     axes = [a for a in START_AXES if references and all(a in r.values for r in references)]
     paths: list[Path | None] = []
-    recorders: list[Any] = []
+    recorders: list[EpisodeRecorder | None] = []
     callbacks: list[EpisodeLogger | None] = []
     for i, box in enumerate(boxes):
         rrd = recorder = callback = None
@@ -302,21 +303,69 @@ def reproduce(
 
 
 def reproduce_seed(
-    seq: ConcurrentSequencer, data: SeedData, task: TaskConfig, **options: Any
+    seq: ConcurrentSequencer,
+    data: SeedData,
+    task: TaskConfig,
+    *,
+    record: RecordMode,
+    record_dir: Path | None = None,
+    max_time: float | None = None,
+    label: str = "",
+    train: Sequence[Demonstration] = (),
 ) -> list[EpisodeRecord]:
     """:func:`reproduce` on one seed's reproduction boxes.
 
     ``data.boxes`` run against the demonstrator's runs ``data.expected``, the chosen strategies
     told apart by ``data.signatures``; a paced robot (the task's ``robot_*`` options) is paced
-    from the run's seed ``data.seed``, as the demonstrations were. ``options``: the other
-    keywords of :func:`reproduce`.
+    from the run's seed ``data.seed``, as the demonstrations were. The keywords are those of
+    :func:`reproduce`.
     """
     return reproduce(
-        seq, data.boxes, data.expected, task, data.signatures, pacing_seed=data.seed, **options
+        seq,
+        data.boxes,
+        data.expected,
+        task,
+        data.signatures,
+        record=record,
+        record_dir=record_dir,
+        max_time=max_time,
+        label=label,
+        train=train,
+        pacing_seed=data.seed,
     )
 
 
-def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
+class ReproductionSummary(TypedDict):
+    """Table I for one set of episodes (:func:`summarize_episodes`), as the report holds it.
+
+    ``W``, ``I``, ``C``: wrong-start, incomplete (diverged included) and complete episodes;
+    ``diverged``: the diverged ones; ``n``: all episodes; ``distance_*``: mean and std of the
+    switch-state distances over the complete episodes (``None`` without any), over
+    ``n_distances`` switches, and over the continuous features only; the recovery, give-up and
+    hold counts summed over the episodes; ``causes``: the incomplete episodes per cause.
+    """
+
+    W: int
+    I: int  # noqa: E741 - Table I's name
+    C: int
+    diverged: int
+    n: int
+    distance_mean: float | None
+    distance_std: float | None
+    n_distances: int
+    distance_continuous_mean: float | None
+    distance_continuous_std: float | None
+    recoveries: int
+    recovered_episodes: int
+    recovered_complete: int
+    recoveries_right: int
+    recoveries_wrong: int
+    give_ups: int
+    holds: int
+    causes: dict[str, int]
+
+
+def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> ReproductionSummary:
     """Table I for one set of episodes: the W/I/C counts and the switch-state distances.
 
     Diverged episodes are counted apart and also in I; the distance mean/std is over all
@@ -336,7 +385,10 @@ def summarize_episodes(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
     distances = [d for e in complete for d in e.distances]
     continuous = [d for e in complete for d in e.distances_continuous]
     return {
-        **counts,
+        "W": counts["W"],
+        "I": counts["I"],
+        "C": counts["C"],
+        "diverged": counts["diverged"],
         "n": len(episodes),
         "distance_mean": float(np.mean(distances)) if distances else None,
         "distance_std": float(np.std(distances)) if distances else None,

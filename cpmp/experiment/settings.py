@@ -15,7 +15,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal, get_args
+from typing import Any, Literal, TypeAlias, TypeVar, get_args
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -23,6 +23,7 @@ from cpmp.config import BCConfig, FitConfig, GoalNearestConfig, TaskConfig
 from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
+from cpmp.records import JsonValue
 
 RecordMode = Literal["failures", "all", "first", "none"]
 """Which reproduction episodes keep an ``.rrd`` (``experiment.record``): ``failures`` (every
@@ -38,10 +39,17 @@ EXECUTORS: tuple[ExecutorName, ...] = get_args(ExecutorName)
 """Values of ``experiment.executor``."""
 CLUSTERS = ("local", "slurm")
 """Values of ``executor.cluster``: where the ``submitit`` executor's jobs run."""
+ConfigNode: TypeAlias = "DictConfig | Mapping[str, object] | None"
+"""A config group as a job gets it: a composed OmegaConf node, a plain mapping of options, or
+``None`` (the group's defaults)."""
+_Options = TypeVar("_Options", bound=Mapping[str, object])
 
 
-def to_dict(cfg: Any) -> dict[str, Any]:
+def to_dict(cfg: object) -> dict[str, Any]:
     """A plain dict from an OmegaConf node or mapping (``None`` -> ``{}``).
+
+    The option values are not checked here: the typed config that takes them as
+    keywords checks them.
 
     Raises:
         ConfigError: ``cfg`` is neither a mapping nor ``None``.
@@ -161,7 +169,7 @@ class ExperimentSettings:
             )
 
     @classmethod
-    def from_cfg(cls, cfg: Any) -> ExperimentSettings:
+    def from_cfg(cls, cfg: ConfigNode) -> ExperimentSettings:
         """From the ``experiment`` node (or a mapping); unknown keys raise :class:`ConfigError`."""
         options = to_dict(cfg)
         known = {f.name for f in dataclasses.fields(cls)}
@@ -195,7 +203,7 @@ class SlurmSettings:
     cpus_per_task: int = 1
     mem: str | None = None
     array_parallelism: int = 32
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)  # OmegaConf's schema: Any, not a union
 
 
 @dataclass
@@ -226,7 +234,7 @@ class ExecutorSettings:
                 raise ConfigError(f"executor.slurm.{name} must be an integer >= 1, got {value!r}")
 
     @classmethod
-    def from_cfg(cls, cfg: Any) -> ExecutorSettings:
+    def from_cfg(cls, cfg: ConfigNode) -> ExecutorSettings:
         """From the ``executor`` node (or a mapping; ``None``: the defaults), keys checked.
 
         Raises:
@@ -265,7 +273,7 @@ class ExecutorSettings:
             )
 
 
-def _known(cls: type, options: dict[str, Any], path: str) -> dict[str, Any]:
+def _known(cls: type, options: _Options, path: str) -> _Options:
     """``options`` of the dataclass ``cls`` at ``path``, unknown keys refused.
 
     Raises:
@@ -300,7 +308,7 @@ class FitSettings:
 
     fit: FitConfig
     goal_nearest: GoalNearestConfig | None = None
-    logger: dict[str, Any] | None = None
+    logger: dict[str, JsonValue] | None = None
     bc: BCConfig | None = None
 
     @property
@@ -313,7 +321,7 @@ class FitSettings:
             return GOAL_NEAREST
         return BC if self.bc is not None else None
 
-    def baseline_options(self) -> dict[str, Any]:
+    def baseline_options(self) -> dict[str, JsonValue]:
         """The selected baseline's options with its ``kind`` (empty for the learned one)."""
         options = self.goal_nearest if self.goal_nearest is not None else self.bc
         if options is None:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from cpmp.errors import ConfigError, CpmpError
 from cpmp.experiment.reproduction import EpisodeLogger
@@ -27,7 +26,7 @@ HELD_OUT_SEED = 1000
 
 
 def record_world_episode(
-    world: World, seq: ConcurrentSequencer, context: Any, path: str | Path
+    world: World, seq: ConcurrentSequencer, context: object, path: str | Path
 ) -> EpisodeRun:
     """Run one episode of ``world`` with ``seq`` and record it to ``path`` (``.rrd``).
 

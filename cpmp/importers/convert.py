@@ -21,7 +21,6 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from cpmp.importers.spec import (
     load_mapping,
 )
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 
 PathLike = str | os.PathLike[str]
 Inputs = PathLike | Sequence[PathLike]
@@ -93,7 +93,7 @@ def source_of(spec: ImportSpec) -> str:
     return "mimicgen"
 
 
-def as_spec(mapping: ImportSpec | Mapping[str, Any] | PathLike) -> ImportSpec:
+def as_spec(mapping: ImportSpec | Mapping[str, object] | PathLike) -> ImportSpec:
     """A parsed mapping: itself, or loaded from a dict or YAML file (:func:`load_mapping`)."""
     if isinstance(mapping, (RosbagSpec, LeRobotSpec, MimicGenSpec)):
         return mapping
@@ -101,7 +101,7 @@ def as_spec(mapping: ImportSpec | Mapping[str, Any] | PathLike) -> ImportSpec:
 
 
 def read_recordings(
-    mapping: ImportSpec | Mapping[str, Any] | PathLike,
+    mapping: ImportSpec | Mapping[str, object] | PathLike,
     inputs: Inputs,
     *,
     on_error: str | None = None,
@@ -222,7 +222,7 @@ def make_splits(names: Sequence[str], split: SplitSpec) -> dict[str, list[str]]:
 
 
 def import_recordings(
-    mapping: ImportSpec | Mapping[str, Any] | PathLike,
+    mapping: ImportSpec | Mapping[str, object] | PathLike,
     inputs: Inputs,
     output: PathLike,
     split: SplitSpec | None = None,
@@ -272,7 +272,7 @@ def skipped_report_path(output: PathLike) -> Path:
     return output.with_name(output.name + SKIPPED_SUFFIX)
 
 
-def skipped_report(result: ImportResult, output: PathLike) -> dict[str, Any]:
+def skipped_report(result: ImportResult, output: PathLike) -> dict[str, JsonValue]:
     """The JSON report of an ``on_error: skip`` import.
 
     Keys: ``output``, ``source``, ``inputs``, ``imported`` (names), ``skipped`` (one

@@ -30,7 +30,6 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -58,6 +57,7 @@ from cpmp.importers.common import (
 )
 from cpmp.importers.resample import clean_stream, interpolate_linear, uniform_clock, zero_order_hold
 from cpmp.importers.spec import ColumnFeature, ColumnLabel, LeRobotSpec
+from cpmp.records import JsonValue
 
 INFO_PATH = "meta/info.json"
 SUBTASKS_PATH = "meta/subtasks.parquet"
@@ -85,7 +85,7 @@ class LeRobotInfo:
 
     version: str
     fps: float
-    features: dict[str, Any]
+    features: dict[str, JsonValue]
 
 
 def read_info(root: str | os.PathLike[str]) -> LeRobotInfo:
@@ -219,7 +219,7 @@ class _Frames:
     files: list[str]
     file: np.ndarray
     row: np.ndarray
-    language: dict[int, list[dict[str, Any]]]
+    language: dict[int, list[dict[str, JsonValue]]]
 
     def where(self, index: int) -> str:
         """``row <r> of <file>`` for table row ``index``."""
@@ -275,7 +275,7 @@ def _read_frames(root: Path, files: list[Path], spec: LeRobotSpec) -> _Frames:
     needed = list(dict.fromkeys([*_INDEX_COLUMNS, *(f.column for f in spec.features), *columns]))
     wants_language = any(lab.language is not None for lab in spec.labels)
     tables, names, file_of, row_of = [], [], [], []
-    language: dict[int, list[dict[str, Any]]] = {}
+    language: dict[int, list[dict[str, JsonValue]]] = {}
     empty = []
     for path in files:
         relative = str(path.relative_to(root))
@@ -341,7 +341,7 @@ def _missing_column_fix(column: str, present: list[str], spec: LeRobotSpec) -> s
     return "fix the column name in the mapping"
 
 
-def _language_rows(table: pa.Table, where: str) -> dict[int, list[dict[str, Any]]]:
+def _language_rows(table: pa.Table, where: str) -> dict[int, list[dict[str, JsonValue]]]:
     """Episode -> its persistent language rows (the first frame's; every frame holds them)."""
     episodes = table.column("episode_index").to_numpy()
     starts = np.flatnonzero(np.r_[True, episodes[1:] != episodes[:-1]])
@@ -351,7 +351,7 @@ def _language_rows(table: pa.Table, where: str) -> dict[int, list[dict[str, Any]
             f"{where}: {LANGUAGE_COLUMN} has type {column.type}; lerobot writes a list of rows "
             "(role, content, style, timestamp, ...) per frame"
         )
-    out: dict[int, list[dict[str, Any]]] = {}
+    out: dict[int, list[dict[str, JsonValue]]] = {}
     for start, rows in zip(starts.tolist(), column.take(pa.array(starts)).to_pylist(), strict=True):
         out.setdefault(int(episodes[start]), rows or [])
     return out
@@ -398,7 +398,7 @@ def _feature_block(table: pa.Table, feature: ColumnFeature, info: LeRobotInfo) -
     return FeatureBlock(values[:, picked], names)
 
 
-def _element_names(entry: Any, width: int) -> list[str]:
+def _element_names(entry: JsonValue, width: int) -> list[str]:
     """A column's element names.
 
     From info.json (a list, or a dict holding one list), else indices; ``[""]`` for a scalar

@@ -30,7 +30,6 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -93,12 +92,13 @@ class _Message:
     Attributes:
         time: [s from the bag's start] its stamp (``spec.stamps``).
         received: [s from the bag's start] when the bag recorded it.
-        msg: the deserialised message.
+        msg: the deserialised message (a ``rosbags`` message dataclass of the topic's type,
+            read through its fields).
     """
 
     time: float
     received: float
-    msg: Any
+    msg: object
 
 
 @dataclass(frozen=True)
@@ -472,7 +472,7 @@ def _topic_users(spec: RosbagSpec, topic: str) -> str:
     return ", ".join(users)
 
 
-def _header_ns(msg: Any) -> int | None:
+def _header_ns(msg: object) -> int | None:
     """``header.stamp`` [ns] where the message has one."""
     stamp = getattr(getattr(msg, "header", None), "stamp", None)
     if stamp is None or not hasattr(stamp, "sec"):
@@ -680,7 +680,7 @@ def _joint_series(
     return _Series(feature, tuple(parts), len(wanted), picked, names, tuple(reports), ())
 
 
-def _resolve(msg: Any, path: str, where: str) -> Any:
+def _resolve(msg: object, path: str, where: str) -> object:
     """The value at dotted ``path`` inside a message."""
     value = msg
     for part in path.split("."):
@@ -696,7 +696,7 @@ def _resolve(msg: Any, path: str, where: str) -> Any:
     return value
 
 
-def _numeric(value: Any, where: str) -> tuple[list[float], list[str], list[int]]:
+def _numeric(value: object, where: str) -> tuple[list[float], list[str], list[int]]:
     """A number, numeric array or message as values, element names and quaternion starts.
 
     Element names: ``[""]`` for a number; indices for an array; field paths for a message.
@@ -729,7 +729,7 @@ def _numeric(value: Any, where: str) -> tuple[list[float], list[str], list[int]]
 
 
 def _flatten(
-    msg: Any, prefix: str, values: list[float], names: list[str], quaternions: list[int]
+    msg: object, prefix: str, values: list[float], names: list[str], quaternions: list[int]
 ) -> None:
     """Append a message's numeric leaves (headers and strings skipped) in definition order.
 

@@ -20,7 +20,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Literal, TypeVar
 
 import yaml
 
@@ -36,17 +36,17 @@ T = TypeVar("T")
 
 
 # ----------------------------------------------------------------------------- small checks
-def _text(value: Any, what: str) -> str:
+def _text(value: object, what: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise ConfigError(f"{what} must be a non-empty string, got {value!r}")
     return value
 
 
-def _optional_text(value: Any, what: str) -> str | None:
+def _optional_text(value: object, what: str) -> str | None:
     return None if value is None else _text(value, what)
 
 
-def _texts(value: Any, what: str) -> tuple[str, ...] | None:
+def _texts(value: object, what: str) -> tuple[str, ...] | None:
     if value is None:
         return None
     if isinstance(value, str) or not isinstance(value, Sequence):
@@ -60,7 +60,7 @@ def _texts(value: Any, what: str) -> tuple[str, ...] | None:
     return items
 
 
-def _positive(value: Any, what: str, *, allow_none: bool = False) -> float | None:
+def _positive(value: object, what: str, *, allow_none: bool = False) -> float | None:
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -70,7 +70,7 @@ def _positive(value: Any, what: str, *, allow_none: bool = False) -> float | Non
     return float(value)
 
 
-def _non_negative(value: Any, what: str) -> float:
+def _non_negative(value: object, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(f"{what} must be a finite number, got {value!r}")
     if value < 0:
@@ -78,7 +78,7 @@ def _non_negative(value: Any, what: str) -> float:
     return float(value)
 
 
-def _integers(value: Any, what: str) -> tuple[int, ...] | None:
+def _integers(value: object, what: str) -> tuple[int, ...] | None:
     if value is None:
         return None
     if isinstance(value, str) or not isinstance(value, Sequence) or not value:
@@ -89,13 +89,13 @@ def _integers(value: Any, what: str) -> tuple[int, ...] | None:
     return tuple(int(v) for v in value)
 
 
-def _choice(value: Any, choices: Sequence[str], what: str) -> str:
+def _choice(value: object, choices: Sequence[str], what: str) -> str:
     if value not in choices:
         raise ConfigError(f"{what} must be one of {', '.join(choices)}, got {value!r}")
     return str(value)
 
 
-def _rename(value: Any, what: str) -> dict[str, str]:
+def _rename(value: object, what: str) -> dict[str, str]:
     if value is None:
         return {}
     if not isinstance(value, Mapping):
@@ -108,7 +108,7 @@ DERIVED = ("velocity",)
 """What a LeRobot or MimicGen feature entry can derive from its elements (``derive:``)."""
 
 
-def _check_derive(value: Any, where: str) -> None:
+def _check_derive(value: object, where: str) -> None:
     if value is not None:
         _choice(value, DERIVED, f"{where}: derive")
 
@@ -570,8 +570,8 @@ class _SourceSpec:
 
     def _check_common(
         self,
-        features: Sequence[Any],
-        labels: Sequence[Any],
+        features: Sequence[Selection],
+        labels: Sequence[LabelNames],
         feature_kind: type[Selection],
         label_kind: type[LabelNames],
     ) -> None:
@@ -753,7 +753,7 @@ _LABELS: dict[str, type] = {"rosbag": TopicLabel, "lerobot": ColumnLabel, "mimic
 _SPECS: dict[str, type] = {"rosbag": RosbagSpec, "lerobot": LeRobotSpec, "mimicgen": MimicGenSpec}
 
 
-def _build(cls: type[T], data: Any, where: str, **extra: Any) -> T:
+def _build(cls: type[T], data: object, where: str, **extra: object) -> T:
     """``cls(**data, **extra)`` with unknown keys and wrong types as :class:`ConfigError`."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where} must be a mapping of options, got {data!r}")
@@ -770,7 +770,7 @@ def _build(cls: type[T], data: Any, where: str, **extra: Any) -> T:
         raise ConfigError(f"{where}: {err}") from None
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: object) -> object:
     """Lists (also OmegaConf ones) as tuples, mappings as dicts, recursively."""
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items()}
@@ -779,7 +779,7 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def parse_mapping(data: Mapping[str, Any], where: str = "mapping") -> ImportSpec:
+def parse_mapping(data: Mapping[str, object], where: str = "mapping") -> ImportSpec:
     """Build the spec of ``data`` (a mapping as :func:`load_mapping` reads it from YAML).
 
     Args:
@@ -812,7 +812,7 @@ def parse_mapping(data: Mapping[str, Any], where: str = "mapping") -> ImportSpec
     return _build(_SPECS[source], options, where, features=parsed_features, labels=parsed_labels)
 
 
-def load_mapping(mapping: str | os.PathLike[str] | Mapping[str, Any]) -> ImportSpec:
+def load_mapping(mapping: str | os.PathLike[str] | Mapping[str, object]) -> ImportSpec:
     """Read a mapping from a YAML file (or take it as a dict) and validate it.
 
     Raises:
