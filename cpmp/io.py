@@ -17,15 +17,27 @@ import struct
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple, TypeVar
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias, TypeVar
 
 import numpy as np
 
 from cpmp.errors import CheckpointFormatError, CpmpError, CpmpFileError
 
+if TYPE_CHECKING:
+    import torch
+
 T = TypeVar("T")
 
 log = logging.getLogger(__name__)
+
+CheckpointValue: TypeAlias = (
+    "torch.Tensor | torch.dtype | str | int | float | bool"
+    " | list[CheckpointValue] | tuple[CheckpointValue, ...] | dict[str, CheckpointValue] | None"
+)
+"""What a checkpoint payload holds: tensors, dtypes and plain Python, nested (nothing else
+loads with ``weights_only=True``; :func:`payload_digest` refuses anything else)."""
+CheckpointPayload: TypeAlias = "dict[str, CheckpointValue]"
+"""A checkpoint's content: entry name -> value (``format``, ``version``, the model's parts)."""
 
 CHECKSUM_KEY = "sha256"
 """The checkpoint entry holding :func:`payload_digest` of the rest of the payload."""
@@ -148,11 +160,13 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def to_builtin(obj: Any) -> Any:
+def to_builtin(obj: object) -> CheckpointValue:
     """Recursively convert numpy arrays/scalars, tuples and mappings to plain Python.
 
-    The result is JSON and ``torch.load(weights_only=True)`` safe; non-finite floats become
-    ``None``.
+    The result is JSON and ``torch.load(weights_only=True)`` safe (a :data:`CheckpointValue`
+    without tensors: ``cpmp.records.JsonValue``); non-finite floats become ``None``. Strings,
+    ints, finite floats, bools and ``None`` are returned as they are (any other object too,
+    unconverted: ``obj`` is to hold only the kinds above).
     """
     if isinstance(obj, Mapping):
         return {str(k): to_builtin(v) for k, v in obj.items()}
@@ -164,10 +178,10 @@ def to_builtin(obj: Any) -> Any:
         return to_builtin(obj.item())
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
-    return obj
+    return obj  # type: ignore[return-value]
 
 
-def payload_digest(payload: Mapping[str, Any]) -> str:
+def payload_digest(payload: Mapping[str, object]) -> str:
     """The SHA-256 (hex) of a checkpoint payload's content, independent of how it was pickled.
 
     Keys, their order, strings, numbers (floats bit-exact), ``None``, lists, tuples and every
@@ -192,7 +206,7 @@ def payload_digest(payload: Mapping[str, Any]) -> str:
 
     inside: set[int] = set()  # the containers being walked (a damaged pickle can loop)
 
-    def walk(obj: Any, where: str) -> None:
+    def walk(obj: object, where: str) -> None:
         if isinstance(obj, Mapping | list | tuple):
             if id(obj) in inside:
                 raise TypeError(
@@ -240,7 +254,7 @@ def payload_digest(payload: Mapping[str, Any]) -> str:
     return digest.hexdigest()
 
 
-def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any]) -> Path:
+def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, CheckpointValue]) -> Path:
     """Write a checkpoint ``payload`` atomically to ``path`` with ``torch.save``.
 
     The file also holds the payload's SHA-256 (:func:`payload_digest`, under
@@ -288,7 +302,9 @@ class CheckpointSpec(NamedTuple):
 
 
 def load_checkpoint(
-    path: str | os.PathLike[str], spec: CheckpointSpec, rebuild: Callable[[dict[str, Any], int], T]
+    path: str | os.PathLike[str],
+    spec: CheckpointSpec,
+    rebuild: Callable[[CheckpointPayload, int], T],
 ) -> T:
     """Read a checkpoint written by :func:`save_checkpoint` and rebuild its model.
 
@@ -349,7 +365,7 @@ def load_checkpoint(
         ) from err
 
 
-def _verified(payload: dict[str, Any], path: Path, spec: CheckpointSpec) -> dict[str, Any]:
+def _verified(payload: CheckpointPayload, path: Path, spec: CheckpointSpec) -> CheckpointPayload:
     """``payload`` without its checksum entry, once the checksum matched.
 
     Args:
@@ -395,8 +411,11 @@ def _verified(payload: dict[str, Any], path: Path, spec: CheckpointSpec) -> dict
     return {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
 
 
-def _load_payload(path: Path, spec: CheckpointSpec) -> Any:
+def _load_payload(path: Path, spec: CheckpointSpec) -> CheckpointValue:
     """What ``torch.load(path, weights_only=True)`` returns.
+
+    A payload dict, or any other value the file holds (:func:`load_checkpoint` refuses that as
+    another format).
 
     Raises:
         CpmpFileError: a missing, unreadable or untrusted file (see :func:`load_checkpoint`).

@@ -41,7 +41,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -49,10 +49,11 @@ import torch
 from cpmp.baselines.episodic import EpisodicBaseline, baseline_data
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.bc import KIND, BCConfig, bc_options
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph
-from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
+from cpmp.io import CheckpointPayload, CheckpointSpec, load_checkpoint, save_checkpoint
 from cpmp.records import BaselineFitReport, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import checked_features, checked_time
 
@@ -324,7 +325,7 @@ class BCSequencer(EpisodicBaseline):
         *,
         seed: int = 0,
         variables: Sequence[str] | None = None,
-        **options: Any,
+        **options: OptionValue,
     ) -> BCSequencer:
         """Build the graphs and fit every node's stay / successor classifier.
 
@@ -553,7 +554,7 @@ class BCSequencer(EpisodicBaseline):
         return load_checkpoint(path, CHECKPOINT, cls._from_payload)
 
     @classmethod
-    def _from_payload(cls, payload: dict[str, Any], version: int) -> BCSequencer:
+    def _from_payload(cls, payload: CheckpointPayload, version: int) -> BCSequencer:
         """Rebuild from a checkpoint payload (of :data:`CHECKPOINT_VERSION`)."""
         graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
         state = payload["predictor"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -118,7 +118,7 @@ class EpisodicBaseline:
         batched policy :func:`cpmp.sim.run_episodes` drives; each episode is a copy of this
         baseline sharing its fitted data.
         """
-        episodes: list[Any] = []
+        episodes: list[EpisodicBaseline] = []
         for _ in range(EpisodeBatch.checked_count(n)):
             episode = copy.copy(self)
             episode._new_episode()

@@ -37,7 +37,6 @@ import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from time import perf_counter
-from typing import Any
 
 import numpy as np
 import torch
@@ -45,10 +44,11 @@ import torch
 from cpmp.baselines.episodic import EpisodicBaseline, baseline_data
 from cpmp.baselines.nearest_progress import NearestProgress
 from cpmp.config.goal_nearest import KIND, GoalNearestConfig, goal_nearest_options
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError, DataError, NotFittedError
 from cpmp.graph import SequenceGraph
-from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint
+from cpmp.io import CheckpointPayload, CheckpointSpec, load_checkpoint, save_checkpoint
 from cpmp.records import BaselineFitReport, SequencerNote, TickInfo, TransitionEvent
 from cpmp.sequencer import (
     checked_features,
@@ -152,7 +152,7 @@ class GoalNearestSequencer(EpisodicBaseline):
         *,
         seed: int = 0,
         variables: Sequence[str] | None = None,
-        **options: Any,
+        **options: OptionValue,
     ) -> GoalNearestSequencer:
         """Build the graphs; collect each node's moving features and entry states.
 
@@ -334,7 +334,7 @@ class GoalNearestSequencer(EpisodicBaseline):
         return load_checkpoint(path, CHECKPOINT, cls._from_payload)
 
     @classmethod
-    def _from_payload(cls, payload: dict[str, Any], version: int) -> GoalNearestSequencer:
+    def _from_payload(cls, payload: CheckpointPayload, version: int) -> GoalNearestSequencer:
         """Rebuild from a checkpoint payload (of :data:`CHECKPOINT_VERSION`)."""
         graphs = {v: SequenceGraph.from_dict(g) for v, g in payload["graphs"].items()}
         state = payload["predictor"]

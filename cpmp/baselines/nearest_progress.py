@@ -8,8 +8,8 @@ sample of each node.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any, NamedTuple
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import torch
@@ -18,6 +18,9 @@ from torch import nn
 
 from cpmp.errors import DataError
 from cpmp.predictors import FeatureScaler
+
+if TYPE_CHECKING:
+    from torch.nn.modules.module import _IncompatibleKeys
 
 
 class _NodeTree(NamedTuple):
@@ -93,7 +96,9 @@ class NearestProgress(nn.Module):
             out[:, k] = targets[tree.query(z)[1]]
         return torch.from_numpy(out).reshape(*lead, len(trees))
 
-    def load_state_dict(self, *args: Any, **kwargs: Any) -> Any:
+    def load_state_dict(
+        self, state_dict: Mapping[str, torch.Tensor], strict: bool = True, assign: bool = False
+    ) -> _IncompatibleKeys:
         """:meth:`torch.nn.Module.load_state_dict`; the search trees are rebuilt on next use."""
         self._trees = None
-        return super().load_state_dict(*args, **kwargs)
+        return super().load_state_dict(state_dict, strict, assign)

@@ -8,10 +8,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from cpmp.config.predictors import SCALINGS
-from cpmp.config.validation import finite_number
+from cpmp.config.validation import OptionValue, finite_number
 from cpmp.errors import ConfigError
 
 KIND = "bc"
@@ -78,7 +77,7 @@ class BCConfig:
             )
 
 
-def bc_options(options: Mapping[str, Any]) -> BCConfig:
+def bc_options(options: Mapping[str, OptionValue]) -> BCConfig:
     """Validated :class:`BCConfig` from a mapping.
 
     Raises:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 from cpmp.config.predictors import (
     REMOVED_OPTIONS,
@@ -20,6 +19,7 @@ from cpmp.config.predictors import (
 )
 from cpmp.config.sequencer import SequencerConfig
 from cpmp.config.trainer import TrainerConfig
+from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
 
 FIT_OPTIONS = ("seed", "variables", "subsample", "repair_glitches")
@@ -77,7 +77,7 @@ class FitConfig:
             )
 
     @classmethod
-    def from_options(cls, predictor: str = "klr", **options: Any) -> FitConfig:
+    def from_options(cls, predictor: str = "klr", **options: OptionValue) -> FitConfig:
         """The keyword form: ``options`` routed by name to the part that has them.
 
         Args:
@@ -97,7 +97,7 @@ class FitConfig:
             "trainer": {f.name for f in dataclasses.fields(TrainerConfig)},
             "fit": set(FIT_OPTIONS),
         }
-        routed: dict[str, dict[str, Any]] = {part: {} for part in names}
+        routed: dict[str, dict[str, OptionValue]] = {part: {} for part in names}
         for key, value in options.items():
             part = next((p for p, valid in names.items() if key in valid), None)
             if part is None and key in REMOVED_OPTIONS.get(predictor, {}):

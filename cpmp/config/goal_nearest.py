@@ -8,10 +8,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from cpmp.config.predictors import SCALINGS
-from cpmp.config.validation import finite_number
+from cpmp.config.validation import OptionValue, finite_number
 from cpmp.errors import ConfigError
 
 KIND = "goal_nearest"
@@ -59,7 +58,7 @@ class GoalNearestConfig:
             )
 
 
-def goal_nearest_options(options: Mapping[str, Any]) -> GoalNearestConfig:
+def goal_nearest_options(options: Mapping[str, OptionValue]) -> GoalNearestConfig:
     """Validated :class:`GoalNearestConfig` from a mapping.
 
     Raises:

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from cpmp.config.validation import finite_number
+from cpmp.config.validation import OptionValue, finite_number
 from cpmp.errors import ConfigError
 from cpmp.progress import PATH_NOISE
 
@@ -303,7 +303,7 @@ class SparseKLRConfig(KLRConfig):
                 f"predictor option holdout_fraction must be in (0, 1), got {fraction!r}"
             )
 
-    def _share(self, name: str, value: Any, upper: float | None = 1.0) -> float:
+    def _share(self, name: str, value: object, upper: float | None = 1.0) -> float:
         """One level or factor: a finite number in (0, ``upper``]."""
         number = finite_number(value, f"predictor option {name}")
         if not number > 0 or (upper is not None and number > upper):
@@ -458,7 +458,7 @@ def predictor_option_names(kind: str) -> list[str]:
     return [f.name for f in dataclasses.fields(predictor_config_class(kind))]
 
 
-def predictor_config(kind: str, **options: Any) -> PredictorConfig:
+def predictor_config(kind: str, **options: OptionValue) -> PredictorConfig:
     """Validated options of predictor ``kind``.
 
     Raises:

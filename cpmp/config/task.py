@@ -12,8 +12,8 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
+from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
 
 MAX_SPEED_FACTOR = 4.0
@@ -312,7 +312,7 @@ class TaskConfig:
         return Pacing(self.robot_speed, self.robot_pause, self.robot_pause_probability)
 
     @classmethod
-    def from_dict(cls, cfg: Mapping[str, Any] | None) -> TaskConfig:
+    def from_dict(cls, cfg: Mapping[str, OptionValue] | None) -> TaskConfig:
         """Build from a mapping (plain or OmegaConf); unknown keys raise :class:`ConfigError`."""
         if cfg is None:
             return cls()
@@ -332,7 +332,7 @@ class TaskConfig:
         except TypeError as exc:
             raise ConfigError(f"invalid task config: {exc}") from exc
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, OptionValue]:
         """Plain-dict form (lists for ranges), the inverse of :meth:`from_dict`."""
         out = dataclasses.asdict(self)
         out["width_range"] = list(self.width_range)
@@ -355,6 +355,6 @@ PACING_RANGES = tuple(f"{run}_{option}" for run in PACED_RUNS for option in ("sp
 """The pacing options given as ``[min, max]``."""
 
 
-def as_task_config(cfg: TaskConfig | Mapping[str, Any] | None) -> TaskConfig:
+def as_task_config(cfg: TaskConfig | Mapping[str, OptionValue] | None) -> TaskConfig:
     """``cfg`` as a :class:`TaskConfig`: itself, built from a mapping, or the defaults for None."""
     return cfg if isinstance(cfg, TaskConfig) else TaskConfig.from_dict(cfg)

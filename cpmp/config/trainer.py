@@ -193,7 +193,7 @@ class SolverOptions:
     max_iter: int = TrainerConfig.newton_max_iter
 
 
-def _devices(value: Any) -> int | str | list[int]:
+def _devices(value: object) -> int | str | list[int]:
     """``devices`` checked: ``"auto"``, a count >= 1 (``-1``: all), or a list of indices >= 0.
 
     Raises:

@@ -3,8 +3,19 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
+from typing import TypeAlias
 
 from cpmp.errors import ConfigError
+
+OptionValue: TypeAlias = (
+    "str | int | float | bool | Sequence[str] | Sequence[float] | Mapping[str, float] | None"
+)
+"""A value an option of these classes takes, given by name (``fit(**options)``, a mapping).
+
+A number, a string, a flag, ``None``, a list (a range, levels, hidden sizes, device indices,
+variables) or a mapping of numbers (the task's ``finger_goals``); the classes check it.
+"""
 
 
 def finite_number(value: object, what: str) -> float:

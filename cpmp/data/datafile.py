@@ -16,7 +16,6 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
@@ -331,7 +330,8 @@ def _decode_labels(ids: np.ndarray, name: str, variable: str, header: _Header) -
     return np.array(mps, dtype=str)[ids]
 
 
-def _as_str(value: Any) -> str | None:
+def _as_str(value: object) -> str | None:
+    """``value`` (an HDF5 attribute or item, of whatever type the file holds) as a string."""
     if isinstance(value, bytes | np.bytes_):
         return value.decode("utf-8")
     if isinstance(value, str):
@@ -341,7 +341,8 @@ def _as_str(value: Any) -> str | None:
     return None
 
 
-def _as_str_list(value: Any, what: str) -> list[str]:
+def _as_str_list(value: object, what: str) -> list[str]:
+    """``value`` (an HDF5 attribute, of whatever type the file holds) as a list of strings."""
     out = [_as_str(v) for v in np.atleast_1d(np.asarray(value)).tolist()]
     strings = [v for v in out if v is not None]
     if len(strings) != len(out):

@@ -16,9 +16,9 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cpmp.errors import DataError, UnknownMPError
 from cpmp.records import TransitionEvent
@@ -171,7 +171,7 @@ class Demonstration:
             )
         return self.labels[variable]
 
-    def _check_time(self, time: Any) -> np.ndarray:
+    def _check_time(self, time: ArrayLike) -> np.ndarray:
         who = self._who
         if np.iscomplexobj(time):
             raise DataError(f"{who}: time must be real seconds, got complex values")
@@ -200,7 +200,7 @@ class Demonstration:
             )
         return t
 
-    def _check_features(self, features: Any, n: int) -> np.ndarray:
+    def _check_features(self, features: ArrayLike, n: int) -> np.ndarray:
         who = self._who
         if np.iscomplexobj(features):
             raise DataError(
@@ -257,7 +257,7 @@ class Demonstration:
             )
         return names
 
-    def _check_labels(self, labels: Any) -> dict[str, np.ndarray]:
+    def _check_labels(self, labels: object) -> dict[str, np.ndarray]:
         who, n = self._who, len(self.time)
         if not isinstance(labels, Mapping) or not labels:
             raise DataError(
@@ -274,7 +274,7 @@ class Demonstration:
             checked[variable] = _check_label_array(who, variable, labels[variable], n)
         return checked
 
-    def _check_metadata(self, metadata: Mapping[str, Any] | None) -> dict[str, MetadataValue]:
+    def _check_metadata(self, metadata: Mapping[str, object] | None) -> dict[str, MetadataValue]:
         who = self._who
         if metadata is None:
             return {}
@@ -297,7 +297,7 @@ class Demonstration:
         return checked
 
 
-def _check_label_array(who: str, variable: str, values: Any, n: int) -> np.ndarray:
+def _check_label_array(who: str, variable: str, values: ArrayLike, n: int) -> np.ndarray:
     """Return ``values`` as a unicode array of shape (n,), or raise :class:`DataError`."""
     raw = np.asarray(values)
     if raw.ndim != 1:
@@ -360,7 +360,7 @@ class DemonstrationLog:
         self.features: list[np.ndarray] = []
         self.labels: dict[str, list[str]] = {v: [] for v in self.variables}
 
-    def append(self, t: float, x: Any, active: Mapping[str, str]) -> None:
+    def append(self, t: float, x: ArrayLike, active: Mapping[str, str]) -> None:
         """Record time ``t`` [s], features ``x`` (d,) and the active MP of every variable."""
         self.time.append(t)
         self.features.append(np.array(x, dtype=np.float64))

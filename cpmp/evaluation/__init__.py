@@ -8,6 +8,12 @@ demonstrations (``offline``), and loading any sequencer checkpoint to evaluate i
 from cpmp.evaluation.checkpoints import load_sequencer
 from cpmp.evaluation.offline import (
     ActivationProgress,
+    DemoReplay,
+    OfflineEvaluation,
+    ProgressCurves,
+    ProgressErrors,
+    ReplaySummary,
+    VariableReplay,
     activation_progress,
     continuous_features,
     evaluate_offline,
@@ -20,6 +26,12 @@ from cpmp.evaluation.offline import (
 
 __all__ = [
     "ActivationProgress",
+    "DemoReplay",
+    "OfflineEvaluation",
+    "ProgressCurves",
+    "ProgressErrors",
+    "ReplaySummary",
+    "VariableReplay",
     "activation_progress",
     "continuous_features",
     "evaluate_offline",

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -45,6 +45,119 @@ class ActivationProgress:
     demo: str
     expected: np.ndarray
     predicted: np.ndarray
+
+
+class ProgressErrors(TypedDict):
+    """Mean absolute progress errors (:func:`progress_errors`).
+
+    Attributes:
+        mae: over every sample of every activation.
+        mae_first: over the first ``edge`` of each activation (by normalised time).
+        mae_last: over the last ``edge`` of each activation.
+        n_activations: the activations.
+        per_node: ``"variable/mp"`` -> the node's MAE (sorted by node).
+    """
+
+    mae: float
+    mae_first: float
+    mae_last: float
+    n_activations: int
+    per_node: dict[str, float]
+
+
+class ProgressCurves(TypedDict):
+    """Average predicted progress over MP activations (:func:`progress_curves`).
+
+    Attributes:
+        time: ``(n_bins,)`` normalised time points in [0, 1].
+        predicted_mean: ``(n_bins,)`` predicted progress per time point, over activations.
+        predicted_std: ``(n_bins,)`` its standard deviation (ddof=0).
+        expected_mean: ``(n_bins,)`` expected progress per time point, over activations.
+        expected_std: ``(n_bins,)`` its standard deviation (ddof=0).
+        progress_bins: ``(n_bins,)`` centres of the expected-progress bins.
+        binned_mean: ``(n_bins,)`` predicted progress per bin (NaN where empty).
+        binned_std: ``(n_bins,)`` its standard deviation (ddof=0; NaN where empty).
+        binned_count: ``(n_bins,)`` samples per bin.
+        n_activations: the activations.
+    """
+
+    time: np.ndarray
+    predicted_mean: np.ndarray
+    predicted_std: np.ndarray
+    expected_mean: np.ndarray
+    expected_std: np.ndarray
+    progress_bins: np.ndarray
+    binned_mean: np.ndarray
+    binned_std: np.ndarray
+    binned_count: np.ndarray
+    n_activations: int
+
+
+class VariableReplay(TypedDict):
+    """One control variable of a replayed demonstration (:func:`replay_demonstrations`).
+
+    Attributes:
+        expected: the demonstrated MPs, in order.
+        replayed: the MPs the sequencer ran, in order.
+        match: whether the two are the same.
+        distances: per switch, the distance between the triggered and the demonstrated switch
+            state (:func:`switch_distances`); ``None`` without a match.
+    """
+
+    expected: list[str]
+    replayed: list[str]
+    match: bool
+    distances: list[float] | None
+
+
+class DemoReplay(TypedDict):
+    """One replayed demonstration (:func:`replay_demonstrations`).
+
+    Attributes:
+        demo: its name (``demo_<m>`` if unnamed).
+        variables: control variable -> its replay.
+        match: every variable matched.
+    """
+
+    demo: str
+    variables: dict[str, VariableReplay]
+    match: bool
+
+
+class ReplaySummary(TypedDict):
+    """The replay of demonstrations through a sequencer (:func:`replay_demonstrations`).
+
+    Attributes:
+        per_demo: one entry per demonstration, in order.
+        sequence_match: control variable -> the fraction of demonstrations it matched on.
+        all_match: the fraction of demonstrations every variable matched on.
+        distance_mean: the mean switch distance over the matched variables (``None``: none).
+        distance_std: their standard deviation (ddof=0; ``None``: none).
+        n_switches: the switch distances measured.
+    """
+
+    per_demo: list[DemoReplay]
+    sequence_match: dict[str, float]
+    all_match: float
+    distance_mean: float | None
+    distance_std: float | None
+    n_switches: int
+
+
+class OfflineEvaluation(TypedDict):
+    """Everything offline about a sequencer on demonstrations (:func:`evaluate_offline`).
+
+    Attributes:
+        progress: the progress errors.
+        curves: the Fig. 6 curves.
+        replay: the replay of the recorded feature streams.
+        pairs: ``(expected (n,), predicted (n,))`` progress per activation.
+    """
+
+    progress: ProgressErrors
+    curves: ProgressCurves
+    replay: ReplaySummary
+    pairs: list[tuple[np.ndarray, np.ndarray]]
 
 
 def activation_progress(
@@ -99,7 +212,7 @@ def _check_features(seq: ConcurrentSequencer, demo: Demonstration) -> None:
         )
 
 
-def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) -> dict[str, Any]:
+def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) -> ProgressErrors:
     """Mean absolute progress error: overall, at the ends of the activations and per node.
 
     Args:
@@ -109,7 +222,7 @@ def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) ->
 
     Returns:
         ``mae``, ``mae_first``, ``mae_last``, ``n_activations`` and ``per_node``
-        (``"variable/mp"`` -> MAE).
+        (``"variable/mp"`` -> MAE), a :class:`ProgressErrors`.
 
     Raises:
         DataError: no activations.
@@ -126,18 +239,18 @@ def progress_errors(records: Sequence[ActivationProgress], edge: float = 0.1) ->
         last.append(e[u >= 1.0 - edge])
         per_node.setdefault(f"{r.variable}/{r.mp}", []).append(e)
     cat = np.concatenate
-    return {
-        "mae": float(cat(errs).mean()),
-        "mae_first": float(cat(first).mean()),
-        "mae_last": float(cat(last).mean()),
-        "n_activations": len(records),
-        "per_node": {k: float(cat(v).mean()) for k, v in sorted(per_node.items())},
-    }
+    return ProgressErrors(
+        mae=float(cat(errs).mean()),
+        mae_first=float(cat(first).mean()),
+        mae_last=float(cat(last).mean()),
+        n_activations=len(records),
+        per_node={k: float(cat(v).mean()) for k, v in sorted(per_node.items())},
+    )
 
 
 def progress_curves(
     activations: Sequence[tuple[np.ndarray, np.ndarray]], n_bins: int = 50
-) -> dict[str, Any]:
+) -> ProgressCurves:
     """Average predicted progress over MP activations (the statistics of Fig. 6).
 
     ``activations``: (expected (n,), predicted (n,)) per activation, n >= 2 samples in time
@@ -147,8 +260,8 @@ def progress_curves(
     Returns arrays of shape (n_bins,): ``time``, ``predicted_mean``, ``predicted_std``,
     ``expected_mean``, ``expected_std`` (over activations, per time point); ``progress_bins``
     (bin centres), ``binned_mean``, ``binned_std`` (predicted progress per expected-progress
-    bin, NaN where empty), ``binned_count``; and ``n_activations``. Standard deviations are
-    population (ddof=0) values.
+    bin, NaN where empty), ``binned_count``; and ``n_activations`` (a :class:`ProgressCurves`).
+    Standard deviations are population (ddof=0) values.
     """
     if int(n_bins) < 2:
         raise ConfigError(f"n_bins must be >= 2, got {n_bins}")
@@ -184,18 +297,18 @@ def progress_curves(
     with np.errstate(invalid="ignore", divide="ignore"):
         binned_mean = np.where(count > 0, total / count, np.nan)
         binned_var = np.where(count > 0, total_sq / count - binned_mean**2, np.nan)
-    return {
-        "time": time,
-        "predicted_mean": np.mean(resampled_predicted, axis=0),
-        "predicted_std": np.std(resampled_predicted, axis=0),
-        "expected_mean": np.mean(resampled_expected, axis=0),
-        "expected_std": np.std(resampled_expected, axis=0),
-        "progress_bins": 0.5 * (edges[:-1] + edges[1:]),
-        "binned_mean": binned_mean,
-        "binned_std": np.sqrt(np.maximum(binned_var, 0.0)),
-        "binned_count": count,
-        "n_activations": len(activations),
-    }
+    return ProgressCurves(
+        time=time,
+        predicted_mean=np.mean(resampled_predicted, axis=0),
+        predicted_std=np.std(resampled_predicted, axis=0),
+        expected_mean=np.mean(resampled_expected, axis=0),
+        expected_std=np.std(resampled_expected, axis=0),
+        progress_bins=0.5 * (edges[:-1] + edges[1:]),
+        binned_mean=binned_mean,
+        binned_std=np.sqrt(np.maximum(binned_var, 0.0)),
+        binned_count=count,
+        n_activations=len(activations),
+    )
 
 
 def switch_distances(
@@ -237,52 +350,51 @@ def continuous_features(demos: Sequence[Demonstration]) -> np.ndarray:
 
 def replay_demonstrations(
     seq: ConcurrentSequencer, demos: Sequence[Demonstration]
-) -> dict[str, Any]:
+) -> ReplaySummary:
     """Replay each demo's feature stream through ``seq``; sequence match and switch distances.
 
     Returns ``{"per_demo": [...], "sequence_match": {variable: fraction}, "all_match": fraction,
-    "distance_mean": float | None, "distance_std": float | None}``.
+    "distance_mean": float | None, "distance_std": float | None, "n_switches": int}`` (a
+    :class:`ReplaySummary`).
     """
-    per_demo = []
+    per_demo: list[DemoReplay] = []
     distances: list[float] = []
     match = {v: 0 for v in sorted(seq.graphs)}
     all_match = 0
     for m, demo in enumerate(demos):
         _check_features(seq, demo)
         seqs, events = seq.replay(demo.time, demo.features)
-        row: dict[str, Any] = {"demo": demo.name or f"demo_{m}", "variables": {}}
+        variables: dict[str, VariableReplay] = {}
         ok_all = True
         for v in sorted(seq.graphs):
             expected = [s.mp for s in demo.segments(v)]
             ok = seqs[v] == expected
             d = switch_distances(events, demo, v) if ok else None
-            row["variables"][v] = {
-                "expected": expected,
-                "replayed": seqs[v],
-                "match": ok,
-                "distances": d,
-            }
+            variables[v] = VariableReplay(
+                expected=expected, replayed=seqs[v], match=ok, distances=d
+            )
             match[v] += ok
             ok_all &= ok
             if d:
                 distances.extend(d)
         all_match += ok_all
-        row["match"] = ok_all
-        per_demo.append(row)
+        per_demo.append(
+            DemoReplay(demo=demo.name or f"demo_{m}", variables=variables, match=ok_all)
+        )
     n = max(len(demos), 1)
-    return {
-        "per_demo": per_demo,
-        "sequence_match": {v: c / n for v, c in match.items()},
-        "all_match": all_match / n,
-        "distance_mean": float(np.mean(distances)) if distances else None,
-        "distance_std": float(np.std(distances)) if distances else None,
-        "n_switches": len(distances),
-    }
+    return ReplaySummary(
+        per_demo=per_demo,
+        sequence_match={v: c / n for v, c in match.items()},
+        all_match=all_match / n,
+        distance_mean=float(np.mean(distances)) if distances else None,
+        distance_std=float(np.std(distances)) if distances else None,
+        n_switches=len(distances),
+    )
 
 
 def evaluate_offline(
     seq: ConcurrentSequencer, demos: Sequence[Demonstration], n_bins: int = 50
-) -> dict[str, Any]:
+) -> OfflineEvaluation:
     """Everything offline about ``seq`` on ``demos``.
 
     Progress MAE (overall, first/last 10 %, per node; :func:`progress_errors`), Fig. 6 curves
@@ -290,11 +402,11 @@ def evaluate_offline(
     activation, and a replay of the recorded feature streams (:func:`replay_demonstrations`).
 
     Returns:
-        ``{"progress", "curves", "replay", "pairs"}``.
+        ``{"progress", "curves", "replay", "pairs"}`` (an :class:`OfflineEvaluation`).
     """
     records = activation_progress(seq, demos)
     errors = progress_errors(records)
     curves = progress_curves([(r.expected, r.predicted) for r in records], n_bins=n_bins)
     replay = replay_demonstrations(seq, demos)
     pairs = [(r.expected, r.predicted) for r in records]
-    return {"progress": errors, "curves": curves, "replay": replay, "pairs": pairs}
+    return OfflineEvaluation(progress=errors, curves=curves, replay=replay, pairs=pairs)

@@ -7,9 +7,10 @@ and the baselines ``sklearn_klr``, ``regression_clip``, ``time_phase``, ``dtw``)
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping
 
 from cpmp.config.predictors import predictor_config
+from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
     START_PREFIX,
@@ -37,6 +38,7 @@ from cpmp.predictors.klr import (
     SparseKLRPredictor,
 )
 from cpmp.predictors.mlp import MLPConfig, MLPPredictor
+from cpmp.records import JsonValue
 
 PREDICTORS: dict[str, type[ProgressPredictor]] = {
     cls.kind: cls
@@ -60,13 +62,13 @@ def _predictor_class(kind: str) -> type[ProgressPredictor]:
 
 
 def make_predictor(
-    kind: str, node_keys: list[NodeKey], n_features: int, **options: Any
+    kind: str, node_keys: list[NodeKey], n_features: int, **options: OptionValue
 ) -> ProgressPredictor:
     """An untrained predictor bank of type ``kind`` for ``node_keys``."""
     return _predictor_class(kind)(node_keys, n_features, predictor_config(kind, **options))
 
 
-def predictor_from_spec(spec: dict[str, Any]) -> ProgressPredictor:
+def predictor_from_spec(spec: Mapping[str, JsonValue]) -> ProgressPredictor:
     """Rebuild a predictor (untrained weights, right shapes) from :meth:`ProgressPredictor.spec`."""
     kind = spec["kind"]
     config = predictor_config(kind, **spec["config"])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -23,6 +23,7 @@ from cpmp.data import START_PREFIX  # noqa: F401 (re-exported: the start heads' 
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.newton import NewtonInfo
 from cpmp.progress import denoise_trajectory
+from cpmp.records import JsonValue
 
 NodeKey = tuple[str, str]
 """(control variable, MP name)."""
@@ -278,7 +279,7 @@ class ProgressPredictor(nn.Module):
     def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
         """Post-training step (e.g. pruning, a convex re-fit by ``solver``); default none."""
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """Per-model facts worth reporting (e.g. support-point counts)."""
         return {"kind": self.kind, "n_nodes": self.n_nodes, "n_parameters": self.n_parameters()}
 
@@ -286,11 +287,11 @@ class ProgressPredictor(nn.Module):
         """The number of parameter entries (trainable or not)."""
         return sum(p.numel() for p in self.parameters())
 
-    def shape_spec(self) -> dict[str, Any]:
+    def shape_spec(self) -> dict[str, int]:
         """Sizes needed to re-create the module before ``load_state_dict``."""
         return {}
 
-    def spec(self) -> dict[str, Any]:
+    def spec(self) -> dict[str, JsonValue]:
         """Everything needed to rebuild this module (without its weights)."""
         return {
             "kind": self.kind,

@@ -19,7 +19,7 @@ checkpoint holds tensors only.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -34,6 +34,7 @@ from cpmp.errors import require
 from cpmp.predictors.base import NodeData
 from cpmp.predictors.klr import KLRPredictor
 from cpmp.predictors.newton import NewtonInfo, penalised_loss
+from cpmp.records import JsonValue
 
 
 class SklearnKLRPredictor(KLRPredictor):
@@ -101,7 +102,7 @@ class SklearnKLRPredictor(KLRPredictor):
         converged = iterations < self.config.sklearn_max_iter
         return NewtonInfo(iterations, float(grad.abs().max()), float("nan"), loss, converged)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """The kernel bank's facts and scikit-learn's solver."""
         out = super().summary()
         out["sklearn_solver"] = self.config.sklearn_solver

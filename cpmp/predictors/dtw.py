@@ -34,7 +34,7 @@ space (``feature_scaling``). A tick costs one cost matrix of ``ceil(window / str
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -51,6 +51,7 @@ from cpmp.predictors.base import (
 )
 from cpmp.predictors.newton import NewtonInfo
 from cpmp.progress import expected_progress
+from cpmp.records import JsonValue
 
 SEPARATOR = 2
 """Columns of infinite cost between two activations in the joint reference (the asymmetric
@@ -156,7 +157,7 @@ class DTWPredictor(ProgressPredictor):
         self._layout_cache: tuple[tuple[int, int], tuple[np.ndarray, ...]] | None = None
         self._steps_cache: tuple[tuple[int, ...], np.ndarray] | None = None
 
-    def shape_spec(self) -> dict[str, Any]:
+    def shape_spec(self) -> dict[str, int]:
         """The number of kept reference samples ``R``."""
         return {"n_reference": int(self.reference.shape[0])}
 
@@ -246,7 +247,7 @@ class DTWPredictor(ProgressPredictor):
         self._loss_cache = (data, total)
         return total
 
-    def _tensor(self, values: Any) -> torch.Tensor:
+    def _tensor(self, values: np.ndarray | float) -> torch.Tensor:
         """``values`` (a NumPy array or a number) as a tensor of the bank's dtype and device."""
         return torch.as_tensor(values, dtype=self.dtype_, device=self.reference.device)
 
@@ -427,7 +428,7 @@ class DTWPredictor(ProgressPredictor):
         _, first = np.unique(segment[hit], return_index=True)
         return interpolate_progress(hit[first], dist[-1], steps, progress)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """The base facts, the reference size and the window."""
         out = super().summary()
         out["n_reference"] = int(self.reference.shape[0])

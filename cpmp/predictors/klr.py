@@ -16,7 +16,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar, TypeAlias, TypeVar
 
 import numpy as np
 import torch
@@ -29,6 +29,7 @@ from cpmp.config.predictors import (
     POOL_SIZE,
     SUPPORT_CAP,
     KLRConfig,
+    PredictorConfig,
     SparseKLRConfig,
 )
 from cpmp.config.trainer import SolverOptions
@@ -50,8 +51,18 @@ from cpmp.predictors.selection import (
     matching_pursuit,
 )
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
+from cpmp.records import JsonValue
 
 log = logging.getLogger(__name__)
+
+_Number = TypeVar("_Number", int, float)
+_CacheKey: TypeAlias = tuple[tuple[int, int], ...]
+"""The identity and version counter of every tensor a cached value derives from."""
+_PackedSupports: TypeAlias = tuple[
+    torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[int]
+]
+"""Every node's real supports (:meth:`KLRPredictor._packed`, before taking the first heads):
+kernel weights ``a``, node index, ``a_n s_n``, ``a_n · s_n²``, weights, each node's end."""
 
 START_REGION = 0.25
 """Progress label up to which a start head's training samples are its *start region*, where
@@ -109,7 +120,9 @@ class KLRPredictor(ProgressPredictor):
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
-        self._packed_cache: tuple[tuple, tuple[Any, ...], dict[int, tuple]] | None = None
+        self._packed_cache: (
+            tuple[_CacheKey, _PackedSupports, dict[int, tuple[torch.Tensor, ...]]] | None
+        ) = None
         self.chunk_size = _option(config, "chunk_size", CHUNK_SIZE, int)
         """Kernel entries (samples x supports) per block (:data:`CHUNK_SIZE`)."""
         self.support_cap = _option(config, "support_cap", SUPPORT_CAP, int)
@@ -129,7 +142,7 @@ class KLRPredictor(ProgressPredictor):
         """Samples per kernel block against ``columns`` supports: ``chunk_size // columns``."""
         return max(1, self.chunk_size // max(int(columns), 1))
 
-    def shape_spec(self) -> dict[str, Any]:
+    def shape_spec(self) -> dict[str, int]:
         """The padded support count ``S``."""
         return {"n_support": int(self.support.shape[1])}
 
@@ -227,7 +240,7 @@ class KLRPredictor(ProgressPredictor):
         self._packed_cache = None
 
     @staticmethod
-    def _first_heads(full: tuple[Any, ...], heads: int) -> tuple[torch.Tensor, ...]:
+    def _first_heads(full: _PackedSupports, heads: int) -> tuple[torch.Tensor, ...]:
         a, node, weighted, s_term, w, ends = full
         n = ends[heads - 1]
         return a[:heads].T.contiguous(), node[:n], weighted[:n], s_term[:n], w[:n]
@@ -618,7 +631,7 @@ class KLRPredictor(ProgressPredictor):
             for (v, mp), n in zip(self.node_keys, self.support_mask.sum(1).tolist(), strict=True)
         }
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """The base facts and the support counts (per node and in total)."""
         out = super().summary()
         counts = self.support_counts()
@@ -1050,7 +1063,7 @@ class SparseKLRPredictor(KLRPredictor):
         self.start_distillation = {"max_logit_error": max(errors)}
         log.info("%s", self.describe_path().splitlines()[-1])
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """The kernel bank's facts and the sparsity path.
 
         ``sparsity_path`` (one dict per :class:`SparsityLevel`),
@@ -1072,13 +1085,14 @@ class SparseKLRPredictor(KLRPredictor):
             out["refine"] = dict(self.refine_summary)
         if self.start_distillation:
             out["start_distillation"] = dict(self.start_distillation)
-        counts = out["support_counts"]
-        out["n_support_start"] = _start_supports(counts)
-        out["n_support_graph"] = out["n_support_total"] - out["n_support_start"]
+        counts = self.support_counts()  # as the base summary's support_counts
+        n_start = _start_supports(counts)
+        out["n_support_start"] = n_start
+        out["n_support_graph"] = sum(counts.values()) - n_start
         return out
 
 
-def _option(config: Any, name: str, default: Any, kind: type) -> Any:
+def _option(config: PredictorConfig, name: str, default: _Number, kind: type[_Number]) -> _Number:
     """Option ``name`` of ``config`` as ``kind`` (``default`` when the options lack it).
 
     Raises:

@@ -22,10 +22,11 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Literal
 
 import lightning as L
 import torch
+from lightning.pytorch.utilities.types import OptimizerLRScheduler
 from torch.nn import functional as F
 
 from cpmp.config.trainer import TrainerConfig
@@ -236,7 +237,7 @@ class ProgressModule(L.LightningModule):
             ", ".join(parts),
         )  # fmt: skip
 
-    def configure_optimizers(self) -> Any:
+    def configure_optimizers(self) -> OptimizerLRScheduler:
         """The optimiser of the solver, and for Adam with early stopping its rate decay.
 
         Returns:

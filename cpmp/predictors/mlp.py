@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from cpmp.config.predictors import MLPConfig
 from cpmp.predictors.base import NodeData, NodeKey, ProgressPredictor, soft_bce
+from cpmp.records import JsonValue
 
 _ACTIVATIONS = {"tanh": torch.tanh, "relu": torch.relu, "silu": nn.functional.silu}
 """The functions of :data:`cpmp.config.ACTIVATIONS` (tested to match)."""
@@ -88,7 +89,7 @@ class MLPPredictor(ProgressPredictor):
             total = total + 0.5 * self.config.weight_decay * penalty
         return total
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, JsonValue]:
         """The base facts and the hidden layer sizes."""
         out = super().summary()
         out["hidden"] = list(self.config.hidden)

@@ -17,7 +17,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Iterator
-from typing import Any, Literal
+from typing import Literal
 
 import lightning as L
 import torch
@@ -80,7 +80,7 @@ def solver_for(predictor: ProgressPredictor, cfg: TrainerConfig) -> Solver:
     return "lbfgs" if cfg.solver == "lbfgs" else "newton"
 
 
-def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
+def _predictor_option(predictor: ProgressPredictor, name: str) -> float:
     """Option ``name`` of the predictor's config, which its solver needs.
 
     Args:
@@ -88,7 +88,7 @@ def _predictor_option(predictor: ProgressPredictor, name: str) -> Any:
         name: ``epochs`` or ``lr`` (Adam), ``max_iter`` (LBFGS).
 
     Returns:
-        The option's value.
+        The option's value (a number).
 
     Raises:
         ConfigError: the predictor's options lack it.

@@ -39,11 +39,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from cpmp.data import Demonstration
+from cpmp.records import JsonValue
 from cpmp.sequencer.switching import Coupling
 
 STAY = "(stay)"
@@ -86,12 +87,12 @@ class LinearChoice(NamedTuple):
         e = np.exp(z)
         return e / e.sum(axis=-1, keepdims=True)
 
-    def to_dict(self) -> dict[str, list[Any]]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """JSON/checkpoint-friendly form."""
         return {k: np.asarray(v).tolist() for k, v in self._asdict().items()}
 
     @classmethod
-    def from_dict(cls, row: Mapping[str, Any]) -> LinearChoice:
+    def from_dict(cls, row: Mapping[str, JsonValue]) -> LinearChoice:
         """Inverse of :meth:`to_dict`."""
         return cls(*(np.asarray(row[k], dtype=np.float64) for k in cls._fields))
 
@@ -229,7 +230,7 @@ class StartChoice:
             f"{_weighs_most(self.model, feature_names, top)})"
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """JSON/checkpoint-friendly form."""
         return {
             "combinations": [dict(c) for c in self.combinations],
@@ -238,7 +239,7 @@ class StartChoice:
         }
 
     @classmethod
-    def from_dict(cls, row: Mapping[str, Any]) -> StartChoice:
+    def from_dict(cls, row: Mapping[str, JsonValue]) -> StartChoice:
         """Inverse of :meth:`to_dict`."""
         model = row.get("model")
         return cls(
@@ -371,7 +372,7 @@ class BranchChoices:
             choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
         return cls(choices, start, dict(entry_scale or {}))
 
-    def to_dict(self) -> list[dict[str, Any]]:
+    def to_dict(self) -> list[dict[str, JsonValue]]:
         """JSON/checkpoint-friendly form."""
         return [
             {
@@ -387,9 +388,9 @@ class BranchChoices:
     @classmethod
     def from_dict(
         cls,
-        rows: Sequence[Mapping[str, Any]],
-        start: Mapping[str, Any] | None = None,
-        entry_scale: Sequence[Sequence[Any]] | None = None,
+        rows: Sequence[Mapping[str, JsonValue]],
+        start: Mapping[str, JsonValue] | None = None,
+        entry_scale: Sequence[Sequence[str | float]] | None = None,
     ) -> BranchChoices:
         """Inverse of :meth:`to_dict`, :meth:`StartChoice.to_dict` and :meth:`entry_rows`."""
         choices = {}
@@ -405,7 +406,7 @@ class BranchChoices:
         scales = {(str(v), str(a), str(b)): float(g) for v, a, b, g in entry_scale or []}
         return cls(choices, None if start is None else StartChoice.from_dict(start), scales)
 
-    def entry_rows(self) -> list[list[Any]]:
+    def entry_rows(self) -> list[list[str | float]]:
         """:attr:`entry_scale` as ``[variable, source, target, factor]`` rows (sorted)."""
         return [[v, a, b, g] for (v, a, b), g in sorted(self.entry_scale.items())]
 

@@ -17,12 +17,13 @@ import dataclasses
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from cpmp.data import Demonstration
 from cpmp.graph import build_graphs
+from cpmp.records import JsonValue
 from cpmp.sequencer.fit_data import GLITCH_SAMPLES
 
 
@@ -59,7 +60,7 @@ class LabelGlitch:
             f"{self.stop - 1}) relabelled {self.around}; kept, it would have added {added}"
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """JSON-ready form (``fit_summary.label_glitches``)."""
         return {**dataclasses.asdict(self), "would_add": list(self.would_add)}
 

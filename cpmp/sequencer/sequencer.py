@@ -27,16 +27,23 @@ import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from cpmp.config import FitConfig, SequencerConfig
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.graph import SequenceGraph
-from cpmp.io import CheckpointSpec, load_checkpoint, save_checkpoint, to_builtin
+from cpmp.io import (
+    CheckpointPayload,
+    CheckpointSpec,
+    load_checkpoint,
+    save_checkpoint,
+    to_builtin,
+)
 from cpmp.predictors import ProgressPredictor, predictor_from_spec
 from cpmp.records import (
     FitReport,
@@ -169,7 +176,7 @@ class ConcurrentSequencer:
         *,
         validation: Sequence[Demonstration] | None = None,
         logger: Logger | str | None = None,
-        **options: Any,
+        **options: OptionValue,
     ) -> ConcurrentSequencer:
         """Build the sequence graphs and fit every node's progress predictor, by keyword.
 
@@ -497,7 +504,7 @@ class ConcurrentSequencer:
         return load_checkpoint(path, CHECKPOINT, cls._from_payload)
 
     @classmethod
-    def _from_payload(cls, payload: dict[str, Any], version: int) -> ConcurrentSequencer:
+    def _from_payload(cls, payload: CheckpointPayload, version: int) -> ConcurrentSequencer:
         """Rebuild from a checkpoint payload, checking it against its own spec."""
         known = {"format", "version", "sequencer", "graphs", "predictor", "feature_names"}
         missing = sorted(known - set(payload))
@@ -556,7 +563,7 @@ class ConcurrentSequencer:
             ),
         )
 
-    def with_config(self, **options: Any) -> ConcurrentSequencer:
+    def with_config(self, **options: OptionValue) -> ConcurrentSequencer:
         """A sequencer sharing graphs and predictor but with other transition-rule options."""
         config = dataclasses.replace(self.config, **options)
         return ConcurrentSequencer(

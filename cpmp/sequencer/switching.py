@@ -64,13 +64,14 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from cpmp.config import COUPLINGS, SWITCH_RULES
 from cpmp.data import Demonstration
 from cpmp.progress import LabelKind, demo_labels
+from cpmp.records import JsonValue
 from cpmp.sequencer.timing import EPS_T
 
 
@@ -459,7 +460,7 @@ class Coupling:
             lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
         return lines
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """JSON/checkpoint-friendly form."""
         return {
             "switches": [
@@ -492,7 +493,9 @@ class Coupling:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> Coupling:
+    def from_dict(
+        cls, data: Mapping[str, JsonValue] | Sequence[Mapping[str, JsonValue]]
+    ) -> Coupling:
         """Inverse of :meth:`to_dict` (also reads the list form of checkpoint version 2)."""
         rows = data.get("switches", []) if isinstance(data, Mapping) else data
         contexts, progress, joint = {}, {}, {}

@@ -10,11 +10,11 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from cpmp.config.task import Pacing, TaskConfig, as_task_config
+from cpmp.config.validation import OptionValue
 from cpmp.data.datafile import save_demonstrations
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
@@ -49,7 +49,7 @@ def make_pacer(pacing: Pacing, cfg: TaskConfig, seed: tuple[int, ...]) -> Pacer 
 
 
 def record_demonstration(
-    box: Box, cfg: TaskConfig | Mapping[str, Any] | None = None, name: str | None = None
+    box: Box, cfg: TaskConfig | Mapping[str, OptionValue] | None = None, name: str | None = None
 ) -> Demonstration:
     """Run the scripted demonstrator on ``box`` and record it at the control rate.
 
@@ -63,7 +63,7 @@ def record_demonstration(
 
 def record_demonstrations(
     boxes: Sequence[Box],
-    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    cfg: TaskConfig | Mapping[str, OptionValue] | None = None,
     names: Sequence[str | None] | None = None,
     on_result: Callable[[int, Demonstration], None] | None = None,
     pacing_seed: int | None = None,

@@ -26,11 +26,11 @@ rule, not the labels; ``robot_pause`` turns them on for that test.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
 from cpmp.config.task import TaskConfig, as_task_config
+from cpmp.config.validation import OptionValue
 from cpmp.records import Policy
 from cpmp.sim.collect import record_demonstrations, sample_boxes
 from cpmp.sim.runner import run_episodes
@@ -39,7 +39,7 @@ from cpmp.worlds.pacing import EpisodeScore, PacedWorld
 
 
 def paced_sim(
-    seed: int, n_demos: int, cfg: TaskConfig | Mapping[str, Any] | None = None
+    seed: int, n_demos: int, cfg: TaskConfig | Mapping[str, OptionValue] | None = None
 ) -> PacedWorld:
     """The simulator's world of ``seed``: scripted demonstrations and the closed loop.
 

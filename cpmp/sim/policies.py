@@ -8,13 +8,15 @@ single policies). :class:`ReplayPolicy` replays a recorded demonstration's label
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import BatchedPolicy, Policy
+
+T = TypeVar("T")
 
 
 class PolicyList:
@@ -74,7 +76,7 @@ class ReplayPolicy:
         return self._at(t)
 
 
-def per_episode(values: Sequence[Any] | None, n: int, name: str) -> list[Any]:
+def per_episode(values: Sequence[T] | None, n: int, name: str) -> list[T | None]:
     """``values`` as a list of ``n`` (``None``: ``n`` times ``None``)."""
     if values is None:
         return [None] * n

@@ -10,11 +10,12 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal, get_args
+from typing import Literal, get_args
 
 import numpy as np
 
 from cpmp.config.task import TaskConfig, as_task_config
+from cpmp.config.validation import OptionValue
 from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import UnknownMPError
 from cpmp.records import (
@@ -86,7 +87,7 @@ def _normalise(active: Mapping[str, str], variables: list[str]) -> dict[str, str
 def run_episode(
     box: Box,
     policy: Policy,
-    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    cfg: TaskConfig | Mapping[str, OptionValue] | None = None,
     max_time: float | None = None,
     expected: Demonstration | None = None,
     on_tick: Callable[[TickInfo], None] | None = None,
@@ -112,7 +113,7 @@ def run_episode(
 def run_episodes(
     boxes: Sequence[Box],
     policy: Policy | BatchedPolicy | Sequence[Policy],
-    cfg: TaskConfig | Mapping[str, Any] | None = None,
+    cfg: TaskConfig | Mapping[str, OptionValue] | None = None,
     expected: Sequence[Demonstration | None] | None = None,
     max_time: float | None = None,
     on_tick: Sequence[Callable[[TickInfo], None] | None] | None = None,

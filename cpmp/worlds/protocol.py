@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, ClassVar, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from typing_extensions import override
@@ -31,11 +31,34 @@ from typing_extensions import override
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import PendingSwitch, Policy, TickInfo, episode_cause
-from cpmp.worlds.common import SteppedTask, note_switches, positive_count, seeded_episodes
+from cpmp.worlds.common import (
+    Episode,
+    State,
+    SteppedTask,
+    note_switches,
+    positive_count,
+    seeded_episodes,
+)
 from cpmp.worlds.outcomes import Outcome, count_outcomes, episode_outcome
 
 _EPS_T = 1e-9
 """Slack [s] when comparing times (ticks are rounded sums of periods)."""
+
+Context = TypeVar("Context")
+"""A world's context type (its own record: ``RelayEpisode``, ``PegContext``, ...)."""
+
+
+class StrategicEpisode(Protocol):
+    """A stepped task's episode, the context of a :class:`SteppedWorld`: it names its strategy."""
+
+    @property
+    def strategy(self) -> str:
+        """The episode's strategy (one of the world's ``strategies``)."""
+        ...
+
+
+Strategic = TypeVar("Strategic", bound=StrategicEpisode)
+"""The episode type of a :class:`SteppedWorld`."""
 
 
 @runtime_checkable
@@ -60,8 +83,8 @@ class WorldRun(Protocol):
 
 
 @runtime_checkable
-class World(Protocol):
-    """A synthetic concurrent task (see the module doc).
+class World(Protocol[Context]):
+    """A synthetic concurrent task (see the module doc), with contexts of type ``Context``.
 
     Attributes:
         name: its registry name.
@@ -83,23 +106,23 @@ class World(Protocol):
         """``n`` training demonstrations, reproducible from ``seed``, named ``demo_<i>``."""
         ...
 
-    def contexts(self, n: int, seed: int) -> list[Any]:
+    def contexts(self, n: int, seed: int) -> list[Context]:
         """``n`` closed-loop contexts drawn from ``seed`` (use another seed than the demos')."""
         ...
 
-    def demonstrate(self, context: Any, name: str | None = None) -> Demonstration:
+    def demonstrate(self, context: Context, name: str | None = None) -> Demonstration:
         """The scripted demonstrator's labelled demonstration of ``context``."""
         ...
 
-    def start(self, context: Any) -> WorldRun:
+    def start(self, context: Context) -> WorldRun:
         """A run of ``context`` at ``t = 0``."""
         ...
 
-    def strategy(self, context: Any) -> str:
+    def strategy(self, context: Context) -> str:
         """The strategy of ``context`` (one of :attr:`strategies`)."""
         ...
 
-    def initial_mps(self, context: Any) -> dict[str, str]:
+    def initial_mps(self, context: Context) -> dict[str, str]:
         """The demonstrator's initial MP per variable for ``context``."""
         ...
 
@@ -109,7 +132,7 @@ class World(Protocol):
 
     def score(
         self,
-        context: Any,
+        context: Context,
         initial: Mapping[str, str],
         sequences: Mapping[str, Sequence[str]],
         completed: bool,
@@ -166,8 +189,11 @@ class Evaluation:
         return self.counts["complete"]
 
 
-class WorldBase:
+class WorldBase(Generic[Context]):
     """What the registered worlds share: the score, and a stepped task's contexts and runs.
+
+    A subclass is a :class:`World` of contexts ``Context``: it gives ``variables``,
+    :meth:`~World.demonstrate` and :meth:`~World.initial_mps`, which these methods call.
 
     Attributes:
         strict: ``complete`` also needs the demonstrator's exact MP sequences
@@ -175,16 +201,27 @@ class WorldBase:
     """
 
     strict: ClassVar[bool] = False
+    variables: tuple[str, ...]
 
-    def expected_sequences(self: Any, context: Any) -> dict[str, list[str]]:
+    if TYPE_CHECKING:  # given by the subclass (a stub here would shadow a mixin's)
+
+        def demonstrate(self, context: Context, name: str | None = None) -> Demonstration:
+            """The demonstrator's demonstration of ``context`` (:meth:`World.demonstrate`)."""
+            ...
+
+        def initial_mps(self, context: Context) -> dict[str, str]:
+            """The demonstrator's initial MPs for ``context`` (:meth:`World.initial_mps`)."""
+            ...
+
+    def expected_sequences(self, context: Context) -> dict[str, list[str]]:
         """The demonstrator's MPs per variable in ``context`` (of :meth:`World.demonstrate`)."""
         from cpmp.data.demonstration import mp_sequences  # the demonstration only when scoring
 
         return mp_sequences(self.demonstrate(context))
 
     def score(
-        self: Any,
-        context: Any,
+        self,
+        context: Context,
         initial: Mapping[str, str],
         sequences: Mapping[str, Sequence[str]],
         completed: bool,
@@ -197,7 +234,7 @@ class WorldBase:
         return episode_outcome(True, all(list(sequences[v]) == want[v] for v in self.variables))
 
 
-class SteppedRun:
+class SteppedRun(Generic[State, Episode]):
     """One episode of a stepped task in progress (a :class:`WorldRun`).
 
     The task is a :class:`~cpmp.worlds.common.SteppedTask` whose ``features(state, episode)``
@@ -205,7 +242,7 @@ class SteppedRun:
     repetition's); done and complete at its goal state.
     """
 
-    def __init__(self, task: SteppedTask, episode: Any) -> None:
+    def __init__(self, task: SteppedTask[State, Episode], episode: Episode) -> None:
         self.task, self.episode = task, episode
         self.state = task.initial_state(episode)
 
@@ -228,8 +265,10 @@ class SteppedRun:
         return self.task.at_goal(self.state, self.episode)
 
 
-class SteppedWorld(WorldBase):
+class SteppedWorld(WorldBase[Strategic]):
     """A world around a stepped task (see :class:`SteppedRun`): contexts cycle ``strategies``.
+
+    Its contexts are the task's episodes (``Strategic``: each names its ``strategy``).
 
     A subclass names its ``strategies`` and gives :meth:`demonstrations`,
     :meth:`demonstrate` and :meth:`scripted_policy`.
@@ -237,32 +276,32 @@ class SteppedWorld(WorldBase):
 
     strategies: tuple[str, ...]
 
-    def __init__(self, task: SteppedTask) -> None:
+    def __init__(self, task: SteppedTask[object, Strategic]) -> None:
         self.task = task
         self.dt = task.dt
         self.max_time = task.max_time
 
-    def contexts(self, n: int, seed: int) -> list[Any]:
+    def contexts(self, n: int, seed: int) -> list[Strategic]:
         """``n`` episodes cycling the strategies (the first is ``strategies[0]``)."""
         return seeded_episodes(self.task.sample_episode, self.strategies, n, seed)  # type: ignore[attr-defined]
 
-    def start(self, context: Any) -> WorldRun:
+    def start(self, context: Strategic) -> WorldRun:
         """A :class:`SteppedRun` of ``context``."""
         return SteppedRun(self.task, context)
 
-    def strategy(self, context: Any) -> str:
+    def strategy(self, context: Strategic) -> str:
         """The episode's ``strategy``."""
         return str(context.strategy)
 
-    def initial_mps(self, context: Any) -> dict[str, str]:
+    def initial_mps(self, context: Strategic) -> dict[str, str]:
         """The task's initial MPs of the episode."""
         return self.task.initial_mps(context)
 
 
 def run_episodes(
-    world: World,
+    world: World[Context],
     policy: Policy,
-    contexts: Sequence[Any],
+    contexts: Sequence[Context],
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> list[EpisodeRun]:
     """Run ``policy`` closed-loop on every context, one tick every ``world.dt``.
@@ -318,9 +357,9 @@ def run_episodes(
 
 
 def run_episode(
-    world: World,
+    world: World[Context],
     policy: Policy,
-    context: Any,
+    context: Context,
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
     on_tick: Callable[[TickInfo], None] | None = None,
 ) -> EpisodeRun:
@@ -361,8 +400,8 @@ def run_episode(
 
 
 def score_episode(
-    world: World,
-    context: Any,
+    world: World[Context],
+    context: Context,
     initial: dict[str, str],
     sequences: dict[str, list[str]],
     time: float,
@@ -396,7 +435,7 @@ def score_episode(
     return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
 
 
-def expected_sequences(world: World, context: Any) -> dict[str, list[str]]:
+def expected_sequences(world: World[Context], context: Context) -> dict[str, list[str]]:
     """The demonstrator's MPs per variable in ``context`` (from its demonstration)."""
     known = getattr(world, "expected_sequences", None)
     if callable(known):

@@ -9,10 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TypeAlias
 
+from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
 from cpmp.worlds.protocol import World
+
+WorldOption: TypeAlias = "OptionValue | Mapping[str, OptionValue]"
+"""A world's option: a field of its task (a number, a range, ...), or a mapping of such fields
+(the paced relay's ``demo``, ``robot`` and ``relay``)."""
 
 
 @dataclass(frozen=True)
@@ -37,7 +42,7 @@ class WorldEntry:
 def _lazy(module: str, name: str) -> Callable[..., World]:
     """``module.name(**options)``, imported when first called (keeps this table cheap)."""
 
-    def make(**options: Any) -> World:
+    def make(**options: WorldOption) -> World:
         import importlib
 
         return getattr(importlib.import_module(module), name)(**options)
@@ -100,7 +105,7 @@ def entry(name: str) -> WorldEntry:
     return found
 
 
-def make_world(name: str, options: Mapping[str, Any] | None = None) -> World:
+def make_world(name: str, options: Mapping[str, WorldOption] | None = None) -> World:
     """The world ``name`` built with ``options`` (its task's fields).
 
     Raises:
@@ -109,7 +114,7 @@ def make_world(name: str, options: Mapping[str, Any] | None = None) -> World:
     return _make(name, entry(name), dict(options or {}))
 
 
-def _make(name: str, found: WorldEntry, options: dict[str, Any]) -> World:
+def _make(name: str, found: WorldEntry, options: dict[str, WorldOption]) -> World:
     """``found.make(**options)``, an unknown option a :class:`ConfigError` naming the world."""
     try:
         return found.make(**options)
@@ -120,7 +125,9 @@ def _make(name: str, found: WorldEntry, options: dict[str, Any]) -> World:
         ) from err
 
 
-def members(name: str, n_tasks: int, options: Mapping[str, Any] | None = None) -> list[World]:
+def members(
+    name: str, n_tasks: int, options: Mapping[str, WorldOption] | None = None
+) -> list[World]:
     """The worlds a benchmark runs for ``name``: itself, or a family's first ``n_tasks`` members.
 
     Raises:

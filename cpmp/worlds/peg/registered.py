@@ -73,7 +73,7 @@ class PegRun:
 
 
 @dataclass
-class PegWorld(PegTask, WorldBase):
+class PegWorld(PegTask, WorldBase[PegContext]):
     """The peg world (see :mod:`cpmp.worlds.peg.world`); its fields are the task's options."""
 
     strict: ClassVar[bool] = True

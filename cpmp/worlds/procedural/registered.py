@@ -34,7 +34,7 @@ DT = 0.01
 
 
 @dataclass
-class ProceduralWorld(WorldBase):
+class ProceduralWorld(WorldBase[ProceduralContext]):
     """Member ``task`` of the procedural family.
 
     Attributes:

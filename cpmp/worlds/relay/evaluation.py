@@ -9,11 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from cpmp.records import Policy
+from cpmp.records import JsonValue, Policy
 from cpmp.worlds.common import PolicyRun, positive_count, run_policies, run_policy, seeded_episodes
 from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 from cpmp.worlds.relay.world import STRATEGIES, VARIABLES, RelayEpisode, RelayTask, Strategy
@@ -76,7 +75,7 @@ def evaluate(
     n_episodes: int = 20,
     seed: int = 0,
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Closed-loop outcomes of a sequencer (or any policy) on random episodes.
 
     The episodes alternate the strategies and are reproducible from ``seed``. Without

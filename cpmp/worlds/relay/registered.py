@@ -9,11 +9,11 @@ speeds). Both score an episode by its start and its goal state.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 from typing_extensions import override
 
 from cpmp.config.task import Pacing
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
 from cpmp.records import Policy
@@ -34,7 +34,7 @@ class RelayWorld(SteppedWorld):
     feature_names = tuple(FEATURE_NAMES)
     strategies: tuple[str, ...] = STRATEGIES
 
-    def __init__(self, **options: Any) -> None:
+    def __init__(self, **options: OptionValue) -> None:
         super().__init__(RelayTask(**options))
 
     @override
@@ -52,7 +52,7 @@ class RelayWorld(SteppedWorld):
         return RelayFeaturePolicy(self.task)
 
 
-def pacing(value: Pacing | Mapping[str, Any] | None, default: Pacing, what: str) -> Pacing:
+def pacing(value: Pacing | Mapping[str, OptionValue] | None, default: Pacing, what: str) -> Pacing:
     """A :class:`Pacing` from itself or a mapping of its fields (``None``: ``default``).
 
     Raises:
@@ -88,9 +88,9 @@ class PacedRelayWorld(RelayWorld):
 
     def __init__(
         self,
-        demo: Pacing | Mapping[str, Any] | None = None,
-        robot: Pacing | Mapping[str, Any] | None = None,
-        relay: Mapping[str, Any] | None = None,
+        demo: Pacing | Mapping[str, OptionValue] | None = None,
+        robot: Pacing | Mapping[str, OptionValue] | None = None,
+        relay: Mapping[str, OptionValue] | None = None,
     ) -> None:
         super().__init__(**{"max_time": varied.MAX_TIME, **dict(relay or {})})
         self.demo_task = varied.PacedRelayTask(self.task, pacing(demo, varied.DEMO_PACING, "demo"))

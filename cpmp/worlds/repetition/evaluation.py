@@ -8,11 +8,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from cpmp.records import Policy
+from cpmp.records import JsonValue, Policy
 from cpmp.worlds.common import positive_count, run_policy, seeded_episodes
 from cpmp.worlds.outcomes import OUTCOMES, Outcome, count_outcomes, episode_outcome
 from cpmp.worlds.repetition.world import (
@@ -96,7 +95,7 @@ def evaluate(
     n_episodes: int = 30,
     seed: int = 0,
     observe: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Closed-loop outcomes of a sequencer (or any policy) on random episodes.
 
     Args:

@@ -6,10 +6,9 @@ sequences (spilt soup scooped again is another route, and ``incomplete``).
 
 from __future__ import annotations
 
-from typing import Any
-
 from typing_extensions import override
 
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.records import Policy
 from cpmp.worlds.protocol import SteppedWorld
@@ -23,7 +22,7 @@ from cpmp.worlds.repetition.world import (
 )
 
 
-class RepetitionWorld(SteppedWorld):
+class RepetitionWorld(SteppedWorld[RepetitionEpisode]):
     r"""The repetition world; ``RepetitionWorld(**options)`` takes :class:`RepetitionTask`'s fields.
 
     Contexts are :class:`RepetitionEpisode`\ s cycling ``once``, ``twice``, ``thrice``.
@@ -35,7 +34,7 @@ class RepetitionWorld(SteppedWorld):
     strategies: tuple[str, ...] = STRATEGIES
     strict = True
 
-    def __init__(self, **options: Any) -> None:
+    def __init__(self, **options: OptionValue) -> None:
         super().__init__(RepetitionTask(**options))
 
     @override

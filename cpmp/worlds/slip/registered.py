@@ -27,7 +27,7 @@ from cpmp.worlds.slip.world import (
 
 
 @dataclass
-class SlipWorld(SlipTask, WorldBase):
+class SlipWorld(SlipTask, WorldBase[SlipContext]):
     """The slip world: pick, maybe slip and retry, place in a drawer the other hand holds open.
 
     Its fields are :class:`~cpmp.worlds.slip.world.SlipTask`'s options (``SlipWorld(**options)``;

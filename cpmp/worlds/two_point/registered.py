@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 from typing_extensions import override
 
+from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.records import Policy
 from cpmp.worlds.protocol import WorldBase, substeps
@@ -50,7 +50,7 @@ class _TwoPointRun:
         return bool(back and np.all(np.abs(self.p) < 0.01))
 
 
-class TwoPointWorld(WorldBase):
+class TwoPointWorld(WorldBase[TwoPointEpisode]):
     """The two-point world; ``TwoPointWorld(**options)`` takes :class:`SyntheticTask`'s fields.
 
     Demonstrations alternate the strategies (:func:`make_demonstrations`); closed-loop contexts
@@ -63,7 +63,7 @@ class TwoPointWorld(WorldBase):
     feature_names = tuple(FEATURE_NAMES)
     strategies = ("sequential", "parallel")
 
-    def __init__(self, **options: Any) -> None:
+    def __init__(self, **options: OptionValue) -> None:
         self.task = SyntheticTask(**options)
         self.dt = self.task.dt
         self.max_time = self.task.max_time
