@@ -22,7 +22,7 @@ demonstrated switch that never came and why, :func:`~cpmp.records.episode_cause`
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, ClassVar, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -63,7 +63,14 @@ Strategic = TypeVar("Strategic", bound=StrategicEpisode)
 
 @runtime_checkable
 class WorldRun(Protocol):
-    """One episode of a world in progress: its state behind features, advance and checks."""
+    """One episode of a world in progress: its state behind features, advance and checks.
+
+    A run may also have ``failure() -> str``: at the end of an episode that is not complete,
+    what went wrong in the world, in words (a failure nothing undoes and when, or the goal
+    conditions not met); ``""`` when it has nothing to say. :func:`run_episode` puts it into
+    an incomplete episode's cause (:func:`run_failure`). It is optional, so that a world
+    written without it still runs.
+    """
 
     def features(self) -> np.ndarray:
         """The true features ``(d,)`` now, in the world's ``feature_names`` order."""
@@ -348,12 +355,16 @@ def run_episodes(
             note_switches(seqs[i], active[i])
             over[i] = runs[i].done(active[i])
             times[i] = t
-    return [
-        score_episode(
-            world, contexts[i], initial[i], seqs[i], times[i], runs[i].complete(active[i]), batch, i
+    scored = []
+    for i in range(n):
+        completed = runs[i].complete(active[i])
+        failure = "" if completed else run_failure(runs[i])
+        scored.append(
+            score_episode(
+                world, contexts[i], initial[i], seqs[i], times[i], completed, batch, i, failure
+            )
         )
-        for i in range(n)
-    ]
+    return scored
 
 
 def run_episode(
@@ -396,7 +407,15 @@ def run_episode(
             on_tick(TickInfo(t, active=dict(active), features=x))
         note_switches(seqs, active)
         over = run.done(active)
-    return score_episode(world, context, initial, seqs, t, run.complete(active), policy)
+    completed = run.complete(active)
+    failure = "" if completed else run_failure(run)
+    return score_episode(world, context, initial, seqs, t, completed, policy, failure=failure)
+
+
+def run_failure(run: WorldRun) -> str:
+    """What went wrong in ``run``, in words: its ``failure()``, ``""`` if it has none."""
+    failure = getattr(run, "failure", None)
+    return str(failure()) if callable(failure) else ""
 
 
 def score_episode(
@@ -408,6 +427,7 @@ def score_episode(
     completed: bool,
     policy: object = None,
     index: int | None = None,
+    failure: str = "",
 ) -> EpisodeRun:
     """Score an episode: its outcome, and an incomplete one's cause.
 
@@ -424,6 +444,8 @@ def score_episode(
             (:func:`~cpmp.records.episode_cause`: a fitted sequencer explains it; ``None`` or
             another policy: ``unknown`` why).
         index: the episode's index in a batched ``policy`` (``None``: a single policy).
+        failure: what went wrong in the world (:func:`run_failure`), added to an incomplete
+            episode's cause as its ``detail`` (after the sequencer's own detail, if any).
 
     Returns:
         The scored :class:`EpisodeRun`.
@@ -432,6 +454,9 @@ def score_episode(
     cause = None
     if outcome == "incomplete":
         cause = episode_cause(policy, sequences, expected_sequences(world, context), index)
+        if cause is not None and failure:
+            detail = f"{cause.detail}; {failure}" if cause.detail else failure
+            cause = replace(cause, detail=detail)
     return EpisodeRun(outcome, world.strategy(context), initial, sequences, time, completed, cause)
 
 

@@ -21,7 +21,7 @@ from cpmp.worlds.peg.world import (
     MOUTH_Z,
     PEG_DEPTH,
 )
-from cpmp.worlds.protocol import World, WorldRun, evaluate
+from cpmp.worlds.protocol import World, WorldRun, evaluate, run_episode
 
 
 @pytest.fixture(scope="module")
@@ -222,12 +222,22 @@ def test_inserting_before_the_hold_slides_a_light_base(world):
     assert run.state.slid
     assert run.features()[CLAMP] < world.hold_force
     assert inserting[0] < world.hold_force  # the holder had not clamped yet
+    # the run says what went wrong, and when
+    slid_at = run.failed_at
+    assert slid_at is not None and 0 < slid_at <= run.state.t
+    assert run.failure() == (
+        "the light base slid: the peg pressed on it while the holder's clamp force was below "
+        f"{world.hold_force:g} at {slid_at:.2f} s"
+    )
     # the same insertion into a heavy base does not slide: the holder rests
     inserting.clear()
     heavy = _context(world, "heavy_shallow")
     run, active = _run(world, heavy, lambda t, x: {**early(t, x), "holder": "rest"}, limit=3.0)
     assert not run.state.slid and not run.done(active)
     assert run.features()[PEG_DEPTH] > 0.1
+    # not done, nothing failed: the goal conditions not met, each in words (the peg is home)
+    assert run.failed_at is None and world.peg_home(run.state, heavy)
+    assert run.failure() == "the gripper is not open; the inserter is not home"
 
 
 def test_pressing_a_jam_breaks_the_peg(world):
@@ -244,6 +254,30 @@ def test_pressing_a_jam_breaks_the_peg(world):
 
     run, active = _run(world, ctx, stubborn)
     assert run.state.broken and run.done(active) and not run.complete(active)
+    assert run.failure() == (
+        f"the jammed peg broke (pressed for {world.break_time:g} s) at {run.failed_at:.2f} s"
+    )
+
+
+def test_an_incomplete_episodes_cause_carries_what_went_wrong(world):
+    tol, align_z = world.tolerance, MOUTH_Z + world.align_clearance
+
+    class Early:  # align, then insert without waiting for the holder: the base slides
+        def reset(self, t, x):
+            self.mp = "align"
+            return {"holder": "hold", "inserter": self.mp}
+
+        def step(self, t, x):
+            aligned = abs(x[INSERTER_X] - x[HOLE_X]) < tol and abs(x[INSERTER_Z] - align_z) < tol
+            self.mp = "insert" if aligned else self.mp
+            return {"holder": "hold", "inserter": self.mp}
+
+    episode = run_episode(world, Early(), _context(world, "light_shallow"))
+    assert episode.outcome == "incomplete" and not episode.completed
+    cause = episode.cause
+    assert cause is not None and cause.reason == "unknown"  # a policy that does not explain
+    assert cause.detail.startswith("the light base slid") and cause.detail.endswith(" s")
+    assert cause.detail in cause.describe()
 
 
 def test_misaligned_insert_jams_without_counting(world):
@@ -256,3 +290,14 @@ def test_misaligned_insert_jams_without_counting(world):
     assert run.state.jammed and run.state.attempts == 0
     assert run.features()[FORCE] >= world.force_threshold
     assert run.features()[HOLE_X] == ctx.hole_x
+
+
+def test_a_peg_never_inserted_is_not_in_the_hole(world):
+    run, active = _run(
+        world,
+        _context(world, "heavy_shallow"),
+        lambda t, x: {"holder": "rest", "inserter": "align"},
+        limit=1.0,
+    )
+    assert not run.done(active) and run.failed_at is None
+    assert run.failure().split("; ")[0] == "the peg is not in the hole"

@@ -156,6 +156,10 @@ def test_release_at_carry_height_breaks_the_object(world):
     run, active = _run_policy(world, context, early_release)
     assert run.done(active) and not run.complete(active)
     assert run.state.failure == "broken"
+    assert run.failed_at is not None and 0 < run.failed_at <= run.t
+    assert run.failure() == (
+        f"the object fell from too high onto the table and broke at {run.failed_at:.2f} s"
+    )
 
 
 def test_shutting_the_drawer_on_the_arm_fails(world):
@@ -169,6 +173,7 @@ def test_shutting_the_drawer_on_the_arm_fails(world):
     run, active = _run_policy(world, context, early_shut)
     assert run.done(active) and not run.complete(active)
     assert run.state.failure == "hit"
+    assert run.failure().startswith("the arm hit the cabinet front")
 
 
 def test_place_on_a_wrong_slip_guess_does_not_complete(world):
@@ -181,6 +186,8 @@ def test_place_on_a_wrong_slip_guess_does_not_complete(world):
     run, active = _run_policy(world, context, ignore_slip, limit=12.0)
     assert not run.complete(active)
     assert run.state.holder == "table"
+    assert run.failed_at is None
+    assert run.failure().startswith("the object is not in the drawer (it is on the table)")
 
 
 @pytest.mark.parametrize(

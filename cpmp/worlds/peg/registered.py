@@ -37,11 +37,13 @@ class PegRun:
         task: the task's options.
         context: the episode's context.
         state: the simulated world, hidden state included.
+        failed_at: when the base slid, the peg broke or dropped [s] (``None``: it did not).
     """
 
     task: PegTask
     context: PegContext
     state: PegState
+    failed_at: float | None = None
 
     def features(self) -> np.ndarray:
         """The features ``(13,)`` now."""
@@ -58,6 +60,15 @@ class PegRun:
         mps = dict(active)
         for _ in range(n):
             self.task.advance(self.state, self.context, mps, step)
+            if self.failed_at is None and self.state.failed:
+                self.failed_at = self.state.t
+
+    def failure(self) -> str:
+        """Why the run is not complete, in words (:meth:`PegTask.shortfall`, with the time)."""
+        text = self.task.shortfall(self.state, self.context)
+        if text and self.failed_at is not None:
+            text += f" at {self.failed_at:.2f} s"
+        return text
 
     def done(self, active: Mapping[str, str]) -> bool:
         """The goal reached, or the base slid, the peg broke or dropped."""

@@ -536,6 +536,35 @@ class PegTask:
         """Whether the peg is at most ``home_tolerance`` short of the hole's depth."""
         return MOUTH_Z - state.peg_z >= context.hole_depth - self.home_tolerance
 
+    def shortfall(self, state: PegState, context: PegContext) -> str:
+        """Why ``state`` is not the goal state, in words (``""`` at the goal).
+
+        The failure nothing undoes if one happened, else each goal condition not met.
+        """
+        if state.slid:
+            return (
+                "the light base slid: the peg pressed on it while the holder's clamp force was "
+                f"below {self.hold_force:g}"
+            )
+        if state.broken:
+            return f"the jammed peg broke (pressed for {self.break_time:g} s)"
+        if state.dropped:
+            return "the peg dropped: released above the hole's mouth"
+        unmet = []
+        depth = MOUTH_Z - state.peg_z
+        if depth <= 0:
+            unmet.append("the peg is not in the hole")
+        elif not self.peg_home(state, context):
+            unmet.append(f"the peg is {1000 * (context.hole_depth - depth):.0f} mm short of home")
+        if state.gripped or state.grip < self.open_level:
+            unmet.append("the gripper is not open")
+        tol = self.goal_tolerance
+        if math.dist((state.ins_x, state.ins_z), context.inserter_home) >= tol:
+            unmet.append("the inserter is not home")
+        if math.dist((state.holder_x, state.holder_z), context.holder_home) >= tol:
+            unmet.append("the holder is not home")
+        return "; ".join(unmet)
+
     def at_goal(self, state: PegState, context: PegContext) -> bool:
         """The peg home and released, the gripper open, both arms home, no failure."""
         tol = self.goal_tolerance

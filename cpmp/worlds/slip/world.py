@@ -483,6 +483,30 @@ class SlipTask:
             state.holder = "broken" if x <= TABLE_EDGE else "lost"
             state.failure = state.holder
 
+    def shortfall(self, state: SlipState, context: SlipContext) -> str:
+        """Why ``state`` is not the goal state, in words (``""`` at the goal).
+
+        The failure nothing undoes if one happened, else each goal condition not met.
+        """
+        failures = {
+            "broken": "the object fell from too high onto the table and broke",
+            "lost": "the object fell beside the table and is lost",
+            "hit": "the arm hit the cabinet front (in the drawer's mouth, the drawer not open)",
+        }
+        if state.failure:
+            return failures[state.failure]
+        unmet = []
+        if state.holder != "drawer":
+            unmet.append(f"the object is not in the drawer (it is {_WHERE[state.holder]})")
+        if state.ext >= self.tolerance:
+            unmet.append("the drawer is not shut")
+        if state.grip < OPEN_READY:
+            unmet.append("the gripper is not open")
+        away = math.hypot(state.arm_x - context.home[0], state.arm_z - context.home[1])
+        if away >= self.goal_tolerance:
+            unmet.append("the arm is not home")
+        return "; ".join(unmet)
+
     def at_goal(self, state: SlipState, context: SlipContext) -> bool:
         """Object in the shut drawer, gripper open, arm home (see the module doc)."""
         return (
@@ -495,12 +519,18 @@ class SlipTask:
         )
 
 
+_WHERE = {"table": "on the table", "hand": "in the hand", "drawer": "in the drawer"}
+"""Where the object is, in words (the failures have their own text)."""
+
 _KEEPS_GOAL = {"arm": ("retreat",), "gripper": ("open", "release"), "drawer": ("push_shut",)}
 """The MPs that hold the goal state."""
 
 
 class SlipRun:
     """One episode of the slip task in progress (a :class:`~cpmp.worlds.protocol.WorldRun`).
+
+    Its ``t`` is the time run so far and ``failed_at`` when the object broke or was lost or
+    the arm hit the drawer [s] (``None``: nothing failed).
 
     Args:
         task: the task's options.
@@ -511,6 +541,8 @@ class SlipRun:
         self.task = task
         self.context = context
         self.state = task.initial_state(context)
+        self.t = 0.0
+        self.failed_at: float | None = None
 
     def features(self) -> np.ndarray:
         """The features ``(10,)`` now."""
@@ -518,7 +550,19 @@ class SlipRun:
 
     def advance(self, active: Mapping[str, str], h: float) -> None:
         """Run the ``active`` MPs for ``h`` [s], in sub-steps of at most ``dt``."""
-        self.task.advance_by(self.state, self.context, active, h)
+        n, step = substeps(h, self.task.dt)
+        for _ in range(n):
+            self.task.advance(self.state, self.context, active, step)
+            self.t = round(self.t + step, 10)
+            if self.failed_at is None and self.state.failure:
+                self.failed_at = self.t
+
+    def failure(self) -> str:
+        """Why the run is not complete, in words (:meth:`SlipTask.shortfall`, with the time)."""
+        text = self.task.shortfall(self.state, self.context)
+        if text and self.failed_at is not None:
+            text += f" at {self.failed_at:.2f} s"
+        return text
 
     def done(self, active: Mapping[str, str]) -> bool:
         """The goal reached, or a failure (object broken or lost, arm hit the drawer)."""
