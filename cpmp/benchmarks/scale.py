@@ -99,7 +99,9 @@ else:
 test = world.demonstrations(args["held_out"], args["held_out_seed"])
 base = rss_gb()
 start = time.perf_counter()
-seq = ConcurrentSequencer.fit(train, seed=args["seed"], logger=None)
+dtype = args.get("dtype", "float64")
+options = {} if dtype == "float64" else {"dtype": dtype}
+seq = ConcurrentSequencer.fit(train, seed=args["seed"], logger=None, **options)
 fit_s = time.perf_counter() - start
 peak = rss_gb()
 mae = float(progress_errors(activation_progress(seq, test))["mae"])
@@ -118,6 +120,7 @@ print("RESULT " + json.dumps({
     "complete": int(run.complete),
     "episodes": args["episodes"],
     "threads": torch.get_num_threads(),
+    "dtype": str(getattr(seq.predictor, "dtype_", "")).removeprefix("torch."),
 }))
 """
 """The measuring process's program (public API only, so that another checkout runs it)."""
@@ -152,6 +155,8 @@ class ScaleSettings:
         timeout: seconds a size's process may run (and the ``lerobot`` leg's import).
         pythonpath: another checkout's root to measure (``None``: this cpmp).
         lerobot: episodes of the ``lerobot`` leg (0: no such leg).
+        dtype: the progress predictors' floating-point type, ``float64`` (cpmp's default) or
+            ``float32`` (the predictor option ``dtype``).
     """
 
     worlds: tuple[str, ...] = WORLDS
@@ -162,6 +167,7 @@ class ScaleSettings:
     timeout: float = 1800.0
     pythonpath: str | None = None
     lerobot: int = LEROBOT_EPISODES
+    dtype: str = "float64"
 
     def __post_init__(self) -> None:
         from cpmp.worlds.registry import world_names
@@ -179,6 +185,8 @@ class ScaleSettings:
             raise ConfigError(f"sizes must be increasing counts >= 1, got {list(self.sizes)}")
         if int(self.lerobot) < 0:
             raise ConfigError(f"lerobot must be >= 0 episodes (0: skip), got {self.lerobot!r}")
+        if self.dtype not in ("float32", "float64"):
+            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
         if not self.timeout > 0:
             raise ConfigError(f"timeout must be > 0 seconds, got {self.timeout!r}")
         if self.pythonpath is not None and not (Path(self.pythonpath) / "cpmp").is_dir():
@@ -242,6 +250,7 @@ def measure_size(
         "held_out_seed": HELD_OUT_SEED + settings.seed,
         "episodes": settings.episodes,
         "demos_file": demos_file,
+        "dtype": settings.dtype,
     }
     env = _environment(settings)
     row: dict[str, JsonValue] = {"world": world, "D": demos}
@@ -560,6 +569,9 @@ def main(argv: list[str] | None = None) -> int:
         help=f"episodes of {LEROBOT_WORLD} written as LeRobot v3 and read by cpmp-import "
         f"({LEROBOT_EPISODES}; 0: skip)",
     )
+    parser.add_argument(
+        "--dtype", choices=("float64", "float32"), help="the predictors' float type (float64)"
+    )
     args = parser.parse_args(argv)
     names = (
         "worlds",
@@ -570,6 +582,7 @@ def main(argv: list[str] | None = None) -> int:
         "timeout",
         "pythonpath",
         "lerobot",
+        "dtype",
     )
     return run_settings_benchmark(
         "bench_scale",

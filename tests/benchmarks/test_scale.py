@@ -68,6 +68,12 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     assert {k: v for k, v in again.items() if k not in MEASURED} == {
         k: v for k, v in small.items() if k not in MEASURED
     }
+    # --dtype float32 fits the predictors in float32: the same data, another rounding
+    assert small["dtype"] == result["settings"]["dtype"] == "float64"
+    single = measure_size("two_point", 4, ScaleSettings.quick(dtype="float32"))
+    assert "error" not in single and single["dtype"] == "float32"
+    assert single["samples"] == small["samples"] and single["supports"] > 0
+    assert single["mae"] != small["mae"] and abs(single["mae"] - small["mae"]) < 0.01
 
 
 def test_growth_exponent_is_the_log_log_slope():
@@ -112,6 +118,7 @@ def test_targets_read_768_against_48_and_192():
         {"episodes": 0},
         {"pythonpath": "/nonexistent"},
         {"lerobot": -1},
+        {"dtype": "float16"},
     ],
 )
 def test_bad_settings_are_config_errors(options):
