@@ -51,6 +51,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from cpmp.benchmarks.cli import given_options, run_settings_benchmark
+from cpmp.config import DTYPES
 from cpmp.errors import ConfigError
 from cpmp.records import JsonValue
 
@@ -99,8 +100,8 @@ else:
 test = world.demonstrations(args["held_out"], args["held_out_seed"])
 base = rss_gb()
 start = time.perf_counter()
-dtype = args.get("dtype", "float64")
-options = {} if dtype == "float64" else {"dtype": dtype}
+dtype = args.get("dtype", "auto")
+options = {} if dtype == "auto" else {"dtype": dtype}
 seq = ConcurrentSequencer.fit(train, seed=args["seed"], logger=None, **options)
 fit_s = time.perf_counter() - start
 peak = rss_gb()
@@ -155,8 +156,10 @@ class ScaleSettings:
         timeout: seconds a size's process may run (and the ``lerobot`` leg's import).
         pythonpath: another checkout's root to measure (``None``: this cpmp).
         lerobot: episodes of the ``lerobot`` leg (0: no such leg).
-        dtype: the progress predictors' floating-point type, ``float64`` (cpmp's default) or
-            ``float32`` (the predictor option ``dtype``).
+        dtype: the progress predictors' floating-point type (the predictor option ``dtype``):
+            ``auto`` (cpmp's default: ``float32`` from
+            :data:`~cpmp.config.FLOAT32_FROM_SAMPLES` training samples), ``float64`` or
+            ``float32``; each row reports the type its fit used.
     """
 
     worlds: tuple[str, ...] = WORLDS
@@ -167,7 +170,7 @@ class ScaleSettings:
     timeout: float = 1800.0
     pythonpath: str | None = None
     lerobot: int = LEROBOT_EPISODES
-    dtype: str = "float64"
+    dtype: str = "auto"
 
     def __post_init__(self) -> None:
         from cpmp.worlds.registry import world_names
@@ -185,8 +188,8 @@ class ScaleSettings:
             raise ConfigError(f"sizes must be increasing counts >= 1, got {list(self.sizes)}")
         if int(self.lerobot) < 0:
             raise ConfigError(f"lerobot must be >= 0 episodes (0: skip), got {self.lerobot!r}")
-        if self.dtype not in ("float32", "float64"):
-            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if self.dtype not in DTYPES:
+            raise ConfigError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
         if not self.timeout > 0:
             raise ConfigError(f"timeout must be > 0 seconds, got {self.timeout!r}")
         if self.pythonpath is not None and not (Path(self.pythonpath) / "cpmp").is_dir():
@@ -570,7 +573,7 @@ def main(argv: list[str] | None = None) -> int:
         f"({LEROBOT_EPISODES}; 0: skip)",
     )
     parser.add_argument(
-        "--dtype", choices=("float64", "float32"), help="the predictors' float type (float64)"
+        "--dtype", choices=DTYPES, help="the predictors' float type (auto: cpmp's default)"
     )
     args = parser.parse_args(argv)
     names = (

@@ -17,6 +17,8 @@ from cpmp.config.fit import FIT_OPTIONS, FitConfig
 from cpmp.config.goal_nearest import GoalNearestConfig, goal_nearest_options
 from cpmp.config.predictors import (
     ACTIVATIONS,
+    DTYPES,
+    FLOAT32_FROM_SAMPLES,
     PREDICTOR_CONFIGS,
     SCALINGS,
     SKLEARN_SOLVERS,
@@ -31,6 +33,7 @@ from cpmp.config.predictors import (
     predictor_config,
     predictor_config_class,
     predictor_option_names,
+    resolved_dtype,
 )
 from cpmp.config.sequencer import (
     BRANCHES,
@@ -48,7 +51,9 @@ __all__ = [
     "ACTIVATIONS",
     "BRANCHES",
     "COUPLINGS",
+    "DTYPES",
     "FIT_OPTIONS",
+    "FLOAT32_FROM_SAMPLES",
     "NONFINITE_POLICIES",
     "PREDICTOR_CONFIGS",
     "SCALINGS",
@@ -77,4 +82,5 @@ __all__ = [
     "predictor_config",
     "predictor_config_class",
     "predictor_option_names",
+    "resolved_dtype",
 ]

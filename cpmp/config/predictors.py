@@ -25,6 +25,13 @@ SKLEARN_SOLVERS = ("newton-cholesky", "lbfgs", "newton-cg")
 """scikit-learn solvers that leave the intercept unpenalised, as ``klr`` does."""
 
 
+
+DTYPES = ("auto", "float64", "float32")
+"""The predictors' ``dtype`` option values."""
+FLOAT32_FROM_SAMPLES = 50_000
+"""Training samples from which ``dtype="auto"`` fits in ``float32`` (half the bytes per kernel
+block, a faster fit; docs/benchmarks.md measures it); smaller fits keep ``float64``."""
+
 @dataclass
 class PredictorConfig:
     """Options shared by every predictor.
@@ -34,7 +41,11 @@ class PredictorConfig:
             do not matter), ``none`` (the paper), ``minmax`` or ``standard`` (see
             :class:`~cpmp.predictors.FeatureScaler`); the fitted scaling is stored in the
             checkpoint and applied to every input.
-        dtype: ``float64`` or ``float32``.
+        dtype: ``auto`` (default), ``float64`` or ``float32``: the predictors' floating-point
+            type. ``auto`` fits in ``float64`` below :data:`FLOAT32_FROM_SAMPLES` training
+            samples and in ``float32`` from there on (:func:`resolved_dtype`; the fit records
+            the type it used in the checkpoint); a predictor built outside a fit with
+            ``auto`` uses ``float64``.
         path_noise: ``auto`` (default) or ``none`` (the paper): with ``auto`` the L1 path of
             eq. 1, and the support points and feature weights that follow it, are measured
             on each training activation after removing the white noise estimated on it
@@ -44,7 +55,7 @@ class PredictorConfig:
     """
 
     feature_scaling: str = "global"
-    dtype: str = "float64"
+    dtype: str = "auto"
     path_noise: str = "auto"
 
     def __post_init__(self) -> None:
@@ -57,8 +68,8 @@ class PredictorConfig:
                 f"feature_scaling must be one of {', '.join(SCALINGS)}, "
                 f"got {self.feature_scaling!r}"
             )
-        if self.dtype not in ("float32", "float64"):
-            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if self.dtype not in DTYPES:
+            raise ConfigError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
 
     def _number(self, name: str) -> float:
         return finite_number(getattr(self, name), f"predictor option {name}")
@@ -93,7 +104,18 @@ class PredictorConfig:
         """The torch dtype of :attr:`dtype`."""
         import torch  # lazy: cpmp.config is read before Hydra composition, without torch
 
-        return torch.float64 if self.dtype == "float64" else torch.float32
+        return torch.float32 if self.dtype == "float32" else torch.float64
+
+
+def resolved_dtype(dtype: str, n_samples: int) -> str:
+    """The floating-point type a fit on ``n_samples`` training samples uses for ``dtype``.
+
+    ``float32`` or ``float64`` as given; ``auto``: ``float32`` from
+    :data:`FLOAT32_FROM_SAMPLES` samples on, else ``float64``.
+    """
+    if dtype != "auto":
+        return dtype
+    return "float32" if n_samples >= FLOAT32_FROM_SAMPLES else "float64"
 
 
 CHUNK_SIZE = 2**22

@@ -4,6 +4,7 @@ refused where they enter, whole-number floats are accepted as counts."""
 from __future__ import annotations
 
 import pytest
+import torch
 
 from cpmp.config import predictor_config
 from cpmp.errors import ConfigError
@@ -30,3 +31,16 @@ def test_non_finite_or_fractional_predictor_options_are_config_errors(kind, opti
 
 def test_whole_number_floats_are_accepted_as_counts():
     assert predictor_config("klr", min_support=4.0).min_support == 4
+
+
+def test_dtype_auto_resolves_by_the_training_samples() -> None:
+    from cpmp.config import DTYPES, FLOAT32_FROM_SAMPLES, KLRConfig, resolved_dtype
+
+    assert KLRConfig().dtype == "auto" and set(DTYPES) == {"auto", "float32", "float64"}
+    assert resolved_dtype("auto", FLOAT32_FROM_SAMPLES - 1) == "float64"
+    assert resolved_dtype("auto", FLOAT32_FROM_SAMPLES) == "float32"
+    assert resolved_dtype("float64", 10**7) == "float64"
+    assert resolved_dtype("float32", 10) == "float32"
+    assert KLRConfig().torch_dtype == torch.float64  # built outside a fit: float64
+    with pytest.raises(ConfigError, match="dtype must be one of auto, float64, float32"):
+        KLRConfig(dtype="float16")

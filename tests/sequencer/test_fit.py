@@ -97,3 +97,31 @@ def test_fit_demos_refuses_validation_with_other_features(
     )
     with pytest.raises(DataError, match="validation demonstrations have features"):
         fit_demos(train_demos, [other], 0.0, seed=0)
+
+
+def test_dtype_auto_fits_small_data_in_float64_and_large_data_in_float32(
+    train_demos: list[Demonstration], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import cpmp.config.predictors as options
+
+    n = sum(d.n_samples for d in train_demos)
+    assert n < options.FLOAT32_FROM_SAMPLES
+    small = fit_parts(train_demos, FitConfig.from_options("klr"))
+    assert small.predictor.config.dtype == "float64" and small.predictor.dtype_ == torch.float64
+    monkeypatch.setattr(options, "FLOAT32_FROM_SAMPLES", n)  # these demos count as large
+    seq = ConcurrentSequencer.fit(train_demos, logger=None)
+    assert seq.predictor.config.dtype == "float32"
+    assert {b.dtype for b in seq.predictor.buffers() if b.is_floating_point()} == {torch.float32}
+    # the type the fit used is the checkpoint's: loaded, it steps in float32 as fitted
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "model.pt"))
+    assert loaded.predictor.config.dtype == "float32"
+    x = train_demos[0].features[::9]
+    np.testing.assert_array_equal(loaded.heads(x), seq.heads(x))
+    # float32 and float64 fits of the same data agree to float32's rounding
+    f64 = ConcurrentSequencer.fit(train_demos, logger=None, dtype="float64")
+    assert f64.predictor.config.dtype == "float64"
+    assert not np.array_equal(seq.heads(x), f64.heads(x))
+    np.testing.assert_allclose(seq.heads(x), f64.heads(x), atol=2e-3)
+    # an explicit type is kept whatever the size
+    explicit = fit_parts(train_demos, FitConfig.from_options("klr", dtype="float64"))
+    assert explicit.predictor.config.dtype == "float64"
