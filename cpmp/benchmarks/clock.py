@@ -29,7 +29,6 @@ import inspect
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
@@ -38,7 +37,7 @@ from cpmp.config import TaskConfig
 from cpmp.data.demonstration import Demonstration, mp_sequences
 from cpmp.errors import ConfigError, CpmpError
 from cpmp.io import to_builtin
-from cpmp.records import Policy
+from cpmp.records import JsonValue, Policy
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sim import correct_strategy, record_demonstrations, run_episodes
 from cpmp.sim.collect import sample_boxes
@@ -303,7 +302,7 @@ def _finish(
 
 
 def run_synthetic_episode(
-    world: World, episode: Any, policy: ClockedPolicy, reference: Demonstration
+    world: World, episode: object, policy: ClockedPolicy, reference: Demonstration
 ) -> EpisodeRecord:
     """One episode of a synthetic world with ``policy`` in the loop.
 
@@ -358,7 +357,7 @@ def _rng(seed: int, condition: str, episode: int) -> np.random.Generator:
 def synthetic_condition(
     world: World,
     seq: Policy,
-    episodes: Sequence[Any],
+    episodes: Sequence[object],
     references: Sequence[Demonstration],
     condition: ClockCondition,
     seed: int,
@@ -402,7 +401,7 @@ def sim_task(condition: ClockCondition, base: TaskConfig | None = None) -> TaskC
 
 def sim_condition(
     seq: ConcurrentSequencer,
-    boxes: Sequence[Any],
+    boxes: Sequence[object],
     references: Sequence[Demonstration],
     condition: ClockCondition,
     seed: int,
@@ -444,7 +443,7 @@ def sim_condition(
 
 
 # --------------------------------------------------------------------------------- summary
-def summarise(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
+def summarise(records: Sequence[EpisodeRecord]) -> dict[str, JsonValue]:
     """Counts and switch-time error of a condition's episodes (JSON-ready)."""
     counts = {o: sum(r.outcome == o for r in records) for o in OUTCOMES}
     errors = np.array([e for r in records for e in r.switch_errors])
@@ -473,7 +472,7 @@ def summarise(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     }
 
 
-def _episode_row(r: EpisodeRecord) -> dict[str, Any]:
+def _episode_row(r: EpisodeRecord) -> dict[str, JsonValue]:
     return {
         "strategy": r.strategy,
         "outcome": r.outcome,
@@ -527,7 +526,7 @@ class ClockSettings:
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
 
     @classmethod
-    def quick(cls, **options: Any) -> ClockSettings:
+    def quick(cls, **options: object) -> ClockSettings:
         """Small sizes for a test: the synthetic worlds, seed 0, 2 episodes, one family member."""
         quick = {"worlds": SYNTHETIC_WORLDS, "seeds": (0,), "episodes": 2, "tasks": 1}
         return cls(**{**quick, **options})
@@ -545,7 +544,7 @@ def _fit(demos: Sequence[Demonstration], seed: int) -> ConcurrentSequencer:
 
 def bench_synthetic_world(
     name: str, settings: ClockSettings, log: Callable[[str], None] | None = None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """Every condition of ``settings`` on the synthetic world ``name``, pooled over seeds.
 
     A family world (the procedural one) pools its first ``settings.tasks`` members too.
@@ -560,7 +559,7 @@ def bench_synthetic_world(
     """
     pooled: dict[str, list[EpisodeRecord]] = {}
     scripted: dict[str, list[EpisodeRecord]] = {}
-    per_seed: dict[str, dict[str, Any]] = {}
+    per_seed: dict[str, dict[str, JsonValue]] = {}
     for seed in settings.seeds:
         by_condition: dict[str, list[EpisodeRecord]] = {}
         for world in members(name, settings.tasks):
@@ -586,7 +585,9 @@ def bench_synthetic_world(
     return result
 
 
-def bench_sim(settings: ClockSettings, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+def bench_sim(
+    settings: ClockSettings, log: Callable[[str], None] | None = None
+) -> dict[str, JsonValue]:
     """Every condition of ``settings`` on the simulator, pooled over ``sim_seeds``.
 
     Returns:
@@ -594,7 +595,7 @@ def bench_sim(settings: ClockSettings, log: Callable[[str], None] | None = None)
     """
     cfg = TaskConfig()
     pooled: dict[str, list[EpisodeRecord]] = {}
-    per_seed: dict[str, dict[str, Any]] = {}
+    per_seed: dict[str, dict[str, JsonValue]] = {}
     for seed in settings.sim_seeds:
         train_boxes = sample_boxes(np.random.default_rng(seed), cfg, settings.sim_demos, True)
         names = [f"demo_{i:03d}" for i in range(len(train_boxes))]
@@ -615,8 +616,8 @@ def bench_sim(settings: ClockSettings, log: Callable[[str], None] | None = None)
 
 
 def _world_result(
-    pooled: Mapping[str, list[EpisodeRecord]], per_seed: dict[str, dict[str, Any]]
-) -> dict[str, Any]:
+    pooled: Mapping[str, list[EpisodeRecord]], per_seed: dict[str, dict[str, JsonValue]]
+) -> dict[str, JsonValue]:
     return {
         "conditions": {name: summarise(records) for name, records in pooled.items()},
         "per_seed": per_seed,
@@ -628,7 +629,7 @@ def _world_result(
 
 def run_clock_benchmark(
     settings: ClockSettings, log: Callable[[str], None] | None = None
-) -> dict[str, Any]:
+) -> dict[str, JsonValue]:
     """The clock benchmark of ``settings`` (JSON-ready; the same settings give the same dict).
 
     Args:
@@ -639,7 +640,7 @@ def run_clock_benchmark(
         ``{"settings", "conditions": {name: ClockCondition fields}, "reference",
         "worlds": {world: ...}}`` (per world: :func:`bench_synthetic_world`).
     """
-    result: dict[str, Any] = {
+    result: dict[str, JsonValue] = {
         "settings": asdict(settings),
         "conditions": {c.name: asdict(c) for c in _conditions(settings)},
         "reference": REFERENCE,
@@ -653,7 +654,7 @@ def run_clock_benchmark(
     return to_builtin(result)
 
 
-def markdown(result: Mapping[str, Any]) -> str:
+def markdown(result: Mapping[str, JsonValue]) -> str:
     """Completion per world and condition as a Markdown table.
 
     Each cell: ``complete / episodes``, then the mean absolute switch-time error in ms; a
