@@ -133,14 +133,11 @@ worlds), so only fits on tens to hundreds of demonstrations reach it."""
 POOL_SIZE = 256
 """Default ``pool_size``: the most supports a pooled node keeps
 (:func:`cpmp.predictors.klr.pool_supports`)."""
-MERGE_SIMILARITY = 0.995
+MERGE_SIMILARITY = 0.999
 """Default ``merge_similarity``: a pooled node stops adding supports once every one of its
 rule's points has a chosen support of kernel value at least this (with γ = 4 and unit feature
-weights: closer than 0.035 in scaled features). Measured by merging alone (no ``pool_size``)
-on two_point, seed 0, 768 demonstrations (20,352 rule points), 20 held-out demonstrations:
-0.8 / 0.95 / 0.99 / 0.995 / 0.999 kept 60 / 116 / 369 / 717 / 2,794 supports at held-out
-progress MAE 0.030 / 0.028 / 0.026 / 0.025 / 0.024 (the rule's 5,088 supports of 192
-demonstrations: 0.023); 0.999 took four times as long to fit as 0.995."""
+weights: closer than about 0.016 in scaled features). Higher keeps more supports and predicts
+progress better; docs/benchmarks.md measures the trade."""
 
 
 @dataclass

@@ -168,9 +168,11 @@ def test_a_node_within_the_cap_keeps_the_rules_supports(train_demos):
 def test_pooled_supports_saturate_with_the_demonstrations(train_demos):
     from cpmp.worlds.two_point import make_demonstrations
 
-    counts, rule = [], []
+    counts, rule, default = [], [], []
     for n in (6, 24, 48):
-        bank, data = _bank(make_demonstrations(n, seed=0), support_cap=40, pool_size=1000)
+        demos = make_demonstrations(n, seed=0)
+        # merging alone (no size cap) at a coarse similarity saturates
+        bank, data = _bank(demos, support_cap=40, pool_size=1000, merge_similarity=0.995)
         bank.initialize(data, torch.Generator().manual_seed(0))
         counts.append(int(bank.support_mask.sum()))
         rule.append(sum(len(bank._supports_for(node)) for node in data))
@@ -178,10 +180,17 @@ def test_pooled_supports_saturate_with_the_demonstrations(train_demos):
             pts = bank.support[i, bank.support_mask[i]].numpy()
             ref = bank._supports_for(node)
             assert all(np.isclose(ref, p).all(1).any() for p in pts)
+        bank, data = _bank(demos, support_cap=40, pool_size=1000)  # the default similarity
+        bank.initialize(data, torch.Generator().manual_seed(0))
+        default.append(int(bank.support_mask.sum()))
     assert rule[2] == pytest.approx(8 * rule[0], rel=0.2)  # the rule: linear in the demos
-    # pooled: doubling the demonstrations adds few (measured 327 -> 368, the rule's count
+    # pooled: doubling the demonstrations adds few (measured 332 -> 357, the rule's count
     # doubling to 1,272)
     assert counts[2] < 1.25 * counts[1] and counts[2] < rule[2] / 3
+    # the default's finer similarity keeps more, a falling share of the rule's points (measured
+    # 450 -> 634 of 636 -> 1,272); pool_size then caps each node
+    assert counts[1] < default[1] < rule[1] and counts[2] < default[2] < rule[2]
+    assert default[2] / rule[2] < 0.8 * default[1] / rule[1]
 
 
 @pytest.mark.parametrize("kind", ["klr_full", "klr_sparse"])
