@@ -22,10 +22,10 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.io import atomic_write_text
+from cpmp.records import JsonValue
 
 BEGIN = "<!-- results:begin -->"
 """The line before the README's generated headline table."""
@@ -35,7 +35,7 @@ RENDER = "python scripts/render_results.py"
 """The command that renders ``docs/results.md`` and the README's table."""
 
 
-def merge_synthetic(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, Any]:
+def merge_synthetic(runs: Sequence[tuple[str, Mapping[str, JsonValue]]]) -> dict[str, JsonValue]:
     """One worlds table from several ``bench_synthetic`` runs, later policies replacing earlier.
 
     A re-run of some policies (after a change that only they see) is merged into the run that
@@ -63,7 +63,7 @@ def merge_synthetic(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, 
     first_source, first = runs[0]
     base = {k: v for k, v in first["settings"].items() if k != "policies"}
     sources: dict[str, str] = {}
-    rows: dict[str, list[dict[str, Any]]] = {}
+    rows: dict[str, list[dict[str, JsonValue]]] = {}
     for source, result in runs:
         settings = {k: v for k, v in result["settings"].items() if k != "policies"}
         if settings != base:
@@ -97,32 +97,54 @@ def _demote(markdown: str, levels: int) -> str:
     )
 
 
-def _simulator(result: Mapping[str, Any]) -> str:
+def _simulator(result: Mapping[str, JsonValue]) -> str:
     from cpmp.experiment.report import render_markdown  # lazy: matplotlib, Hydra
 
     report = render_markdown(result).split("\n## Files\n")[0]  # the run directory's files
     return _demote(report, 2)
 
 
-def _synthetic(result: Mapping[str, Any]) -> str:
+def _synthetic(result: Mapping[str, JsonValue]) -> str:
     from cpmp.benchmarks.synthetic import markdown  # lazy: the worlds' and sequencer's imports
 
     return markdown(result)
 
 
-def _scale(result: Mapping[str, Any]) -> str:
+def _scale(result: Mapping[str, JsonValue]) -> str:
     from cpmp.benchmarks.scale import markdown  # lazy: a benchmark module
 
     return markdown(dict(result))
 
 
-def _start(result: Mapping[str, Any]) -> str:
+def _clock(result: Mapping[str, JsonValue]) -> str:
+    from cpmp.benchmarks.clock import markdown  # lazy: the worlds' and sequencer's imports
+
+    return markdown(result)
+
+
+def _about_clock(r: Mapping[str, JsonValue]) -> str:
+    s = r["settings"]
+    worlds = list(r["worlds"])
+    return (
+        f"Every single world ({', '.join(worlds)}) with cpmp's defaults under a robot's clock: "
+        f"per world and seed ({', '.join(map(str, s['seeds']))}) a fit on {s['demos']} "
+        f"demonstrations and {s['episodes']} held-out episodes under each condition — control "
+        "rates from 30 Hz to 1 kHz, ±30 % jitter, 10 % dropped ticks, slow sensors (10, 16.7, "
+        "25 Hz), a 1 s clock step, NaN bursts — against the worlds' own 100 Hz loop "
+        f"(`{r['reference']}`). Each cell: complete / episodes (all seeds) and the mean "
+        "absolute switch-time error; the row below a world is its feature-only scripted "
+        "policy on the same episodes. Issue #32's target: every condition within 1 episode "
+        "per 20 of the 100 Hz run."
+    )
+
+
+def _start(result: Mapping[str, JsonValue]) -> str:
     from cpmp.benchmarks.start import markdown  # lazy: scikit-learn, MuJoCo
 
     return markdown(dict(result))
 
 
-def _about_simulator(r: Mapping[str, Any]) -> str:
+def _about_simulator(r: Mapping[str, JsonValue]) -> str:
     e = r["experiment"]
     demos = 3 * e["demos_per_strategy"]
     train = 3 * e["train_per_strategy"]
@@ -136,7 +158,7 @@ def _about_simulator(r: Mapping[str, Any]) -> str:
     )
 
 
-def _sources(r: Mapping[str, Any]) -> str:
+def _sources(r: Mapping[str, JsonValue]) -> str:
     by_source: dict[str, list[str]] = {}
     for policy, source in r.get("sources", {}).items():
         by_source.setdefault(source, []).append(f"`{policy}`")
@@ -146,7 +168,7 @@ def _sources(r: Mapping[str, Any]) -> str:
     return " Merged from two runs (`sources` in the JSON): " + "; ".join(parts) + "."
 
 
-def _about_worlds(r: Mapping[str, Any]) -> str:
+def _about_worlds(r: Mapping[str, JsonValue]) -> str:
     s = r["settings"]
     return (
         f"Every single world ({', '.join(s['worlds'])}) x the policies "
@@ -161,7 +183,7 @@ def _about_worlds(r: Mapping[str, Any]) -> str:
     )
 
 
-def _about_procedural(r: Mapping[str, Any]) -> str:
+def _about_procedural(r: Mapping[str, JsonValue]) -> str:
     s = r["settings"]
     n = s["tasks"] * len(s["family_seeds"]) * s["family_episodes"]
     return (
@@ -172,7 +194,7 @@ def _about_procedural(r: Mapping[str, Any]) -> str:
     )
 
 
-def _about_scale(r: Mapping[str, Any]) -> str:
+def _about_scale(r: Mapping[str, JsonValue]) -> str:
     s = r["settings"]
     machine = r.get("machine", {})
     cores = f" on {machine['cpus']} cores" if "cpus" in machine else ""
@@ -183,11 +205,28 @@ def _about_scale(r: Mapping[str, Any]) -> str:
         f"{s['held_out']} demonstrations and C of {s['episodes']} closed-loop episodes; then the "
         "growth exponents of fit time and memory against the training samples. The machine "
         "was shared with other jobs (`machine` in the JSON has its load averages), so the "
-        "times are pessimistic." + _about_lerobot(r)
+        "times are pessimistic." + _about_dtype(r) + _about_lerobot(r)
     )
 
 
-def _about_lerobot(r: Mapping[str, Any]) -> str:
+def _about_dtype(r: Mapping[str, JsonValue]) -> str:
+    """The scale section's sentence on the predictors' float type (empty if not recorded)."""
+    dtype = r["settings"].get("dtype")
+    if dtype is None:
+        return ""
+    used = sorted({str(row["dtype"]) for row in r["rows"] if row.get("dtype")})
+    if dtype != "auto":
+        return f" Every fit in {dtype} (`--dtype {dtype}`)."
+    from cpmp.config import FLOAT32_FROM_SAMPLES
+
+    return (
+        " The predictors' float type is cpmp's default `dtype=auto`: float64 below "
+        f"{FLOAT32_FROM_SAMPLES:,} training samples, float32 from there on "
+        f"({' and '.join(used)} in these rows)."
+    )
+
+
+def _about_lerobot(r: Mapping[str, JsonValue]) -> str:
     """The scale section's sentence on its ``lerobot`` row (empty for a JSON without one)."""
     row = r.get("lerobot")
     if not row:
@@ -200,7 +239,7 @@ def _about_lerobot(r: Mapping[str, Any]) -> str:
     )
 
 
-def _about_start(r: Mapping[str, Any]) -> str:
+def _about_start(r: Mapping[str, JsonValue]) -> str:
     return (
         f"The start decision alone, on {r['n_boxes']} fresh boxes per seed "
         f"({', '.join(map(str, r['seeds']))}): wrong starts per 20 boxes (as in Table I), mean "
@@ -227,8 +266,8 @@ class Section:
     title: str
     command: str
     keys: tuple[str, ...]
-    about: Callable[[Mapping[str, Any]], str]
-    table: Callable[[Mapping[str, Any]], str]
+    about: Callable[[Mapping[str, JsonValue]], str]
+    table: Callable[[Mapping[str, JsonValue]], str]
     copy: str = ""
 
     def rerun(self, path: Path) -> str:
@@ -265,6 +304,14 @@ SECTIONS: tuple[Section, ...] = (
         _synthetic,
     ),
     Section(
+        "clock.json",
+        "Every world on a robot's clock",
+        f"python scripts/bench_clock.py --worlds {SINGLE_WORLDS} --out results/clock.json",
+        ("settings", "conditions", "reference", "worlds"),
+        _about_clock,
+        _clock,
+    ),
+    Section(
         "start.json",
         "The start decision",
         "python scripts/bench_start.py --out results/start.json",
@@ -288,7 +335,7 @@ def _section(name: str) -> Section:
     return next(s for s in SECTIONS if s.file == name)
 
 
-def load_result(results_dir: str | Path, name: str) -> dict[str, Any]:
+def load_result(results_dir: str | Path, name: str) -> dict[str, JsonValue]:
     """The committed JSON ``results_dir/name`` (one of :data:`SECTIONS`' files).
 
     Raises:
@@ -310,7 +357,7 @@ def load_result(results_dir: str | Path, name: str) -> dict[str, Any]:
     return result
 
 
-def _rendered(section: Section, result: Mapping[str, Any], path: Path) -> tuple[str, str]:
+def _rendered(section: Section, result: Mapping[str, JsonValue], path: Path) -> tuple[str, str]:
     """``(about, table)`` of one section; a key the renderer misses names the file."""
     try:
         return section.about(result), section.table(result)
@@ -350,7 +397,7 @@ def render_results(results_dir: str | Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _pct(cell: Mapping[str, Any] | None) -> str:
+def _pct(cell: Mapping[str, JsonValue] | None) -> str:
     return "–" if cell is None else f"{100 * cell['complete_frac']:.0f}"
 
 

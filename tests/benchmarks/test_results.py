@@ -131,7 +131,25 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
         | {"episodes": 5, "write_s": 2.5, "frames": 150000, "files": 8, "import_s": 12.34}
         | {"import_rss_gb": 1.5},
     }
-    scale["settings"]["episodes"] = 5
+    scale["settings"] |= {"episodes": 5, "dtype": "auto"}
+    scale["rows"][0]["dtype"] = "float64"
+    condition = {"complete": 4, "n_episodes": 5, "switch_error": {"mean_abs": 0.05}}
+    clock = {
+        "settings": {"seeds": [0], "demos": 6, "episodes": 5},
+        "conditions": {"rate_100hz": {}, "sensor_10hz": {}},
+        "reference": "rate_100hz",
+        "worlds": {
+            "two_point": {
+                "conditions": {
+                    "rate_100hz": condition | {"complete": 5, "switch_error": {"mean_abs": 0.012}},
+                    "sensor_10hz": condition,
+                },
+                "scripted": {
+                    n: {"complete": 5, "n_episodes": 5} for n in ("rate_100hz", "sensor_10hz")
+                },
+            }
+        },
+    }
     files = {
         "simulator.json": report,
         "worlds.json": merge_synthetic(
@@ -141,6 +159,7 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
             ]
         ),
         "procedural.json": synthetic_run({"scripted": 10, "defaults": 4}, "procedural"),
+        "clock.json": clock,
         "start.json": {"n_boxes": 10, "seeds": [0], "rows": [], "mean_per_20": {"3": {"r": 4.5}}},
         "scale.json": scale,
     }
@@ -194,6 +213,13 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "400 episodes (150,000 frames, 8 data files) written in 2.5 s" in page
     assert "cpmp-import 12.3 s, peak RSS 1.50 GB" in page
     assert "The last row: 400 demonstrations of two_point written as a LeRobot v3" in page
+    assert "`dtype=auto`: float64 below 50,000 training samples" in page
+    assert "from there on (float64 in these rows)" in page
+    # the clock section: each condition's completions and switch-time error, the scripted below
+    assert "| world | rate_100hz | sensor_10hz |" in page
+    assert "| two_point | 5/5 (12 ms) | 4/5 (50 ms) |" in page
+    assert "| two_point (scripted) | 5/5 | 5/5 |" in page
+    assert "per world and seed (0) a fit on 6 demonstrations and 5 held-out episodes" in page
 
 
 def test_headline_puts_the_simulator_beside_the_paper_and_every_world(tmp_path: Path) -> None:
