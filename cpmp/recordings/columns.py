@@ -8,7 +8,6 @@ entity's column with one ``send_columns`` call (why: :mod:`cpmp.recordings`).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -19,6 +18,8 @@ _RowBuffer = tuple[list[int], list[float], list[np.ndarray]]
 """Ticks, times [s] and one row (K,) of scalar values per tick for a tuple of K entity paths."""
 _PoseBuffer = tuple[list[int], list[float], list[np.ndarray], list[np.ndarray]]
 """Ticks, times [s], positions (B, 3) and xyzw quaternions (B, 4) per tick for B bodies."""
+_LayoutKey = tuple[str | tuple[str, ...], ...]
+"""A row layout: its kind, then its variable and MP names, or its variables."""
 
 
 class ColumnBuffer:
@@ -29,13 +30,13 @@ class ColumnBuffer:
         mp_names: control variable -> its MP names, to check the variables and MPs of a layout.
     """
 
-    def __init__(self, rec: Any, mp_names: Mapping[str, Sequence[str]]) -> None:
+    def __init__(self, rec: rr.RecordingStream, mp_names: Mapping[str, Sequence[str]]) -> None:
         self._rec = rec
         self._mp_names = mp_names
         self._rows: dict[tuple[str, ...], _RowBuffer] = {}
         self._poses: dict[tuple[str, ...], _PoseBuffer] = {}
         # The paths of a (kind, variable, MP names) layout are made, checked and named once.
-        self._layouts: dict[tuple[Any, ...], tuple[str, ...]] = {}
+        self._layouts: dict[_LayoutKey, tuple[str, ...]] = {}
         self._named_series: set[str] = set()
 
     def name_series(self, path: str, name: str, color: tuple[int, int, int] | None = None) -> None:
@@ -91,7 +92,7 @@ class ColumnBuffer:
 
     def _add_layout(
         self,
-        key: tuple[Any, ...],
+        key: _LayoutKey,
         checks: Sequence[tuple[str, str | None]],
         series: Sequence[tuple[tuple[str, ...], str | None]],
     ) -> None:
@@ -138,7 +139,7 @@ class ColumnBuffer:
         ``time`` and ``tick`` timelines.
         """
 
-        def indexes(ticks: list[int], times: list[float]) -> list[Any]:
+        def indexes(ticks: list[int], times: list[float]) -> list[rr.TimeColumn]:
             return [
                 rr.TimeColumn("time", duration=np.asarray(times)),
                 rr.TimeColumn("tick", sequence=np.asarray(ticks)),

@@ -15,13 +15,12 @@ from __future__ import annotations
 import os
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from cpmp.config.task import TaskConfig
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import DataError
 from cpmp.recordings.writer import EpisodeRecorder
-from cpmp.records import TickInfo, TransitionEvent
+from cpmp.records import JsonValue, TickInfo, TransitionEvent
 from cpmp.sim import Box, Simulation, run_episode
 from cpmp.sim.policies import ReplayPolicy
 
@@ -87,7 +86,7 @@ def record_demo_rrd(
             f"{demo.name or 'demonstration'}: feature names differ from the simulator's; "
             "record_demo_rrd replays demonstrations recorded in cpmp.sim only"
         )
-    metadata: dict[str, Any] = {
+    metadata: dict[str, JsonValue] = {
         "kind": "demonstration",
         "demo": demo.name,
         "box_width": box.width,

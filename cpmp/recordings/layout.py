@@ -12,7 +12,7 @@ import math
 import re
 import textwrap
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Literal, NamedTuple, Protocol, TypedDict
 
 import numpy as np
 import rerun as rr
@@ -20,6 +20,9 @@ import rerun.blueprint as rrb
 
 from cpmp.errors import ConfigError, CpmpError, DataError, UnknownMPError
 from cpmp.records import StartDecision
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 GEOM_TYPES = ("box", "capsule", "sphere", "cylinder")
 """Geom types :class:`~cpmp.recordings.EpisodeRecorder` can draw."""
@@ -474,7 +477,7 @@ class StartMap(NamedTuple):
         y_range: the view's y range (downwards: ``-axes[1]``, with the titles and margins).
     """
 
-    entities: list[tuple[str, Any]]
+    entities: list[tuple[str, rr.Points2D | rr.LineStrips2D]]
     x_range: tuple[float, float]
     y_range: tuple[float, float]
 
@@ -518,7 +521,11 @@ def start_map(
     def flip(xy: np.ndarray) -> np.ndarray:
         return np.column_stack([xy[:, 0], -xy[:, 1]])
 
-    def labels(xy: np.ndarray, texts: Sequence[str], colors: Any = ink) -> Any:
+    def labels(
+        xy: np.ndarray,
+        texts: Sequence[str],
+        colors: tuple[int, int, int] | Sequence[tuple[int, int, int]] = ink,
+    ) -> rr.Points2D:
         # a label takes its point's colour: the anchor is a dot too small to see
         anchors = flip(xy) + np.array([0.0, gap])
         return rr.Points2D(anchors, radii=1e-4 * span, colors=colors, labels=list(texts))
@@ -527,7 +534,7 @@ def start_map(
         return next(k for k, c in enumerate(combos) if dict(c) == dict(combination))
 
     base = START_BOXES_ENTITY.split("/")
-    out: list[tuple[str, Any]] = [
+    out: list[tuple[str, rr.Points2D | rr.LineStrips2D]] = [
         (
             entity(*base, "training"),
             rr.Points2D(
@@ -801,7 +808,7 @@ def blueprint(
     focus: str | None = None,
     focus_time: tuple[float, float] | None = None,
     scene: bool = True,
-) -> Any:
+) -> rrb.Blueprint:
     """The viewer's default layout (an ``rrb.Blueprint``) for what a recording logged.
 
     Scene above the ``status`` document | the active MPs as state lanes (:data:`LANE_SHARE` of the
@@ -914,7 +921,7 @@ def blueprint(
             if scene
             else status
         )
-        parts: list[Any] = [lanes]
+        parts: list[rrb.ContainerLike] = [lanes]
         shares = [max(3.0, LANE_SHARE * len(series))]
         if overview:
             columns = min(len(overview), 3)
@@ -960,7 +967,7 @@ _MONOSPACE = rrb.TextLogFormat(monospace_body=True)
 event's continuation rows line up below its text."""
 
 
-def legend_time_axis(duration: float | None, space: float) -> Any:
+def legend_time_axis(duration: float | None, space: float) -> rrb.TimeAxis | None:
     """A plot's time axis from before t = 0 to ``duration`` [s], room for its legend.
 
     The first ``space`` of the plot's width is empty (before t = 0); ``None`` without a
@@ -982,7 +989,7 @@ def _variable_views(
     logged: VariableSeries,
     extra: Sequence[str] = (),
     duration: float | None = None,
-) -> Any:
+) -> rrb.Horizontal:
     """One variable's tab: φ (= exit), entry (1 - φ) and the transition probabilities.
 
     Only φ shows a legend (entry and the transitions use its colours; its time axis starts
@@ -1030,7 +1037,14 @@ def _variable_views(
     return rrb.Horizontal(*views, name=variable)
 
 
-def blueprint_paths(views: Sequence[Any]) -> list[str]:
+class _ViewContents(Protocol):
+    """A view with its contents lines (a :class:`~cpmp.recordings.ViewInfo`)."""
+
+    @property
+    def contents(self) -> Sequence[str]: ...
+
+
+def blueprint_paths(views: Sequence[_ViewContents]) -> list[str]:
     """The entity paths the ``+ path`` lines of ``views``' contents name (no wildcards).
 
     Args:
@@ -1062,7 +1076,23 @@ class StartReference(NamedTuple):
 
 
 # ----------------------------------------------------------------------------- the 3D scene
-def _as_vector(value: Any, size: int, what: str, error: type[CpmpError]) -> np.ndarray:
+class ParsedGeom(TypedDict):
+    """A geom of :func:`parse_geom`: validated, with its defaults."""
+
+    body: str
+    name: str
+    type: str
+    size: list[float]
+    pos: np.ndarray
+    quat: np.ndarray
+    rgba: np.ndarray
+
+
+GeomShape = rr.Boxes3D | rr.Ellipsoids3D | rr.Cylinders3D | rr.Capsules3D
+"""The shape archetype of a geom (:func:`geom_archetypes`)."""
+
+
+def _as_vector(value: npt.ArrayLike, size: int, what: str, error: type[CpmpError]) -> np.ndarray:
     array = np.asarray(value, dtype=float)
     if array.shape != (size,):
         raise error(f"{what} must have shape ({size},), got {array.shape}")
@@ -1073,7 +1103,7 @@ def _wxyz_to_xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
     return quat_wxyz[[1, 2, 3, 0]]
 
 
-def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
+def parse_geom(index: int, geom: Mapping[str, str | npt.ArrayLike]) -> ParsedGeom:
     """Geom ``index`` of the recorder's ``geoms``, validated and completed with its defaults.
 
     The result has ``body``, ``name``, ``type``, ``size`` (list), ``pos`` (3,) [m], ``quat``
@@ -1108,7 +1138,7 @@ def parse_geom(index: int, geom: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def parse_geoms(geoms: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def parse_geoms(geoms: Sequence[Mapping[str, str | npt.ArrayLike]]) -> list[ParsedGeom]:
     """Every geom of the recorder's ``geoms`` through :func:`parse_geom`, each at its own path.
 
     Args:
@@ -1135,7 +1165,7 @@ def parse_geoms(geoms: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return parsed
 
 
-def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:
+def geom_archetypes(geom: ParsedGeom) -> tuple[rr.Transform3D, GeomShape]:
     """The static ``Transform3D`` (pose in the body frame) and shape of a parsed geom.
 
     Both are logged at ``world/<body>/<name>`` for a geom of :func:`parse_geom`.
@@ -1164,7 +1194,7 @@ def geom_archetypes(geom: Mapping[str, Any]) -> tuple[Any, Any]:
 
 
 def pose_rows(
-    body_poses: Mapping[str, tuple[Any, Any]],
+    body_poses: Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]],
 ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """Body names, positions (B, 3) [m] and xyzw quaternions (B, 4) of wxyz ``body_poses``.
 

@@ -13,7 +13,7 @@ import uuid
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
@@ -32,12 +32,16 @@ from cpmp.recordings.layout import (
     transition_text,
 )
 from cpmp.records import (
+    JsonValue,
     PendingSwitch,
     SequencerNote,
     StartDecision,
     StartOption,
     TransitionEvent,
 )
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 
 class ViewInfo(NamedTuple):
@@ -81,16 +85,16 @@ class RecordingSummary:
     duration: float
     n_ticks: int
     entity_paths: list[str]
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     notes: list[SequencerNote] = field(default_factory=list)
     feature_groups: dict[str, list[str]] = field(default_factory=dict)
     start: StartDecision | None = None
     note_texts: list[str] = field(default_factory=list)
     cause: PendingSwitch | None = None
     start_correct: dict[str, str] = field(default_factory=dict)
-    start_references: list[dict[str, Any]] = field(default_factory=list)
+    start_references: list[dict[str, JsonValue]] = field(default_factory=list)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, JsonValue]:
         """JSON-able dict of the fields, each transition and note as a dict with named fields.
 
         Transitions have no ``state``: a recording does not hold it. The start's options are
@@ -106,14 +110,14 @@ class RecordingSummary:
         return data
 
 
-def _first(cell: Any) -> Any:
+def _first(cell: object) -> object:
     """A component cell reads back as a list (one batch); return its first value or None."""
     if isinstance(cell, list):
         return cell[0] if cell else None
     return cell
 
 
-def _times_seconds(batch: Any) -> list[float] | None:
+def _times_seconds(batch: pa.RecordBatch) -> list[float] | None:
     if "time" not in batch.schema.names:
         return None
     column = batch.column("time")
@@ -122,7 +126,7 @@ def _times_seconds(batch: Any) -> list[float] | None:
     return [math.nan if value is None else value * scale for value in raw]
 
 
-def _timed_rows(entity: str, batch: Any, times: list[float]) -> list[float]:
+def _timed_rows(entity: str, batch: pa.RecordBatch, times: list[float]) -> list[float]:
     """The times of ``batch``'s rows that count for the episode's duration [s].
 
     An event's continuation rows in the events log sit a few microseconds after it (the
@@ -141,7 +145,7 @@ def _timed_rows(entity: str, batch: Any, times: list[float]) -> list[float]:
     return [t for t, ok in zip(own, valid, strict=True) if ok]
 
 
-def _event_times(batch: Any, archetype: str, times: list[float]) -> list[float]:
+def _event_times(batch: pa.RecordBatch, archetype: str, times: list[float]) -> list[float]:
     """The time [s] of each row's ``archetype`` record: its ``t`` field, else the row's time.
 
     The writer logs an event after the rows of one logged before it at the same time, a few
@@ -155,7 +159,7 @@ def _event_times(batch: Any, archetype: str, times: list[float]) -> list[float]:
     return [t if value is None else float(value) for t, value in zip(times, own, strict=True)]
 
 
-def _open(path: str | os.PathLike[str]) -> tuple[Path, Any]:
+def _open(path: str | os.PathLike[str]) -> tuple[Path, RrdReader]:
     """``(path, RrdReader)``; :class:`~cpmp.errors.CpmpFileError` for a missing path."""
     file = Path(path)
     if not file.exists():
@@ -193,7 +197,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
         raise CpmpFileError(f"{file} contains no rerun recording")
 
     names: dict[int, str] = {}
-    metadata: dict[str, Any] = {}
+    metadata: dict[str, JsonValue] = {}
     feature_groups: dict[str, list[str]] = {}
     ticks: dict[int, set[int]] = {index: set() for index in range(len(stores))}
     entity_paths: set[str] = set()
@@ -202,7 +206,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     outcomes: list[tuple[float, int, str, str, PendingSwitch | None]] = []
     start: StartDecision | None = None
     start_correct: dict[str, str] = {}
-    start_references: list[dict[str, Any]] = []
+    start_references: list[dict[str, JsonValue]] = []
     duration = 0.0
     for index, _store, entity_path, batch in batches:
         columns = batch.schema.names
@@ -332,7 +336,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingSummary:
     )
 
 
-def _note_text(note: SequencerNote, cells: dict[str, Any]) -> str:
+def _note_text(note: SequencerNote, cells: dict[str, JsonValue]) -> str:
     """A note's text as the events log shows it: a hold's with how long it was held.
 
     ``cells``: the note record's ``until`` [s], ``count``, ``ended_by`` and ``then`` (a hold
@@ -361,7 +365,7 @@ def read_views(path: str | os.PathLike[str]) -> list[ViewInfo]:
     Raises:
         CpmpFileError: ``path`` is missing or not a rerun recording.
     """
-    views: dict[str, dict[str, Any]] = {}
+    views: dict[str, dict[str, str | list[str]]] = {}
     containers: dict[str, list[str]] = {}
     root = None
     try:

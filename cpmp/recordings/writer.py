@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
@@ -63,8 +63,14 @@ from cpmp.recordings.layout import (
     status_markdown,
     transition_text,
 )
-from cpmp.records import PendingSwitch, StartDecision
+from cpmp.records import JsonValue, PendingSwitch, StartDecision
 from cpmp.sequencer.inputs import checked_time
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+    import rerun.blueprint as rrb
+
+    from cpmp.recordings.layout import ParsedGeom
 
 ROW_STEP = 1e-6
 """Time [s] between the rows of one event in the events log (:meth:`EpisodeRecorder._log_event`),
@@ -131,8 +137,8 @@ class EpisodeRecorder:
         mp_names: Mapping[str, Sequence[str]],
         episode: str = "episode",
         application_id: str = "cpmp",
-        geoms: Sequence[Mapping[str, Any]] | None = None,
-        metadata: Mapping[str, Any] | None = None,
+        geoms: Sequence[Mapping[str, str | npt.ArrayLike]] | None = None,
+        metadata: Mapping[str, JsonValue] | None = None,
         flush_every: int = 5000,
         feature_groups: Mapping[str, Sequence[str]] | None = None,
         threshold: float | None = SequencerConfig.threshold,
@@ -232,7 +238,7 @@ class EpisodeRecorder:
             self.abort()
             raise
 
-    def _log_geom(self, geom: dict[str, Any]) -> None:
+    def _log_geom(self, geom: ParsedGeom) -> None:
         local, shape = geom_archetypes(geom)
         self._rec.log(entity("world", geom["body"], geom["name"]), local, shape, static=True)
 
@@ -253,7 +259,7 @@ class EpisodeRecorder:
         t: float,
         text: str,
         level: str = "INFO",
-        record: tuple[str, Mapping[str, Any]] | None = None,
+        record: tuple[str, Mapping[str, str | float]] | None = None,
         tick: int | None = None,
         first: int | None = None,
     ) -> int:
@@ -287,7 +293,7 @@ class EpisodeRecorder:
         for k, row in enumerate(rows, start=first):
             if k:
                 self._rec.set_time("time", duration=t + k * ROW_STEP)
-            extra: list[Any] = []
+            extra: list[rr.DynamicArchetype] = []
             if record is not None and k == first:
                 name, components = record
                 archetype = self._rr.DynamicArchetype(name, components={**components, "t": t})
@@ -316,7 +322,7 @@ class EpisodeRecorder:
         progress: Mapping[str, Mapping[str, float]],
         active: Mapping[str, str],
         transition_probs: Mapping[str, Mapping[str, float]] | None = None,
-        body_poses: Mapping[str, tuple[Any, Any]] | None = None,
+        body_poses: Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]] | None = None,
     ) -> None:
         """Record one control tick.
 
@@ -712,7 +718,7 @@ class EpisodeRecorder:
         self._atomic.__exit__(None, None, None)
         return self.path
 
-    def _blueprint(self) -> Any:
+    def _blueprint(self) -> rrb.Blueprint:
         """The default layout for what was logged (:func:`~cpmp.recordings.layout.blueprint`).
 
         An episode that ended at its first tick with a start decision logged (a wrong start)
