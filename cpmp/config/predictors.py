@@ -25,12 +25,12 @@ SKLEARN_SOLVERS = ("newton-cholesky", "lbfgs", "newton-cg")
 """scikit-learn solvers that leave the intercept unpenalised, as ``klr`` does."""
 
 
-
 DTYPES = ("auto", "float64", "float32")
 """The predictors' ``dtype`` option values."""
 FLOAT32_FROM_SAMPLES = 50_000
 """Training samples from which ``dtype="auto"`` fits in ``float32`` (half the bytes per kernel
 block, a faster fit; docs/benchmarks.md measures it); smaller fits keep ``float64``."""
+
 
 @dataclass
 class PredictorConfig:
