@@ -355,16 +355,12 @@ def run_episodes(
             note_switches(seqs[i], active[i])
             over[i] = runs[i].done(active[i])
             times[i] = t
-    scored = []
-    for i in range(n):
-        completed = runs[i].complete(active[i])
-        failure = "" if completed else run_failure(runs[i])
-        scored.append(
-            score_episode(
-                world, contexts[i], initial[i], seqs[i], times[i], completed, batch, i, failure
-            )
+    return [
+        score_episode(
+            world, contexts[i], initial[i], seqs[i], times[i], runs[i], active[i], batch, i
         )
-    return scored
+        for i in range(n)
+    ]
 
 
 def run_episode(
@@ -407,9 +403,17 @@ def run_episode(
             on_tick(TickInfo(t, active=dict(active), features=x))
         note_switches(seqs, active)
         over = run.done(active)
-    completed = run.complete(active)
-    failure = "" if completed else run_failure(run)
-    return score_episode(world, context, initial, seqs, t, completed, policy, failure=failure)
+    return score_episode(world, context, initial, seqs, t, run, active, policy)
+
+
+def failure_text(shortfall: str, failed_at: float | None) -> str:
+    """A run's ``failure()`` from its task's ``shortfall`` and when a failure happened [s].
+
+    ``" at <t> s"`` follows ``shortfall`` after a failure nothing undoes (``failed_at`` set).
+    """
+    if shortfall and failed_at is not None:
+        return f"{shortfall} at {failed_at:.2f} s"
+    return shortfall
 
 
 def run_failure(run: WorldRun) -> str:
@@ -424,10 +428,10 @@ def score_episode(
     initial: dict[str, str],
     sequences: dict[str, list[str]],
     time: float,
-    completed: bool,
+    run: WorldRun,
+    active: Mapping[str, str],
     policy: object = None,
     index: int | None = None,
-    failure: str = "",
 ) -> EpisodeRun:
     """Score an episode: its outcome, and an incomplete one's cause.
 
@@ -439,21 +443,24 @@ def score_episode(
         initial: the policy's initial MPs.
         sequences: variable -> the MPs it ran, in order.
         time: when the episode ended [s].
-        completed: whether the goal state was reached.
+        run: the episode's run at its end: whether it completed (with the MPs ``active``
+            then), and what went wrong in the world if not (:func:`run_failure`, added to an
+            incomplete episode's cause as its ``detail``, after the sequencer's own).
+        active: the MPs active at the end.
         policy: the policy that ran it, asked for an incomplete episode's cause
             (:func:`~cpmp.records.episode_cause`: a fitted sequencer explains it; ``None`` or
             another policy: ``unknown`` why).
         index: the episode's index in a batched ``policy`` (``None``: a single policy).
-        failure: what went wrong in the world (:func:`run_failure`), added to an incomplete
-            episode's cause as its ``detail`` (after the sequencer's own detail, if any).
 
     Returns:
         The scored :class:`EpisodeRun`.
     """
+    completed = run.complete(active)
     outcome = world.score(context, initial, sequences, completed)
     cause = None
     if outcome == "incomplete":
         cause = episode_cause(policy, sequences, expected_sequences(world, context), index)
+        failure = "" if completed else run_failure(run)
         if cause is not None and failure:
             detail = f"{cause.detail}; {failure}" if cause.detail else failure
             cause = replace(cause, detail=detail)

@@ -26,7 +26,7 @@ from cpmp.worlds.peg.world import (
     PegState,
     PegTask,
 )
-from cpmp.worlds.protocol import WorldBase, substeps
+from cpmp.worlds.protocol import WorldBase, failure_text, substeps
 
 
 @dataclass
@@ -65,10 +65,7 @@ class PegRun:
 
     def failure(self) -> str:
         """Why the run is not complete, in words (:meth:`PegTask.shortfall`, with the time)."""
-        text = self.task.shortfall(self.state, self.context)
-        if text and self.failed_at is not None:
-            text += f" at {self.failed_at:.2f} s"
-        return text
+        return failure_text(self.task.shortfall(self.state, self.context), self.failed_at)
 
     def done(self, active: Mapping[str, str]) -> bool:
         """The goal reached, or the base slid, the peg broke or dropped."""

@@ -62,7 +62,7 @@ import numpy as np
 
 from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError, UnknownMPError
-from cpmp.worlds.protocol import substeps
+from cpmp.worlds.protocol import failure_text, substeps
 
 FEATURE_NAMES: tuple[str, ...] = (
     "arm_x",
@@ -559,10 +559,7 @@ class SlipRun:
 
     def failure(self) -> str:
         """Why the run is not complete, in words (:meth:`SlipTask.shortfall`, with the time)."""
-        text = self.task.shortfall(self.state, self.context)
-        if text and self.failed_at is not None:
-            text += f" at {self.failed_at:.2f} s"
-        return text
+        return failure_text(self.task.shortfall(self.state, self.context), self.failed_at)
 
     def done(self, active: Mapping[str, str]) -> bool:
         """The goal reached, or a failure (object broken or lost, arm hit the drawer)."""
