@@ -131,7 +131,7 @@ def test_slip_is_seen_mid_lift_in_grip_and_contact(world):
     assert grip[lift.stop + 5] > grip[lift.stop - 2]  # and the gripper opens again at once
 
 
-def test_advance_by_three_ticks_equals_three_steps(world):
+def test_advancing_three_ticks_at_once_equals_three_steps(world):
     context = world.contexts(1, 5)[0]
     active = {"arm": "reach", "gripper": "open", "drawer": world.initial_mps(context)["drawer"]}
     a, b = world.start(context), world.start(context)

@@ -454,14 +454,6 @@ class SlipTask:
         if self.in_mouth(state.arm_x, state.arm_z, context) and state.ext < OPEN_EXT / 2:
             state.failure = "hit"
 
-    def advance_by(
-        self, state: SlipState, context: SlipContext, active: Mapping[str, str], h: float
-    ) -> None:
-        """Advance ``state`` by any ``h`` [s] in equal sub-steps no longer than ``dt``."""
-        n, step = substeps(h, self.dt)
-        for _ in range(n):
-            self.advance(state, context, active, step)
-
     @staticmethod
     def in_mouth(x: float, z: float, context: SlipContext) -> bool:
         """Whether the point ``(x, z)`` [m] is in the drawer's mouth."""
