@@ -163,13 +163,12 @@ def fit_parts(
     node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
     if config.sequencer.start_kernel == "isotropic":
         node_keys += start_keys(graphs)
-    n_samples = sum(d.n_samples for d in demos)
+    all_x = np.concatenate([d.features for d in demos], axis=0)
     options = config.predictor_config
-    dtype = resolved_dtype(options.dtype, n_samples)
+    dtype = resolved_dtype(options.dtype, len(all_x))
     if dtype != options.dtype:
         options = dataclasses.replace(options, dtype=dtype)
     model = PREDICTORS[predictor](node_keys, len(feature_names), options)
-    all_x = np.concatenate([d.features for d in demos], axis=0)
     model.scaler.fit(all_x, model.config.feature_scaling)
     data = node_training_data(graphs, model, config.subsample)
     val = None
