@@ -1,13 +1,19 @@
 """``cpmp-import`` (scripts/import.py): one command turns a recording into a
 demonstration file and prints the summary and the file's path last; a bad configuration or a
-failed import ends with exit status 2, one ``error:`` line and no output file."""
+failed import ends with exit status 2, one ``error:`` line and no output file.
+
+The first command runs as a process of its own; the others (:func:`batched`) run one after
+another in one fresh interpreter, each as ``python scripts/import.py ...`` runs it
+(``tests/cli/conftest.py``)."""
 
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -58,6 +64,39 @@ def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
+def drop_signals(recording: Path, demos: range) -> None:
+    """Delete the ``reached`` termination signal of ``demo_<k>`` for every ``k`` of ``demos``."""
+    with h5py.File(recording, "a") as f:
+        for k in demos:
+            del f[f"data/demo_{k}/datagen_info/subtask_term_signals/reached"]
+
+
+@pytest.fixture(scope="module")
+def batched(tmp_path_factory, run_scripts: Callable[..., list[Any]]) -> dict[str, tuple[Path, Any]]:
+    """The failing and skipping imports, each in a directory of its own with its own mapping
+    and recording, run as :func:`run` runs them (``hydra.run.dir`` = ``<dir>/run``) in one
+    fresh interpreter: ``{name: (directory, what the command left)}``."""
+    root = tmp_path_factory.mktemp("import_runs")
+    cases: dict[str, tuple[range, list[str]]] = {
+        "failed": (range(2, 3), ["output=demos.hdf5"]),
+        "skip": (range(2, 3), ["output={dir}/demos.hdf5", "on_error=skip"]),
+        "all_bad": (range(4), ["output=demos.hdf5", "on_error=skip"]),
+    }
+    runs, dirs = [], {}
+    for name, (bad, args) in cases.items():
+        cwd = root / name
+        cwd.mkdir()
+        mapping = cwd / "mapping.yaml"
+        mapping.write_text(yaml.safe_dump(MAPPING))
+        recording = write_recording(cwd / "recording.hdf5")
+        drop_signals(recording, bad)
+        argv = [f"mapping={mapping}", f"input={recording}"]
+        argv += [a.replace("{dir}", str(cwd)) for a in args] + [f"hydra.run.dir={cwd / 'run'}"]
+        runs.append((SCRIPT, argv, cwd))
+        dirs[name] = cwd
+    return dict(zip(cases, zip(dirs.values(), run_scripts(runs, root), strict=True), strict=True))
+
+
 def test_one_command_imports_prints_the_summary_and_the_path_last(inputs, tmp_path):
     mapping, recording = inputs
     out = tmp_path / "demos.hdf5"
@@ -75,11 +114,9 @@ def test_one_command_imports_prints_the_summary_and_the_path_last(inputs, tmp_pa
     assert (tmp_path / "run" / "summary.txt").read_text().startswith("imported 4 demonstration(s)")
 
 
-def test_a_failed_import_is_one_error_line_and_no_file(inputs, tmp_path):
-    mapping, recording = inputs
-    with h5py.File(recording, "a") as f:
-        del f["data/demo_2/datagen_info/subtask_term_signals/reached"]
-    proc = run([f"mapping={mapping}", f"input={recording}", "output=demos.hdf5"], tmp_path)
+def test_a_failed_import_is_one_error_line_and_no_file(batched):
+    """demo_2 lacks its signal: exit status 2, one error line naming it, no file (nor temp)."""
+    tmp_path, proc = batched["failed"]
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "demo_2: no termination signal reached" in errors[0]
@@ -138,14 +175,11 @@ def test_the_job_writes_relative_outputs_into_the_run_directory(inputs, tmp_path
     assert not (tmp_path / "out.hdf5").exists()
 
 
-def test_on_error_skip_imports_the_rest_reports_and_exits_3(inputs, tmp_path):
-    mapping, recording = inputs
-    with h5py.File(recording, "a") as f:
-        del f["data/demo_2/datagen_info/subtask_term_signals/reached"]
+def test_on_error_skip_imports_the_rest_reports_and_exits_3(batched):
+    """demo_2 lacks its signal, ``on_error=skip``: the other three are written, the skipped one
+    is reported (stdout and a JSON file), exit status 3."""
+    tmp_path, proc = batched["skip"]
     out = tmp_path / "demos.hdf5"
-    proc = run(
-        [f"mapping={mapping}", f"input={recording}", f"output={out}", "on_error=skip"], tmp_path
-    )
     assert proc.returncode == 3, proc.stderr[-3000:]
     assert "error:" not in proc.stderr
     lines = proc.stdout.strip().splitlines()
@@ -158,14 +192,9 @@ def test_on_error_skip_imports_the_rest_reports_and_exits_3(inputs, tmp_path):
     assert f"skipped demonstrations: {out}.skipped.json" in proc.stdout
 
 
-def test_on_error_skip_with_every_demo_bad_is_one_error_line_and_no_file(inputs, tmp_path):
-    mapping, recording = inputs
-    with h5py.File(recording, "a") as f:
-        for k in range(4):
-            del f[f"data/demo_{k}/datagen_info/subtask_term_signals/reached"]
-    proc = run(
-        [f"mapping={mapping}", f"input={recording}", "output=demos.hdf5", "on_error=skip"], tmp_path
-    )
+def test_on_error_skip_with_every_demo_bad_is_one_error_line_and_no_file(batched):
+    """Every demo lacks its signal, ``on_error=skip``: exit status 2, one error line, no file."""
+    tmp_path, proc = batched["all_bad"]
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "every demonstration failed to import (4 skipped" in errors[0]

@@ -1,16 +1,28 @@
 """The command-line entry points (``cpmp-*`` console scripts and ``scripts/*.py``): every kind
 of bad override ends a Hydra command with exit status 2 and one ``error:`` line naming it,
 before torch, Lightning or MuJoCo are imported; ``evaluate`` reports MPs the model does not
-know."""
+know.
+
+Most command lines are run by calling the function a console script calls
+(``cpmp.cli.main.<name>_main``, ``scripts/<name>.py`` through :func:`runpy.run_path`) with
+``sys.argv`` set, reading its exit status and the process's stderr (file descriptor 2);
+the bad overrides that must fail before anything heavy is imported run that way in one fresh
+interpreter (:func:`light_runs`). A few commands still run as real processes to prove the
+wiring of the installed console scripts: a bad override and a bad value
+(:func:`test_a_console_script_exits_2_with_one_error_line`), a job's own user error, a job
+that runs from another directory.
+"""
 
 from __future__ import annotations
 
 import json
 import logging
 import pickle
+import runpy
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -41,13 +53,39 @@ def run(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
-def error_line(proc: subprocess.CompletedProcess) -> str:
-    """The one ``error:`` line of a failed command (exit status 2, no traceback)."""
-    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert "Traceback" not in proc.stderr, proc.stderr
-    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1, proc.stderr
+def one_error_line(code: object, stderr: str, stdout: str = "") -> str:
+    """The one ``error:`` line of a failed command (exit status ``code`` 2, no traceback)."""
+    assert code == 2, stdout[-2000:] + stderr[-2000:]
+    assert "Traceback" not in stderr, stderr
+    errors = [line for line in stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, stderr
     return errors[0]
+
+
+def error_line(proc: subprocess.CompletedProcess) -> str:
+    """The one ``error:`` line of a failed process (exit status 2, no traceback)."""
+    return one_error_line(proc.returncode, proc.stderr, proc.stdout)
+
+
+def _no_job(*args: object, **kwargs: object) -> None:
+    """Stands in for ``hydra.main`` where the checks must fail first: a command line that
+    passed them fails the test here instead of starting a (long) job in the test process."""
+    raise AssertionError("the command line passed the checks: Hydra would start the job")
+
+
+def run_in_process(
+    main: Any, argv: list[str], cwd: Path, monkeypatch: pytest.MonkeyPatch, capfd: Any
+) -> tuple[object, str, str]:
+    """``main()`` as its console script runs it: ``sys.argv`` = ``argv``, working directory
+    ``cwd``; ``(exit status, stdout, stderr)`` with both streams read at the file descriptors
+    (``capfd``), so output that bypasses ``sys.stderr`` is seen too."""
+    monkeypatch.chdir(cwd)
+    monkeypatch.setattr(sys, "argv", argv)
+    capfd.readouterr()
+    with pytest.raises(SystemExit) as info:
+        main()
+    out, err = capfd.readouterr()
+    return info.value.code, out, err
 
 
 # Every kind of bad override on every Hydra command: (command, argv, words the error names).
@@ -155,51 +193,134 @@ def some_file(tmp_path: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize("case", LIGHT_CASES, ids=case_id)
-def test_bad_override_exits_2_with_one_error_line(case, tmp_path, some_file):
-    command, argv, names = case
-    proc = run([console_script(command), *fill(argv, some_file)], cwd=tmp_path)
-    line = error_line(proc)
-    assert proc.stderr.strip() == line  # nothing but the error line
-    for name in names:
-        assert name in line
-    assert not (tmp_path / "logs").exists()  # no run directory: failed before Hydra ran
+LIGHT_RUNNER = r"""
+import json, os, sys, tempfile, traceback, warnings
+from pathlib import Path
+
+from cpmp.cli import main as cli
+from cpmp.errors import CpmpError
+
+spec = json.loads(Path(sys.argv[1]).read_text())
+seen = {}
+real_fail = cli._fail
 
 
-def test_light_checks_import_no_heavy_module(tmp_path, some_file):
-    """Every bad override above fails, and every good command line passes, in a fresh
-    interpreter that has not imported torch, Lightning, MuJoCo, rerun or matplotlib."""
-    cases = [(c, fill(a, some_file)) for c, a, _ in LIGHT_CASES]
+def observed_fail(err):
+    # what the command failed with and where it was raised; then the real _fail
+    frames, tb = [], err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame.f_code.co_name)
+        tb = tb.tb_next
+    seen.update(cpmp_error=isinstance(err, CpmpError), frames=frames)
+    real_fail(err)
+
+
+def no_job(*args, **kwargs):
+    raise AssertionError("the command line passed the checks: Hydra would start the job")
+
+
+cli._fail = observed_fail
+cli.hydra.main = no_job
+runs = {}
+for case in spec["cases"]:
+    cwd = Path(case["cwd"])
+    cwd.mkdir()
+    os.chdir(cwd)
+    seen.clear()
+    sys.argv = ["cpmp-" + case["command"].replace("_", "-"), *case["argv"]]
+    main = getattr(cli, case["command"] + "_main")
+    with tempfile.TemporaryFile() as captured, warnings.catch_warnings():
+        # catch_warnings resets the warning registries: a warning shows in every case, as in
+        # a fresh process; fd 2 is captured, as a parent process reads stderr
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(captured.fileno(), 2)
+        try:
+            main()
+            code = 0
+        except SystemExit as done:  # the exit status Python gives SystemExit(code)
+            code = 0 if done.code is None else done.code
+            if not isinstance(code, int):
+                print(code, file=sys.stderr)
+                code = 1
+        except BaseException:
+            traceback.print_exc()
+            code = 1
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        stderr = captured.read().decode()
+    runs[case["id"]] = {"code": code, "stderr": stderr, "logs": (cwd / "logs").exists(), **seen}
+os.chdir(spec["root"])
+passed = [len(cli.check_command(command, argv)) for command, argv in spec["good"]]
+heavy = [m for m in spec["heavy"] if m in sys.modules]
+Path(spec["out"]).write_text(json.dumps({"runs": runs, "passed": passed, "heavy": heavy}))
+"""
+"""Runs every case of :data:`LIGHT_CASES` through its command's entry point
+(``cli.<command>_main``, with ``sys.argv`` set, in a directory of its own, stderr read at file
+descriptor 2) in one fresh interpreter, then checks the good command lines of
+:func:`light_runs` with :func:`check_command`, and lists the heavy modules it imported.
+``cli._fail`` is wrapped to record the error it prints (its class, where it was raised) and
+``hydra.main`` replaced by a stub that fails: none of these command lines may get that far."""
+
+
+@pytest.fixture(scope="module")
+def light_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The bad overrides of :data:`LIGHT_CASES`, and six good command lines, run by
+    :data:`LIGHT_RUNNER` in one fresh interpreter: ``runs`` (by :func:`case_id`: exit status,
+    stderr, whether ``logs/`` was made, the error's class and frames), ``passed`` (the good
+    command lines' job counts) and ``heavy`` (heavy modules imported by the end)."""
+    root = tmp_path_factory.mktemp("light")
+    some_file = root / "exists.bin"
+    some_file.write_bytes(b"not read by the checks")
+    ids = [case_id(case) for case in LIGHT_CASES]
+    assert len(set(ids)) == len(ids), "case ids must be unique"
+    cases = [
+        {"id": id_, "command": c, "argv": fill(a, some_file), "cwd": str(root / f"case_{i}")}
+        for i, (id_, (c, a, _)) in enumerate(zip(ids, LIGHT_CASES, strict=True))
+    ]
     good = [
         ("experiment", ["experiment=tiny", "predictor=mlp", "predictor.lr=0.1"]),
         ("train", [f"data.path={some_file}", "seed=3"]),
         ("evaluate", [f"checkpoint={some_file}", f"data.path={some_file}"]),
-        ("aggregate", [f"sweep_dir={tmp_path}"]),
+        ("aggregate", [f"sweep_dir={root}"]),
         ("compare", ["experiment=compare_tiny", "compare.predictors=[klr,mlp]"]),
         ("experiment", ["experiment=compare_tiny"]),
     ]
-    code = f"""
-import json, sys
-from cpmp.errors import CpmpError
-from cpmp.cli.main import check_command
-failed = []
-for command, argv in {cases!r}:
-    try:
-        check_command(command, argv)
-    except CpmpError:
-        failed.append(True)
-    else:
-        failed.append(False)
-passed = [len(check_command(command, argv)) for command, argv in {good!r}]
-heavy = [m for m in {HEAVY!r} if m in sys.modules]
-print(json.dumps({{"failed": failed, "passed": passed, "heavy": heavy}}))
-"""
-    proc = run([sys.executable, "-c", code], cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert out["failed"] == [True] * len(cases)
-    assert out["passed"] == [1] * len(good)
-    assert out["heavy"] == []
+    out = root / "runs.json"
+    spec = {"cases": cases, "good": good, "heavy": HEAVY, "root": str(root), "out": str(out)}
+    (root / "spec.json").write_text(json.dumps(spec))
+    proc = run([sys.executable, "-c", LIGHT_RUNNER, str(root / "spec.json")], cwd=root)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    results = json.loads(out.read_text())
+    assert sorted(results["runs"]) == sorted(ids)
+    return {**results, "n_good": len(good)}
+
+
+@pytest.mark.parametrize("case", LIGHT_CASES, ids=case_id)
+def test_bad_override_exits_2_with_one_error_line(case, light_runs):
+    """The command's entry point exits with status 2; its stderr is one ``error:`` line, which
+    names the override (and the hint); no run directory was made (failed before Hydra ran)."""
+    names = case[2]
+    result = light_runs["runs"][case_id(case)]
+    line = one_error_line(result["code"], result["stderr"])
+    assert result["stderr"].strip() == line  # nothing but the error line
+    for name in names:
+        assert name in line
+    assert not result["logs"]  # no run directory: failed before Hydra ran
+
+
+def test_light_checks_import_no_heavy_module(light_runs):
+    """Every bad override above fails in :func:`check_command` with a CpmpError, and every
+    good command line passes, in a fresh interpreter that has not imported torch, Lightning,
+    MuJoCo, rerun or matplotlib by the end."""
+    for id_, result in light_runs["runs"].items():
+        assert result.get("cpmp_error") is True, (id_, result)
+        assert "check_command" in result["frames"], (id_, result["frames"])
+    assert light_runs["passed"] == [1] * light_runs["n_good"]
+    assert light_runs["heavy"] == []
 
 
 @pytest.mark.parametrize(
@@ -266,10 +387,30 @@ DEEP_CASES = [
 
 
 @pytest.mark.parametrize("case", DEEP_CASES, ids=case_id)
-def test_bad_value_fails_before_the_job_starts(case, tmp_path, some_file):
+def test_bad_value_fails_before_the_job_starts(case, tmp_path, some_file, monkeypatch, capfd):
+    """The command's entry point exits with status 2 and one ``error:`` line naming the value,
+    and made no run directory (Hydra never started: ``hydra.main`` would fail the test)."""
+    command, argv, names = case
+    monkeypatch.setattr(cli.hydra, "main", _no_job)
+    main = getattr(cli, f"{command}_main")
+    argv = [f"cpmp-{command.replace('_', '-')}", *fill(argv, some_file)]
+    code, out, err = run_in_process(main, argv, tmp_path, monkeypatch, capfd)
+    line = one_error_line(code, err, out)
+    for name in names:
+        assert name in line
+    assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize("case", [LIGHT_CASES[0], DEEP_CASES[0]], ids=case_id)
+def test_a_console_script_exits_2_with_one_error_line(case, tmp_path, some_file):
+    """The installed console script, as a process: a bad override (caught by the light checks)
+    and a bad value (caught by the job's own checks) end it with exit status 2, one
+    ``error:`` line naming them, and no run directory."""
     command, argv, names = case
     proc = run([console_script(command), *fill(argv, some_file)], cwd=tmp_path)
     line = error_line(proc)
+    if case in LIGHT_CASES:
+        assert proc.stderr.strip() == line  # nothing but the error line
     for name in names:
         assert name in line
     assert not (tmp_path / "logs").exists()
@@ -290,16 +431,29 @@ def test_user_error_inside_the_job_exits_2(tmp_path, some_file):
 
 
 @pytest.mark.parametrize("script", sorted(COMMANDS))
-def test_scripts_are_wrappers_of_the_commands(script, tmp_path):
-    proc = run([sys.executable, str(ROOT / "scripts" / f"{script}.py"), "nokey=1"], cwd=tmp_path)
-    assert f"the {script} config has no key 'nokey'" in error_line(proc)
+def test_scripts_are_wrappers_of_the_commands(script, tmp_path, monkeypatch, capfd):
+    """``python scripts/<script>.py nokey=1`` (the file run as ``__main__``, as python runs
+    it) checks the command line of command ``script``: exit status 2 and one error line
+    naming that command's config."""
+    path = ROOT / "scripts" / f"{script}.py"
+    monkeypatch.setattr(cli.hydra, "main", _no_job)
+    code, out, err = run_in_process(
+        lambda: runpy.run_path(str(path), run_name="__main__"),
+        [str(path), "nokey=1"],
+        tmp_path,
+        monkeypatch,
+        capfd,
+    )
+    assert f"the {script} config has no key 'nokey'" in one_error_line(code, err, out)
 
 
-def test_help_lists_the_config_groups(tmp_path):
-    proc = run([console_script("experiment"), "--help"], cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr
+def test_help_lists_the_config_groups(tmp_path, monkeypatch, capfd):
+    """``cpmp-experiment --help`` exits with status 0 and lists every predictor option."""
+    argv = ["cpmp-experiment", "--help"]
+    code, out, err = run_in_process(cli.experiment_main, argv, tmp_path, monkeypatch, capfd)
+    assert code == 0, err
     predictors = ", ".join(sorted(p.stem for p in (CONF_DIR / "predictor").glob("*.yaml")))
-    assert f"predictor: {predictors}" in proc.stdout
+    assert f"predictor: {predictors}" in out
 
 
 def test_command_runs_from_anywhere_into_logs_of_its_job(tmp_path):
@@ -343,12 +497,20 @@ def test_conf_dir_is_the_repository_conf():
     assert sorted(COMMANDS) == sorted(p.stem for p in CONF_DIR.glob("*.yaml"))
 
 
-def test_inspect_rrd_reports_unreadable_files(tmp_path):
+def test_inspect_rrd_reports_unreadable_files(tmp_path, monkeypatch, capfd):
+    """``cpmp-inspect-rrd`` (installed, and ``inspect_rrd_entry`` in pyproject) exits with
+    status 2 and one stderr line naming an unreadable file."""
+    import tomllib
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["cpmp-inspect-rrd"] == "cpmp.cli.main:inspect_rrd_entry"
+    console_script("inspect_rrd")  # installed
     bad = tmp_path / "bad.rrd"
     bad.write_text("not an rrd")
-    proc = run([console_script("inspect_rrd"), str(bad)], cwd=tmp_path)
-    assert proc.returncode == 2
-    assert proc.stderr.count("\n") == 1 and "bad.rrd" in proc.stderr
+    argv = ["cpmp-inspect-rrd", str(bad)]
+    code, _, err = run_in_process(cli.inspect_rrd_entry, argv, tmp_path, monkeypatch, capfd)
+    assert code == 2
+    assert err.count("\n") == 1 and "bad.rrd" in err
 
 
 # ---------------------------------------------------------- evaluate: MPs the model lacks

@@ -1,14 +1,18 @@
 """docs/importing.md runs as written: its Python blocks write the example recordings and fit
 on an import, its commands import each source, its printed summary is what the command
-prints, and its mappings are the files in conf/import/."""
+prints, and its mappings are the files in conf/import/.
+
+The doc's three commands run one after another in one fresh interpreter (:func:`doc_runs`),
+each as ``python scripts/import.py ...`` runs it, by the batch runner of
+``tests/cli/conftest.py``."""
 
 from __future__ import annotations
 
 import os
 import re
-import subprocess
-import sys
+import runpy
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -62,14 +66,29 @@ def test_the_python_blocks_write_recordings_and_fit_on_an_import(examples):
     assert ns["replay"]["sequence_match"] == {"left_arm": 1.0, "right_arm": 1.0}
 
 
-@pytest.mark.parametrize("index", range(3))
-def test_each_import_command_runs(examples, tmp_path, index):
+@pytest.fixture(scope="module")
+def doc_runs(examples, tmp_path_factory) -> list[Any]:
+    """The doc's import commands on the example recordings, each from the repository root with
+    a run directory of its own, run in one fresh interpreter as ``python <script> ...`` runs
+    them: what each left (exit status, stdout, stderr)."""
     folder, _ = examples
-    command = commands()[index].replace(EXAMPLES, str(folder))
-    argv = command.split()
-    assert argv[0] == ".venv/bin/python"
-    argv = [sys.executable, *argv[1:], f"hydra.run.dir={tmp_path / 'run'}"]
-    proc = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    root = tmp_path_factory.mktemp("doc_runs")
+    runs = []
+    for index, command in enumerate(commands()):
+        argv = command.replace(EXAMPLES, str(folder)).split()
+        assert argv[0] == ".venv/bin/python" and argv[1] == "scripts/import.py", argv
+        runs.append((argv[1], [*argv[2:], f"hydra.run.dir={root / str(index) / 'run'}"], ROOT))
+    run_scripts = runpy.run_path(str(ROOT / "tests" / "cli" / "conftest.py"))["_run_scripts"]
+    return run_scripts(runs, root)
+
+
+@pytest.mark.parametrize("index", range(3))
+def test_each_import_command_runs(examples, doc_runs, index):
+    """The doc's command ``index`` exits with status 0, prints the demonstration file's path
+    last, and the file holds the four demonstrations with their MP sequences (the first
+    command: prints the summary shown in the doc and holds out demo_run_2)."""
+    folder, _ = examples
+    proc = doc_runs[index]
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = Path(proc.stdout.strip().splitlines()[-1])
     assert out.parent == folder and out.is_file()
