@@ -23,6 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from cpmp.cli.compose import (
     CONF_DIR,
+    Composed,
     compose_config,
     one_line,
     parse_command_line,
@@ -215,17 +216,15 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
     )
     jobs = sweep_jobs(parsed) if multirun else [overrides]
     checked: list[CheckedJob] = []
+    composed: Composed = {}  # each list of overrides is composed once
     bases: dict[tuple[str, ...], dict[str, JsonValue]] = {}
-    group_names: set[str] | None = None
     for job_overrides in jobs:
         try:
             if inspection:
-                compose_config(config_name, job_overrides, args.config_dir)
+                compose_config(config_name, job_overrides, args.config_dir, composed)
                 continue
             job_parsed = parse_overrides(job_overrides)
-            if group_names is None:
-                default = compose_config(config_name, [], args.config_dir)
-                group_names = set(default.hydra.runtime.choices)
+            group_names = _group_names(config_name, args.config_dir, composed)
             groups = tuple(
                 line
                 for line, o in zip(job_overrides, job_parsed, strict=True)
@@ -233,17 +232,43 @@ def check_command_line(command: Command, argv: Sequence[str]) -> list[CheckedJob
             )
             if groups not in bases:
                 bases[groups] = resolved_job(
-                    compose_config(config_name, list(groups), args.config_dir)
+                    compose_config(config_name, list(groups), args.config_dir, composed)
                 )
             _check_types(bases[groups], [o for o in job_parsed if o.input_line not in groups])
-            cfg = compose_config(config_name, job_overrides, args.config_dir)
-            _check_values(command, resolved_job(cfg))
+            cfg = compose_config(config_name, job_overrides, args.config_dir, composed)
+            same = tuple(job_overrides) == groups  # no value override: the base is the job
+            _check_values(command, bases[groups] if same else resolved_job(cfg))
         except CpmpError as err:
             raise _in_job(err, job_overrides, len(jobs)) from None
         checked.append(
             CheckedJob(job_overrides, OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
         )
     return checked
+
+
+_GROUP_NAMES: dict[str, frozenset[str]] = {}
+"""The config groups of each of cpmp's own configs (no ``--config-dir``) by config name,
+found once per process (the defaults list of ``conf/<name>.yaml`` does not change)."""
+
+
+def _group_names(config_name: str, config_dir: str | None, composed: Composed) -> frozenset[str]:
+    """The config groups of ``config_name`` (its ``hydra.runtime.choices`` with no override).
+
+    Args:
+        config_name: the command's config.
+        config_dir: an extra config directory, or ``None``.
+        composed: the command line's configs (:func:`~cpmp.cli.compose.compose_config`).
+
+    Returns:
+        The group names, such as ``predictor`` and ``hydra/launcher``.
+    """
+    if config_dir is None and config_name in _GROUP_NAMES:
+        return _GROUP_NAMES[config_name]
+    default = compose_config(config_name, [], config_dir, composed)
+    names = frozenset(default.hydra.runtime.choices)
+    if config_dir is None:
+        _GROUP_NAMES[config_name] = names
+    return names
 
 
 def _in_job(err: CpmpError, overrides: list[str], n_jobs: int) -> CpmpError:

@@ -36,6 +36,10 @@ CONF_DIR = conf_dir()
 """The Hydra config directory: the checkout's ``conf/`` (editable install) or its installed copy
 (:mod:`cpmp.config.paths`); Hydra reads it as the package ``cpmp._conf``."""
 
+Composed = dict[tuple[str, ...], DictConfig]
+"""The configs composed for one command line (one config name and config directory), by
+their overrides: :func:`compose_config` composes each list of overrides once."""
+
 
 def parse_command_line(argv: Sequence[str]) -> argparse.Namespace:
     """``argv`` parsed by Hydra's own command-line parser.
@@ -98,9 +102,16 @@ def parse_overrides(overrides: Sequence[str]) -> list[Override]:
 
 
 def _composition_error(
-    err: Exception, overrides: Sequence[Override], config_name: str, config_dir: str | None
+    err: Exception,
+    overrides: Sequence[Override],
+    config_name: str,
+    config_dir: str | None,
+    composed: Composed | None,
 ) -> ConfigError:
-    """A one-line :class:`ConfigError` for a Hydra composition error, naming the override."""
+    """A one-line :class:`ConfigError` for a Hydra composition error, naming the override.
+
+    ``composed`` is :func:`compose_config`'s cache, reused to suggest a key.
+    """
     text = str(err)
     missing = re.search(r"Could not find '([^']+)/([^']+)'", text)
     if isinstance(err, MissingConfigException) and missing:
@@ -121,7 +132,7 @@ def _composition_error(
         if group == "predictor" and removed:
             return ConfigError(f"{line}: removed option {name}: {removed[0]}; drop it")
         others = [o.input_line for o in overrides if "." not in o.key_or_group]
-        close = _close_key(name, config_name, others, config_dir)
+        close = _close_key(name, config_name, others, config_dir, composed)
         if close is not None:  # a misspelt key: adding it with + would only fail later
             value = line.partition("=")[2]
             return ConfigError(
@@ -158,7 +169,13 @@ def _composition_error(
     return ConfigError(f"{one_line(text)}{detail}")
 
 
-def _close_key(key: str, config_name: str, groups: list[str], config_dir: str | None) -> str | None:
+def _close_key(
+    key: str,
+    config_name: str,
+    groups: list[str],
+    config_dir: str | None,
+    composed: Composed | None = None,
+) -> str | None:
     """The existing key a misspelt ``key`` most likely means, from the keys beside it.
 
     Args:
@@ -166,13 +183,16 @@ def _close_key(key: str, config_name: str, groups: list[str], config_dir: str | 
         config_name: the command's config.
         groups: the overrides of groups and top-level keys (the config is composed with them).
         config_dir: an extra config directory, or ``None``.
+        composed: :func:`compose_config`'s cache of the configs composed for the same command
+            line (the config composed with ``groups`` is often there already), or ``None``.
 
     Returns:
         The dotted key (``sequencer.threshold`` for ``sequencer.treshold``), or ``None``.
     """
     parent, _, leaf = key.rpartition(".")
+    others = [g for g in groups if g.split("=")[0] != key]
     try:
-        cfg = compose_config(config_name, [g for g in groups if g.split("=")[0] != key], config_dir)
+        cfg = compose_config(config_name, others, config_dir, composed)
     except CpmpError:
         return None
     node = OmegaConf.select(cfg, parent) if parent else cfg
@@ -182,25 +202,44 @@ def _close_key(key: str, config_name: str, groups: list[str], config_dir: str | 
 
 
 def compose_config(
-    config_name: str, overrides: Sequence[str], config_dir: str | None
+    config_name: str,
+    overrides: Sequence[str],
+    config_dir: str | None,
+    composed: Composed | None = None,
 ) -> DictConfig:
     """The composed config (with its ``hydra`` node) of ``conf/<config_name>.yaml``.
+
+    Args:
+        config_name: the command's config.
+        overrides: the command line's overrides.
+        config_dir: an extra config directory, or ``None``.
+        composed: the configs composed already with this ``config_name`` and ``config_dir``
+            (by their overrides), or ``None``: a config found there is returned as it is
+            (treat it as read-only), a newly composed one is added. Pass one per command line
+            (a config's ``hydra`` node holds the working directory and the time).
 
     Raises:
         ConfigError: anything Hydra cannot compose.
         CpmpFileError: ``config_dir`` is not a directory.
     """
-    register_configs()  # the schemas of conf/, in case Hydra's ConfigStore was cleared
-    register_compare()
+    key = tuple(overrides)
+    if composed is not None and key in composed:
+        return composed[key]
+    # the schemas of conf/ are stored on import; again only if Hydra's ConfigStore was cleared
+    register_configs(missing_only=True)
+    register_compare(missing_only=True)
     overrides = list(overrides)
     if config_dir is not None:
         overrides = _with_search_path(overrides, config_dir)
     parsed = parse_overrides(overrides)
     try:
         with initialize_config_module(config_module=CONF_PACKAGE, version_base="1.3"):
-            return compose(config_name, overrides=overrides, return_hydra_config=True)
+            cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
     except (HydraException, OmegaConfBaseException, ValueError) as err:
-        raise _composition_error(err, parsed, config_name, config_dir) from None
+        raise _composition_error(err, parsed, config_name, config_dir, composed) from None
+    if composed is not None:
+        composed[key] = cfg
+    return cfg
 
 
 def _with_search_path(overrides: list[str], config_dir: str) -> list[str]:

@@ -21,13 +21,19 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from omegaconf import DictConfig
 
 from cpmp.cli.checks import Command
 from cpmp.errors import ConfigError, CpmpFileError
-from cpmp.importers import ON_ERROR, SplitSpec, import_recordings, load_mapping, summary_text
 from cpmp.io import atomic_write_text
+
+if TYPE_CHECKING:
+    from cpmp.importers import SplitSpec
+
+# cpmp.importers (rosbags, LeRobot and HDF5 readers) is imported by the functions that use it:
+# every other command's process imports this module (cpmp.cli.main lists the command)
 
 NAME = "import"
 """The config (``conf/import.yaml``) and job name (runs go to ``logs/import/<timestamp>/``)."""
@@ -49,6 +55,8 @@ def _inputs(cfg: DictConfig) -> list[str]:
 
 def split_from_cfg(cfg: DictConfig) -> SplitSpec:
     """The job's ``test_fraction``, ``seed`` and ``test`` as a :class:`SplitSpec`."""
+    from cpmp.importers import SplitSpec  # lazy: see the imports above
+
     test = cfg.get("test") or ()
     return SplitSpec(
         test_fraction=cfg.get("test_fraction", 0.0),
@@ -63,6 +71,8 @@ def on_error_from_cfg(cfg: DictConfig) -> str | None:
     Raises:
         ConfigError: another value.
     """
+    from cpmp.importers import ON_ERROR  # lazy: see the imports above
+
     value = cfg.get("on_error")
     if value is not None and value not in ON_ERROR:
         raise ConfigError(
@@ -79,6 +89,8 @@ def check_import(cfg: DictConfig) -> None:
         ConfigError: an invalid mapping, ``on_error`` or split.
         CpmpFileError: the mapping file or an input is missing.
     """
+    from cpmp.importers import load_mapping  # lazy: see the imports above
+
     load_mapping(str(cfg.mapping))
     on_error_from_cfg(cfg)
     for path in _inputs(cfg):
@@ -99,6 +111,8 @@ def import_job(cfg: DictConfig, run_dir: Path) -> Path:
         SystemExit: status :data:`SKIPPED_STATUS` when demonstrations were skipped, after the
             summary and the file's path (printed last, as the command does) were printed.
     """
+    from cpmp.importers import import_recordings, summary_text  # lazy: see the imports above
+
     output = Path(str(cfg.output))
     output = output if output.is_absolute() else run_dir / output
     result = import_recordings(

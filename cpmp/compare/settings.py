@@ -24,7 +24,7 @@ from cpmp.config import TaskConfig
 from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
 from cpmp.errors import ConfigError
-from cpmp.experiment.config import executor_settings, store_schema
+from cpmp.experiment.config import executor_settings, is_stored, store_schema
 from cpmp.experiment.settings import ConfigNode, ExecutorSettings, ExperimentSettings, to_dict
 
 SCHEMA = "schema_compare"
@@ -416,9 +416,15 @@ class CompareJob:
         return cls(settings, task, compare, worlds, executor)
 
 
-def register_compare() -> None:
-    """Store the ``compare`` node's schema (:data:`SCHEMA`) in Hydra's ConfigStore (idempotent)."""
-    store_schema(SCHEMA, CompareSettings)
+def register_compare(*, missing_only: bool = False) -> None:
+    """Store the ``compare`` node's schema (:data:`SCHEMA`) in Hydra's ConfigStore (idempotent).
+
+    Args:
+        missing_only: store it only if the ConfigStore lacks it (it holds it after this
+            module's import), as :func:`~cpmp.experiment.config.register_configs`.
+    """
+    if not (missing_only and is_stored(SCHEMA)):
+        store_schema(SCHEMA, CompareSettings)
 
 
 register_compare()

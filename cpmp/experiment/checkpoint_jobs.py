@@ -9,25 +9,26 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 from omegaconf import DictConfig
 
-from cpmp.baselines.bc import BCSequencer
-from cpmp.baselines.goal_nearest import GoalNearestSequencer
 from cpmp.data.datafile import list_splits, load_demonstrations
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError, DataError
-from cpmp.evaluation.checkpoints import load_sequencer
-from cpmp.evaluation.offline import evaluate_offline
 from cpmp.experiment.config import job_fit_settings
 from cpmp.experiment.console import stage
-from cpmp.experiment.fitting import train_sequencer
-from cpmp.experiment.plots import plot_progress_curves
-from cpmp.experiment.report import predictor_entry, write_json
 from cpmp.io import atomic_write_text
 from cpmp.records import JsonValue
-from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+if TYPE_CHECKING:
+    from cpmp.baselines.bc import BCSequencer
+    from cpmp.baselines.goal_nearest import GoalNearestSequencer
+    from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+# The sequencers, their fit and evaluation, the plots and the report (SciPy, Lightning,
+# matplotlib, MuJoCo, rerun: seconds) are imported by the functions that use them, after the
+# file and split are checked: a job with a bad file fails without them.
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +119,9 @@ def train_from_file(cfg: DictConfig, run_dir: str | Path) -> Path:
     Returns:
         The checkpoint's path.
     """
+    from cpmp.experiment.fitting import train_sequencer  # lazy: see the imports above
+    from cpmp.experiment.report import write_json
+
     settings = job_fit_settings(cfg)
     path, split = _demo_file(cfg, "train")
     demos = _load_split(path, split, "train")
@@ -151,6 +155,11 @@ def evaluate_checkpoint(cfg: DictConfig, run_dir: str | Path) -> Path:
     Returns:
         The path of ``evaluation.json``.
     """
+    from cpmp.evaluation.checkpoints import load_sequencer  # lazy: see the imports above
+    from cpmp.evaluation.offline import evaluate_offline
+    from cpmp.experiment.plots import plot_progress_curves
+    from cpmp.experiment.report import write_json
+
     if not cfg.get("checkpoint"):
         raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
     checkpoint = Path(str(cfg.checkpoint))
@@ -201,6 +210,10 @@ def _model_entry(
         ``sequencer`` (``learned``, ``goal_nearest`` or ``bc``) and ``predictor`` (its kind,
         ``none`` for a baseline, with a note on what its progress is).
     """
+    from cpmp.baselines.bc import BCSequencer  # lazy: see the imports above
+    from cpmp.baselines.goal_nearest import GoalNearestSequencer
+    from cpmp.experiment.report import predictor_entry
+
     if isinstance(seq, (GoalNearestSequencer, BCSequencer)):
         entry = predictor_entry("none", {}, {"kind": seq.kind})
         return {"sequencer": seq.kind, "predictor": entry.pop("kind"), **entry}

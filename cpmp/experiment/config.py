@@ -63,6 +63,7 @@ __all__ = [
     "executor_settings",
     "experiment_job",
     "fit_settings",
+    "is_stored",
     "job_fit_settings",
     "logger_spec",
     "predictor_from_cfg",
@@ -113,23 +114,43 @@ def store_schema(name: str, cls: type, **first: str) -> None:
     ConfigStore.instance().store(name=name, node=schema_of(cls, **first))
 
 
-def register_configs() -> None:
+def is_stored(name: str) -> bool:
+    """Whether Hydra's ConfigStore holds a top-level config ``name`` (a schema)."""
+    return f"{name}.yaml" in ConfigStore.instance().repo
+
+
+def _schemas() -> list[tuple[str, type, dict[str, str]]]:
+    """Every schema of the main job's config groups: ``(name, dataclass, first fields)``."""
+    schemas: list[tuple[str, type, dict[str, str]]] = [
+        ("schema_task", TaskConfig, {}),
+        ("schema_trainer", TrainerConfig, {}),
+        ("schema_sequencer", SequencerConfig, {}),
+        ("schema_experiment", ExperimentSettings, {}),
+        ("schema_executor", ExecutorSettings, {}),
+        (f"schema_sequencer_{GOAL_NEAREST}", GoalNearestConfig, {"kind": GOAL_NEAREST}),
+        (f"schema_sequencer_{BC}", BCConfig, {"kind": BC}),
+    ]
+    schemas += [
+        (f"schema_predictor_{kind}", cls, {"kind": kind}) for kind, cls in PREDICTOR_CONFIGS.items()
+    ]
+    return schemas
+
+
+def register_configs(*, missing_only: bool = False) -> None:
     """Store the schema of every config group of the main job in Hydra's ConfigStore.
 
-    Idempotent: storing a schema again replaces it with the same one.
+    Idempotent: storing a schema again replaces it with the same one. Run on this module's
+    import; storing the schemas costs a structured config each (seconds in all on a busy
+    machine), so a caller that only needs them present (:func:`cpmp.cli.compose.compose_config`,
+    in case Hydra's ConfigStore was cleared) passes ``missing_only``.
+
+    Args:
+        missing_only: store only the schemas the ConfigStore lacks (none after this module's
+            import: then nothing is built).
     """
-    for name, cls in (
-        ("schema_task", TaskConfig),
-        ("schema_trainer", TrainerConfig),
-        ("schema_sequencer", SequencerConfig),
-        ("schema_experiment", ExperimentSettings),
-        ("schema_executor", ExecutorSettings),
-    ):
-        store_schema(name, cls)
-    store_schema(f"schema_sequencer_{GOAL_NEAREST}", GoalNearestConfig, kind=GOAL_NEAREST)
-    store_schema(f"schema_sequencer_{BC}", BCConfig, kind=BC)
-    for kind, cls in PREDICTOR_CONFIGS.items():
-        store_schema(f"schema_predictor_{kind}", cls, kind=kind)
+    for name, cls, first in _schemas():
+        if not (missing_only and is_stored(name)):
+            store_schema(name, cls, **first)
 
 
 # ------------------------------------------------------------------------------- conversion

@@ -10,10 +10,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
-from lightning.pytorch.loggers import Logger
 
 from cpmp.baselines.bc import BCSequencer
 from cpmp.baselines.goal_nearest import GoalNearestSequencer
@@ -23,6 +23,9 @@ from cpmp.experiment.config import fit_settings
 from cpmp.experiment.settings import ConfigNode, FitSettings
 from cpmp.records import JsonValue
 from cpmp.sequencer.sequencer import ConcurrentSequencer
+
+if TYPE_CHECKING:
+    from lightning.pytorch.loggers import Logger
 
 
 def make_logger(spec: Mapping[str, JsonValue] | None, log_dir: str | Path | None) -> Logger | None:
@@ -43,6 +46,8 @@ def make_logger(spec: Mapping[str, JsonValue] | None, log_dir: str | Path | None
     """
     if spec is None or log_dir is None:
         return None
+    from lightning.pytorch.loggers import Logger  # lazy: Lightning (seconds) for a fit only
+
     target = spec.get("_target_")
     kwargs = {} if "save_dir" in spec else {"save_dir": str(log_dir)}
     try:
