@@ -150,6 +150,15 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
             }
         },
     }
+    ratios = {"mae": 0.97, "supports": 0.24, "supports_all": 0.23, "tick": 0.9, "tick_floor": 0.88}
+    ratios |= {"batch": 0.4, "step": 0.95, "fit": 2.5, "complete": 4.0}
+    ratios["met"] = {"mae": True, "supports": True, "tick": False, "fit": False, "complete": True}
+    sparse = {
+        "settings": {"worlds": ["slip"], "sizes": [9], "seeds": [0, 1], "held_out": 6}
+        | {"episodes": 20, "tasks": 10},
+        "rows": [],
+        "summary": {"slip": {"9": {"seeds": 2, "ratios": ratios}}},
+    }
     files = {
         "simulator.json": report,
         "worlds.json": merge_synthetic(
@@ -162,6 +171,7 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
         "clock.json": clock,
         "start.json": {"n_boxes": 10, "seeds": [0], "rows": [], "mean_per_20": {"3": {"r": 4.5}}},
         "scale.json": scale,
+        "sparse.json": sparse,
     }
     folder.mkdir(parents=True, exist_ok=True)
     for name, result in files.items():
@@ -204,6 +214,9 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "| two_point | defaults | 70 / 30 / 0 |" in page  # the later run's row
     assert "`defaults` from `new.json`" in page  # and where it came from
     assert "| procedural | defaults | 40 / 60 / 0 (40 % of scripted) |" in page
+    # klr_sparse against the default: its ratios, a missed bound marked, C as a difference
+    assert "| slip | 9 | 0.97 | 0.24 | 0.23 | 0.90 ! | 0.88 | 0.40 | 0.95 | 2.50 ! | +4.0 |" in page
+    assert "on every world (slip): per world, D = 9 and seed (0, 1)" in page
     assert (
         "| r | 4.5 |" in page
         and "| two_point | 12 | 1,234 | 1.2 | 0.50 | 17 | 0.0312 | 5/5 |" in page
