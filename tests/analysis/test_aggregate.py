@@ -209,12 +209,19 @@ def test_script_writes_into_sweep_dir_and_prints_json_path_last(sweep, tmp_path,
 
 @pytest.mark.slow
 def test_real_multirun_then_aggregate(tmp_path, run_script):
-    """Two tiny jobs through Hydra's multirun (~40 s), then the aggregate of their sweep dir."""
+    """Two tiny jobs through Hydra's multirun (~40 s), then the aggregate of their sweep dir:
+    only the override that differs between the jobs is swept, each job has its rows.
+
+    The arm Jacobian is eager (``task.compile_kinematics=false``, the same in both jobs, so
+    not swept): compiling it costs the process more CPU than it saves over two tiny jobs, and
+    nothing here depends on it."""
     sweep = tmp_path / "multirun"
-    argv = ["-m", "experiment=tiny", "predictor.gamma=2.0,4.0", f"hydra.sweep.dir={sweep}"]
+    argv = ["-m", "experiment=tiny", "task.compile_kinematics=false", "predictor.gamma=2.0,4.0"]
+    argv.append(f"hydra.sweep.dir={sweep}")
     proc = run_script("experiment.py", *argv, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     table = collect_sweep(sweep)
+    assert table.override_keys == ["experiment", "task.compile_kinematics", "predictor.gamma"]
     assert table.swept == ["predictor.gamma"]
     assert [(r["job"], r["predictor.gamma"], r["D"]) for r in table.rows] == [
         ("0", 2.0, 3),

@@ -58,17 +58,25 @@ def without_timings(obj: Any) -> Any:
 
 
 # ------------------------------------------------------------------- experiment=tiny, twice
+TINY = ["experiment=tiny", "task.compile_kinematics=false"]
+"""``experiment=tiny`` as the tests below run it. The arm Jacobian is not compiled: compiling
+costs every process seconds of CPU (``cpmp.sim.kinematics.COMPILE_SECONDS``: 20 s, 4 s from
+torch's cache), more than the eager call loses over the few thousand ticks of a tiny run; no
+assertion here depends on it (tests/sim/test_kinematics.py checks the compiled Jacobian against
+the eager one; tests/test_packaging.py runs ``experiment=tiny`` as it ships)."""
+
+
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory, script_in_background):
     """Run ``experiment=tiny`` in-process and, at the same time, as ``scripts/experiment.py``
-    in a subprocess (two cores, ~20 s for both). Yields the two run dirs and the script's
-    stdout."""
+    in a subprocess (two cores, ~20 s for both), both with the eager arm Jacobian
+    (:data:`TINY`). Yields the two run dirs and the script's stdout."""
     base = tmp_path_factory.mktemp("tiny")
     direct, script = base / "direct", base / "script"
     direct.mkdir()
-    argv = ["experiment=tiny", "experiment.record=failures", f"hydra.run.dir={script}"]
+    argv = [*TINY, "experiment.record=failures", f"hydra.run.dir={script}"]
     with script_in_background(base, "experiment.py", *argv, timeout=300) as run:
-        cfg = compose_cfg("experiment", ["experiment=tiny"])
+        cfg = compose_cfg("experiment", TINY)
         report_path = run_experiment(cfg, direct)
     return {
         "cfg": cfg,
@@ -371,9 +379,11 @@ def test_default_workers_is_cores_or_seeds():
 def test_two_workers_give_the_serial_report(tmp_path, caplog):
     """Two seeds of ``experiment=tiny`` run serially, on two worker processes and as submitit
     jobs (``cluster=local``, two at once): every number of the report and of every episode is
-    the same; the workers' log lines reach this process, prefixed with their job."""
+    the same; the workers' log lines reach this process, prefixed with their job. The Jacobian
+    is eager (:data:`TINY`): each worker and each submitit job is a fresh process that would
+    compile it again."""
 
-    overrides = ["experiment=tiny", "experiment.seeds=[0,1]", "experiment.record=none"]
+    overrides = [*TINY, "experiment.seeds=[0,1]", "experiment.record=none"]
     runs = {}
     executors = {
         1: ["experiment.workers=1"],
