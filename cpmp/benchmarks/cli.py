@@ -236,7 +236,7 @@ def bench_sim_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--demos", type=int, default=6, help="demos for the learned policy")
     parser.add_argument("--seed", type=int, default=1, help="seed of the training boxes")
     args = parser.parse_args(argv)
-    from cpmp.benchmarks.sim_speed import benchmark  # lazy: torch, MuJoCo after the arguments
+    from cpmp.benchmarks.sim import benchmark  # lazy: torch, MuJoCo after the arguments
     from cpmp.sim import Box  # lazy: MuJoCo after the arguments
 
     cfg = TaskConfig()

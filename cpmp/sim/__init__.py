@@ -12,7 +12,7 @@ Modules: ``scene`` (MJCF model, boxes, strategy regions), ``kinematics`` (arm FK
 batching of policies), ``runner`` (closed-loop episodes and their :data:`Outcome`), ``paced``
 (the world with varied MP speeds and holds, :func:`~cpmp.sim.paced.paced_sim`). The options
 are :class:`~cpmp.config.task.TaskConfig`; the simulator's speed benchmark is
-:mod:`cpmp.benchmarks.sim_speed`.
+:mod:`cpmp.benchmarks.sim`.
 """
 
 # ruff: noqa: E402

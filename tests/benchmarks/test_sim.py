@@ -1,11 +1,11 @@
-"""The simulation speed benchmark (:mod:`cpmp.benchmarks.sim_speed`): report structure, not
+"""The simulation speed benchmark (:mod:`cpmp.benchmarks.sim`): report structure, not
 speed."""
 
 from __future__ import annotations
 
 import pytest
 
-from cpmp.benchmarks.sim_speed import TARGET_REAL_TIME_FACTOR, benchmark, time_rollouts
+from cpmp.benchmarks.sim import TARGET_REAL_TIME_FACTOR, benchmark, time_rollouts
 from cpmp.errors import ConfigError
 from cpmp.sim import Box
 from cpmp.sim.policies import ReplayPolicy

@@ -16,7 +16,7 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from cpmp.benchmarks.sim_speed import LEARNED_POLICY
+from cpmp.benchmarks.sim import LEARNED_POLICY
 from cpmp.compare.settings import CompareSettings, SweepSettings
 from cpmp.config import (
     ACTIVATIONS,
