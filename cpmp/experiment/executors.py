@@ -1,4 +1,4 @@
-"""What runs the jobs of the main job and of the comparison: one interface, three backends.
+"""What runs the jobs of the main job and of the comparison: one interface, four backends.
 
 A job is a call of a module-level function on picklable arguments (a seed's collection, a
 (seed, D) training size, a comparison's (world, seed, row, D) fit). :class:`JobExecutor`
@@ -14,7 +14,18 @@ its collection is done). The backends (``experiment.executor``, :func:`make_exec
   (with one worker: in this process, as ``inline``);
 - ``submitit`` (:class:`SubmititExecutor`): one ``submitit`` job per job, as a local process
   (``executor.cluster=local``) or a SLURM job (``slurm``), its call, result and log in
-  ``executor.folder``.
+  ``executor.folder``;
+- ``dask`` (:class:`DaskExecutor`): one task per job on a Dask ``distributed`` cluster, an
+  existing one (``executor.address=tcp://host:8786``) or a ``LocalCluster`` of ``workers``
+  processes started for the run; one torch thread per job, its log records sent to this
+  process prefixed with their job (``distributed`` is imported only by this backend).
+
+Measured (``scripts/bench_executors.py``, :mod:`cpmp.benchmarks.executors`; docs/guide.md,
+"Running the jobs on a Dask cluster"): ``local`` and ``dask`` (local cluster) start in a few
+seconds (workers spawned, torch imported), then a job costs ``local`` under a millisecond and
+``dask`` about ten; ``submitit`` starts a process per job (seconds each). So ``local`` on one
+machine, ``dask`` on a Dask cluster that already runs (its calls and results need no shared
+folder), ``submitit`` on SLURM, ``inline`` for jobs shorter than a worker's start.
 
 Every job seeds itself and depends only on its arguments, so the numbers do not depend on the
 backend, the worker count or the order in which jobs finish (tested).
@@ -30,7 +41,9 @@ import multiprocessing.queues
 import os
 import re
 import sys
+import threading
 import time
+import uuid
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -39,6 +52,7 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Generic, NamedTuple, NoReturn, Protocol, TypeVar
 
 if TYPE_CHECKING:
+    import distributed
     import submitit
 
 from cpmp.errors import ConfigError, CpmpError
@@ -431,18 +445,195 @@ class SubmititExecutor(JobExecutor):
         self._futures.clear()
 
 
+# --------------------------------------------------------------- dask: a distributed cluster
+class _ForwardRecords(logging.Handler):
+    """In a Dask task: send the records of this task's thread to the client, labelled.
+
+    Each record, its message prefixed with ``[label]``, becomes an event of ``topic`` on the
+    scheduler, which the client that submitted the task handles (:class:`DaskExecutor`).
+    """
+
+    def __init__(self, worker: distributed.Worker, topic: str, label: str) -> None:
+        super().__init__()
+        self.worker = worker
+        self.topic = topic
+        self.label = label
+        self.thread = threading.get_ident()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread != self.thread:  # another task's (a worker of several threads)
+            return
+        try:
+            message = record.getMessage()
+            attributes = dict(record.__dict__)
+            attributes["msg"] = f"[{self.label}] {message}" if self.label else message
+            attributes["args"] = None
+            if record.exc_info:
+                attributes["exc_text"] = logging.Formatter().formatException(record.exc_info)
+            attributes["exc_info"] = None
+            attributes.pop("message", None)
+            self.worker.log_event(self.topic, attributes)
+        except Exception:
+            self.handleError(record)
+
+
+def _dask_call(topic: str, label: str, level: int, fn: Callable[..., R], *args: object) -> R:
+    """In a Dask task: one torch thread, no progress bars, log records to the client.
+
+    The records of ``cpmp`` (at ``level``) and the warnings of every other logger go to the
+    client as events of ``topic`` while ``fn(*args)`` runs.
+    """
+    from distributed import get_worker  # lazy: the worker has it
+
+    one_thread()
+    os.environ["TQDM_DISABLE"] = "1"  # read when tqdm is first imported in this worker
+    handler = _ForwardRecords(get_worker(), topic, label)
+    root, ours = logging.getLogger(), logging.getLogger("cpmp")
+    before = ours.level
+    ours.setLevel(level)
+    root.addHandler(handler)
+    try:
+        return fn(*args)
+    finally:
+        root.removeHandler(handler)
+        ours.setLevel(before)
+
+
+def _dispatch_event(event: tuple[float, dict[str, object]]) -> None:
+    """The client's side of :class:`_ForwardRecords`: a record to this process's logger."""
+    _, attributes = event
+    _DISPATCH.emit(logging.makeLogRecord(attributes))
+
+
+_DISPATCH = _Dispatch()
+"""The handler of :func:`_dispatch_event`."""
+
+
+class DaskExecutor(JobExecutor):
+    """One Dask task per job on a ``distributed`` cluster (the ``dask`` backend).
+
+    ``settings.address`` names the scheduler of a running cluster (``tcp://host:8786``; its
+    workers must import cpmp and the same packages); ``None`` starts a ``LocalCluster`` of
+    ``slots`` worker processes, one thread each, closed on exit. A job runs one torch thread;
+    its log records reach this process's handlers prefixed with its label; its exception is
+    re-raised with its type by its future's ``result()``. On exit the client closes: jobs not
+    started are dropped (a job already running on a shared cluster finishes its call).
+    """
+
+    name = "dask"
+
+    def __init__(self, settings: ExecutorSettings, slots: int) -> None:
+        super().__init__(slots)
+        settings.check(self.name)
+        self.address = settings.address
+        self.connect_timeout = settings.connect_timeout
+        self.topic = f"cpmp-log-{uuid.uuid4().hex}"
+        self.cluster: distributed.LocalCluster | None = None
+        self.client: distributed.Client | None = None
+        self._quiet: int | None = None
+
+    def __enter__(self) -> DaskExecutor:
+        from distributed import Client, LocalCluster  # lazy: only this backend needs it
+
+        try:
+            with _no_bars():
+                if self.address is None:
+                    # its scheduler runs in this process: its INFO lines are not the job's
+                    scheduler_log = logging.getLogger("distributed")
+                    self._quiet = scheduler_log.level
+                    scheduler_log.setLevel(max(logging.WARNING, self._quiet))
+                    self.cluster = LocalCluster(
+                        n_workers=self.slots,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,  # no dashboard; its health page: any port
+                        scheduler_kwargs={"dashboard_address": ":0"},
+                    )
+                    self.client = Client(self.cluster)
+                else:
+                    self.client = self._connect(Client)
+            self.client.subscribe_topic(self.topic, _dispatch_event)
+        except BaseException:
+            self._close()
+            raise
+        log.info("dask: %d jobs at once on %s", self.slots, self.client.scheduler.address)
+        return self
+
+    def _connect(self, client: type[distributed.Client]) -> distributed.Client:
+        """A client of the scheduler at ``self.address``.
+
+        Raises:
+            ConfigError: no scheduler answered within ``connect_timeout`` seconds.
+        """
+        try:
+            return client(self.address, timeout=self.connect_timeout)
+        except (OSError, TimeoutError) as err:
+            raise ConfigError(
+                f"no Dask scheduler answered at executor.address={self.address} within "
+                f"{self.connect_timeout} s ({type(err).__name__}: {err}): start one there "
+                "(`dask scheduler`, then `dask worker <address>` on each machine), fix the "
+                "address, raise executor.connect_timeout, or set executor.address=null for a "
+                "local Dask cluster"
+            ) from None
+
+    def _close(self) -> None:
+        """Close the client and the local cluster (if this executor started one)."""
+        client, cluster = self.client, self.cluster
+        self.client = self.cluster = None
+        try:
+            if client is not None:
+                with contextlib.suppress(Exception):
+                    client.unsubscribe_topic(self.topic)
+                client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            if self._quiet is not None:
+                logging.getLogger("distributed").setLevel(self._quiet)
+                self._quiet = None
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self._close()
+
+    def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
+        """Submit ``fn(*args)`` as a Dask task (its key named after ``label``)."""
+        if self.client is None:
+            raise RuntimeError("submit a job inside `with DaskExecutor(...):`")
+        level = logging.getLogger("cpmp").getEffectiveLevel()
+        key = f"{_job_name(label)}-{uuid.uuid4().hex}"
+        return self.client.submit(_dask_call, self.topic, label, level, fn, *args, key=key)
+
+    def wait_first(self, futures: Iterable[JobFuture[R]]) -> list[JobFuture[R]]:
+        """``distributed.wait`` for the first of the futures."""
+        from distributed import wait as dask_wait
+
+        futures = list(futures)
+        if not futures:
+            return []
+        done, _ = dask_wait(futures, return_when="FIRST_COMPLETED")
+        return [f for f in futures if f in done]
+
+
 def make_executor(name: str, settings: ExecutorSettings, workers: int) -> JobExecutor:
     """The backend ``name`` (``experiment.executor``) with ``workers`` jobs at once.
 
     ``local`` with one worker runs in this process (``inline``).
 
     Args:
-        name: ``inline``, ``local`` or ``submitit``.
-        settings: the ``executor`` node (``submitit`` only).
-        workers: jobs in flight at once (worker processes of ``local``).
+        name: ``inline``, ``local``, ``submitit`` or ``dask``.
+        settings: the ``executor`` node (``submitit`` and ``dask`` only).
+        workers: jobs in flight at once (worker processes of ``local`` and of ``dask``'s local
+            cluster).
 
     Raises:
-        ConfigError: an unknown name (naming the valid ones); ``submitit`` without a folder.
+        ConfigError: an unknown name (naming the valid ones); ``submitit`` without a folder;
+            ``dask`` with a bad address.
+        MissingExtraError: ``submitit`` or ``dask`` without its package (the ``jobs`` extra).
     """
     if name not in EXECUTORS:
         raise ConfigError(
@@ -450,6 +641,8 @@ def make_executor(name: str, settings: ExecutorSettings, workers: int) -> JobExe
         )
     if name == "submitit":
         return SubmititExecutor(settings, workers)
+    if name == "dask":
+        return DaskExecutor(settings, workers)
     if name == "local" and workers > 1:
         return LocalExecutor(workers)
     return InlineExecutor()
@@ -474,14 +667,20 @@ def job_slots(
 
     Returns:
         1 for ``inline``; else ``workers``, by default :func:`default_workers` (one per core,
-        at most ``auto``), on SLURM ``executor.slurm.array_parallelism``; at most ``n_jobs``.
+        at most ``auto``), on SLURM ``executor.slurm.array_parallelism``, on a Dask cluster at
+        ``executor.address`` ``auto`` (every job ready: its scheduler queues them); at most
+        ``n_jobs``.
     """
     if name == "inline":
         return 1
     if workers is None:
         on_slurm = name == "submitit" and settings.cluster == "slurm"
+        on_dask_cluster = name == "dask" and settings.address is not None
         cap = n_jobs if auto is None else auto
-        workers = settings.slurm.array_parallelism if on_slurm else default_workers(cap)
+        if on_slurm:
+            workers = settings.slurm.array_parallelism
+        else:
+            workers = cap if on_dask_cluster else default_workers(cap)
     return max(1, min(workers, n_jobs))
 
 

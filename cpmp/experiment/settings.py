@@ -5,8 +5,8 @@
 :class:`ExperimentJob` all of them with the ``task``. Each validates itself on construction;
 :mod:`cpmp.experiment.config` registers them with Hydra and converts a composed ``cfg`` into
 them. :class:`ExecutorSettings` is the ``executor`` node: where the jobs of
-``experiment.executor=submitit`` run (:mod:`cpmp.experiment.executors`). :func:`to_dict` turns
-a config node into a plain dict.
+``experiment.executor=submitit`` or ``dask`` run (:mod:`cpmp.experiment.executors`).
+:func:`to_dict` turns a config node into a plain dict.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 from cpmp.config import BCConfig, FitConfig, GoalNearestConfig, TaskConfig
 from cpmp.config.bc import KIND as BC
 from cpmp.config.goal_nearest import KIND as GOAL_NEAREST
-from cpmp.errors import ConfigError
+from cpmp.errors import ConfigError, require
 from cpmp.records import JsonValue
 
 RecordMode = Literal["failures", "all", "first", "none"]
@@ -31,10 +31,11 @@ episode that did not complete, plus the first one per training size), ``all``, `
 first per training size) or ``none``."""
 RECORD_CHOICES: tuple[RecordMode, ...] = get_args(RecordMode)
 """Values of ``experiment.record``."""
-ExecutorName = Literal["inline", "local", "submitit"]
+ExecutorName = Literal["inline", "local", "submitit", "dask"]
 """What runs the jobs (``experiment.executor``, :mod:`cpmp.experiment.executors`): ``inline``
 (this process, one job after the other), ``local`` (spawned worker processes; one worker: this
-process) or ``submitit`` (submitit jobs: local processes or SLURM jobs, ``executor`` node)."""
+process), ``submitit`` (submitit jobs: local processes or SLURM jobs, ``executor`` node) or
+``dask`` (Dask distributed: an existing cluster at ``executor.address`` or a local one)."""
 EXECUTORS: tuple[ExecutorName, ...] = get_args(ExecutorName)
 """Values of ``experiment.executor``."""
 CLUSTERS = ("local", "slurm")
@@ -87,12 +88,14 @@ class ExperimentSettings:
             as a fraction of each feature's range over the training set (0: none); the test
             demonstrations and the closed loop stay noise-free.
         workers: how many jobs (a seed's collection, a training size) run at once: worker
-            processes of the ``local`` executor (1: everything in this process), jobs in flight
-            of the ``submitit`` one (``None``: min(cores, jobs); on SLURM
-            ``executor.slurm.array_parallelism``). The report's numbers do not depend on it.
+            processes of the ``local`` executor (1: everything in this process) and of the
+            ``dask`` one's local cluster, jobs in flight of the ``submitit`` one and on a Dask
+            cluster (``None``: min(cores, jobs); on SLURM ``executor.slurm.array_parallelism``;
+            on a Dask cluster at ``executor.address``: every job ready to run). The report's
+            numbers do not depend on it.
         executor: what runs the jobs (:data:`ExecutorName`): ``local`` (spawned processes),
-            ``inline`` (this process) or ``submitit`` (the ``executor`` node says where). The
-            report's numbers do not depend on it.
+            ``inline`` (this process), ``submitit`` or ``dask`` (the ``executor`` node says
+            where). The report's numbers do not depend on it.
     """
 
     name: str = "quick"
@@ -208,7 +211,7 @@ class SlurmSettings:
 
 @dataclass
 class ExecutorSettings:
-    """The ``executor`` node: where the ``submitit`` executor runs the jobs.
+    """The ``executor`` node: where the ``submitit`` and ``dask`` executors run the jobs.
 
     Attributes:
         folder: submitit's folder: each job's pickled call, result and logs
@@ -216,11 +219,18 @@ class ExecutorSettings:
             Required by ``experiment.executor=submitit``.
         cluster: ``local`` (local processes) or ``slurm`` (SLURM jobs), see :data:`CLUSTERS`.
         slurm: the SLURM parameters of each job (time and cpus_per_task also on ``local``).
+        address: ``experiment.executor=dask``: the scheduler of a running Dask cluster
+            (``tcp://host:8786``; its workers must import cpmp); ``None``: a Dask cluster of
+            ``experiment.workers`` local processes, one thread each, started for the job.
+        connect_timeout: ``experiment.executor=dask``: how long [s] to try to reach
+            ``address`` before giving up.
     """
 
     folder: str | None = None
     cluster: str = "local"
     slurm: SlurmSettings = field(default_factory=SlurmSettings)
+    address: str | None = None
+    connect_timeout: int = 30
 
     def __post_init__(self) -> None:
         if self.cluster not in CLUSTERS:
@@ -232,6 +242,14 @@ class ExecutorSettings:
             value = getattr(slurm, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"executor.slurm.{name} must be an integer >= 1, got {value!r}")
+        timeout = self.connect_timeout
+        if isinstance(timeout, bool) or not isinstance(timeout, int) or timeout < 1:
+            raise ConfigError(f"executor.connect_timeout must be an integer >= 1, got {timeout!r}")
+        if self.address is not None and (not isinstance(self.address, str) or not self.address):
+            raise ConfigError(
+                "executor.address must be a Dask scheduler address such as tcp://host:8786, "
+                f"or null for a local Dask cluster; got {self.address!r}"
+            )
 
     @classmethod
     def from_cfg(cls, cfg: ConfigNode) -> ExecutorSettings:
@@ -249,11 +267,16 @@ class ExecutorSettings:
         """What ``experiment.executor=executor`` needs of this node.
 
         The ``submitit`` executor needs a folder and takes only the ``extra`` SLURM parameters
-        submitit knows (imports submitit).
+        submitit knows (imports submitit); the ``dask`` executor needs the ``distributed``
+        package and an ``executor.address`` it can parse (``None`` or ``scheme://host:port``).
 
         Raises:
-            ConfigError: no ``executor.folder``, or an unknown ``executor.slurm.extra`` key.
+            ConfigError: no ``executor.folder``, an unknown ``executor.slurm.extra`` key, or a
+                bad ``executor.address``.
+            MissingExtraError: ``dask`` without ``distributed`` (the ``jobs`` extra).
         """
+        if executor == "dask":
+            self._check_dask()
         if executor != "submitit":
             return
         if not self.folder:
@@ -271,6 +294,22 @@ class ExecutorSettings:
                 f"unknown executor.slurm.extra parameter(s) {', '.join(unknown)}; "
                 f"valid: {', '.join(sorted(valid))}"
             )
+
+    def _check_dask(self) -> None:
+        """What ``experiment.executor=dask`` needs: ``distributed``, a parseable address."""
+        require("distributed", "jobs", "experiment.executor=dask")
+        if self.address is None:
+            return
+        from distributed.comm import get_address_host_port  # lazy: only dask needs it
+
+        try:
+            get_address_host_port(self.address)
+        except ValueError as err:
+            raise ConfigError(
+                f"executor.address={self.address!r} is not a Dask scheduler address ({err}): "
+                "write scheme://host:port, e.g. executor.address=tcp://10.0.0.5:8786 (what "
+                "`dask scheduler` prints), or executor.address=null for a local Dask cluster"
+            ) from None
 
 
 def _known(cls: type, options: _Options, path: str) -> _Options:
@@ -342,7 +381,7 @@ class ExperimentJob:
         settings: the ``experiment`` group.
         task: the ``task`` group.
         fit: the ``predictor``, ``sequencer`` and ``trainer`` groups.
-        executor: the ``executor`` node (used by ``experiment.executor=submitit``).
+        executor: the ``executor`` node (used by ``experiment.executor=submitit`` and ``dask``).
     """
 
     settings: ExperimentSettings
