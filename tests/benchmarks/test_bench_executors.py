@@ -1,4 +1,5 @@
-"""The executor benchmark (:mod:`cpmp.benchmarks.executors`): what it measures and reports,
+"""The executor benchmark (:mod:`cpmp.benchmarks.executors`; named apart from
+tests/experiment/test_executors.py, which tests the executors): what it measures and reports,
 not how fast (the numbers are machine-dependent)."""
 
 from __future__ import annotations
