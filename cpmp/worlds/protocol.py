@@ -271,6 +271,14 @@ class SteppedRun(Generic[State, Episode]):
     def complete(self, active: Mapping[str, str]) -> bool:
         return self.task.at_goal(self.state, self.episode)
 
+    def failure(self) -> str:
+        """Why the run is not complete, in words.
+
+        The task's ``shortfall(state, episode)``; ``""`` for a task without one, or at the goal.
+        """
+        shortfall = getattr(self.task, "shortfall", None)
+        return str(shortfall(self.state, self.episode)) if callable(shortfall) else ""
+
 
 class SteppedWorld(WorldBase[Strategic]):
     """A world around a stepped task (see :class:`SteppedRun`): contexts cycle ``strategies``.

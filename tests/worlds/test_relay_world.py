@@ -53,3 +53,31 @@ def test_initial_features_are_the_homes_and_the_scaled_context():
     np.testing.assert_array_equal(task.features(state, episode), want)
     assert np.array_equal(state.obj, episode.carrier_home) and state.holder == "carrier"
     assert not task.at_goal(state, episode)
+
+
+def test_shortfall_names_each_goal_condition_not_met():
+    """At the goal the shortfall is empty; each condition of ``at_goal`` broken names itself
+    (who holds the object, how far it is from its destination, the gripper, the carrier's
+    distance from home), in that order; a run's ``failure()`` is the task's shortfall."""
+    from cpmp.worlds.protocol import SteppedRun, run_failure
+
+    task = RelayTask()
+    episode = task.sample_episode(np.random.default_rng(3), "fetch")
+    run = SteppedRun(task, episode)
+    at_goal = run.state
+    at_goal.holder, at_goal.aperture = "none", 1.0
+    at_goal.obj = episode.destination.astype(float).copy()
+    at_goal.carrier = episode.carrier_home.astype(float).copy()
+    assert task.at_goal(at_goal, episode) and task.shortfall(at_goal, episode) == ""
+    assert run.failure() == run_failure(run) == ""
+
+    at_goal.obj = at_goal.obj + np.array([0.1, 0.0])  # released 100 mm short
+    assert not task.at_goal(at_goal, episode)
+    assert run.failure() == "the object is 100 mm from its destination"
+
+    at_goal.holder, at_goal.aperture = "receiver", 0.2
+    at_goal.carrier = at_goal.carrier + np.array([0.0, 0.25])
+    assert task.shortfall(at_goal, episode) == (
+        "the receiver still holds the object; the object is 100 mm from its destination; "
+        "the gripper is not open; the carrier is 250 mm from home"
+    )

@@ -358,6 +358,25 @@ class RelayTask:
         elif state.holder == "receiver":
             state.holder = "none"
 
+    def shortfall(self, state: RelayState, episode: RelayEpisode) -> str:
+        """Why ``state`` is not the goal state, in words (``""`` at the goal).
+
+        Each goal condition of :meth:`at_goal` not met.
+        """
+        tol = self.goal_tolerance
+        unmet = []
+        if state.holder != "none":
+            unmet.append(f"the {state.holder} still holds the object")
+        off = float(np.linalg.norm(state.obj - episode.destination))
+        if off >= tol:
+            unmet.append(f"the object is {1000 * off:.0f} mm from its destination")
+        if state.aperture < OPEN_APERTURE:
+            unmet.append("the gripper is not open")
+        away = float(np.linalg.norm(state.carrier - episode.carrier_home))
+        if away >= tol:
+            unmet.append(f"the carrier is {1000 * away:.0f} mm from home")
+        return "; ".join(unmet)
+
     def at_goal(self, state: RelayState, episode: RelayEpisode) -> bool:
         """Object released at its destination, gripper open, carrier home."""
         tol = self.goal_tolerance
