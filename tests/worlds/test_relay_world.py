@@ -81,3 +81,15 @@ def test_shortfall_names_each_goal_condition_not_met():
         "the receiver still holds the object; the object is 100 mm from its destination; "
         "the gripper is not open; the carrier is 250 mm from home"
     )
+
+
+def test_the_paced_relay_says_what_the_relay_says():
+    """A paced relay run's ``failure()`` is the relay task's shortfall of its relay state."""
+    from cpmp.worlds.registry import make_world
+
+    world = make_world("paced_relay")
+    run = world.start(world.contexts(1, 0)[0])
+    relay = world.robot_task.relay
+    text = relay.shortfall(run.state.relay, run.episode.relay)
+    assert text.startswith("the carrier still holds the object; the object is ")
+    assert run.failure() == text

@@ -170,6 +170,10 @@ class PacedRelayTask:
         """The relay's goal state."""
         return self.relay.at_goal(state.relay, episode.relay)
 
+    def shortfall(self, state: PacedState, episode: PacedEpisode) -> str:
+        """Why ``state`` is not the relay's goal state, in words (:meth:`RelayTask.shortfall`)."""
+        return self.relay.shortfall(state.relay, episode.relay)
+
     def features(self, state: PacedState, episode: PacedEpisode) -> np.ndarray:
         """The relay's features ``(6,)``."""
         return self.relay.features(state.relay, episode.relay)
