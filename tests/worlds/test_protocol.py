@@ -253,3 +253,24 @@ def test_paced_worlds_scores_name_the_cause() -> None:
         if s.cause is not None:
             assert s.cause.variable and s.cause.expected and s.cause.reason in CAUSE_REASONS
             assert math.isfinite(s.cause.best_p) and s.cause.describe() == s.reason
+
+
+@pytest.mark.parametrize(("name", "member"), _every_world())
+def test_every_world_says_what_is_missing_until_its_goal(name: str, member: int) -> None:
+    """Issue #36: every registered world's run has ``failure()``: at the start it names what
+    is missing from the goal state (non-empty), and once the world's scripted policy has
+    completed the episode it is empty."""
+    world = _world(name, member)
+    run = world.start(world.contexts(1, 3)[0])
+    policy = world.scripted_policy()
+    assert hasattr(run, "failure")
+    active = policy.reset(0.0, run.features())
+    run.advance(active, world.dt)  # one tick: the MPs it runs are known to the run
+    assert run.failure() != ""
+    t = world.dt
+    while not run.done(active) and t < world.max_time:
+        active = policy.step(t, run.features())
+        run.advance(active, world.dt)
+        t += world.dt
+    assert run.complete(active)
+    assert run.failure() == ""

@@ -138,6 +138,7 @@ class ProceduralRun:
         self.succeeded = loop is None
         self._last = None if loop is None else spec.initial_mps(context.strategy)[loop.variable]
         self._tail = [context.context, *context.distractors]
+        self._active: dict[str, str] = {}
 
     def features(self) -> np.ndarray:
         """The features ``(d,)`` in the spec's ``feature_names`` order."""
@@ -171,6 +172,7 @@ class ProceduralRun:
         """
         n, hs = substeps(h, self.dt)
         goals = [self._goal(i, active) for i in range(len(self._names))]
+        self._active = dict(active)
         decay = math.exp(-FORCE_RATE * hs)
         for _ in range(n):
             for i, (p, g) in enumerate(zip(self.positions, goals, strict=True)):
@@ -203,6 +205,27 @@ class ProceduralRun:
     def _nominal(self, mp: str) -> tuple[float, ...]:
         """The nominal goal of the loop variable's ``mp``."""
         return self.spec.variables[self._loop].mp(mp).goal  # type: ignore[index]
+
+    def failure(self) -> str:
+        """Why the run is not complete, in words (``""`` when it is), under the MPs it last ran.
+
+        The loop's try not yet succeeded (with the jams so far), then each variable not in its
+        last MP for the strategy or not at that MP's goal (distance in the task's units).
+        """
+        unmet = []
+        if not self.succeeded:
+            loop = self._names[self._loop]  # type: ignore[index]
+            unmet.append(
+                f"{loop}'s {self._try} has not succeeded ({self.failed} of "
+                f"{self.context.failures} jams so far)"
+            )
+        for (v, mp, goal), p in zip(self._final, self.positions, strict=True):
+            now = self._active.get(v)
+            if now != mp:
+                unmet.append(f"{v} ends in {now}, not {mp}")
+            elif (r := distance(p, goal)) >= TOLERANCE:
+                unmet.append(f"{v} is {r:.2f} from {mp}'s goal (tolerance {TOLERANCE:g})")
+        return "; ".join(unmet)
 
     def done(self, active: Mapping[str, str]) -> bool:
         """Whether the episode is over: the goal state (nothing else ends it early)."""

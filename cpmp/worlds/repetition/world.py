@@ -315,6 +315,25 @@ class RepetitionTask:
             else:
                 state.spilled += out
 
+    def shortfall(self, state: RepetitionState, episode: RepetitionEpisode) -> str:
+        """Why ``state`` is not the goal state, in words (``""`` at the goal).
+
+        Each goal condition of :meth:`at_goal` not met; soup poured beside the bowl is said
+        with the soup left.
+        """
+        tol = self.goal_tolerance
+        unmet = []
+        if state.remaining > AMOUNT_EPS:
+            spilled = f" ({state.spilled:.2f} l spilled)" if state.spilled > AMOUNT_EPS else ""
+            unmet.append(f"{state.remaining:.2f} l of soup left to pour{spilled}")
+        bowl = float(np.linalg.norm(state.bowl - episode.hatch))
+        if bowl >= tol:
+            unmet.append(f"the bowl is {1000 * bowl:.0f} mm from the hatch")
+        ladle = float(np.linalg.norm(state.ladle - episode.ladle_home))
+        if ladle >= tol:
+            unmet.append(f"the ladle is {1000 * ladle:.0f} mm from home")
+        return "; ".join(unmet)
+
     def at_goal(self, state: RepetitionState, episode: RepetitionEpisode) -> bool:
         """Nothing left to pour, the bowl at the hatch and the ladle home."""
         tol = self.goal_tolerance

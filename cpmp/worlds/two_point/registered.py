@@ -28,6 +28,7 @@ class _TwoPointRun:
         self.task, self.episode = task, episode
         self.p = np.array(episode.start, dtype=float)
         self.gain = np.asarray(task.gain)
+        self._active: dict[str, str] = {}
 
     @override
     def features(self) -> np.ndarray:
@@ -36,6 +37,7 @@ class _TwoPointRun:
     @override
     def advance(self, active: Mapping[str, str], h: float) -> None:
         n, hs = substeps(h, self.task.dt)
+        self._active = dict(active)
         for _ in range(n):
             goals = self.task.goals(self.episode, dict(active))
             self.p = self.p + hs * self.gain * (goals - self.p)
@@ -48,6 +50,19 @@ class _TwoPointRun:
     def complete(self, active: Mapping[str, str]) -> bool:
         back = active["a"] == "a_back" and active["b"] == "b_back"
         return bool(back and np.all(np.abs(self.p) < 0.01))
+
+    def failure(self) -> str:
+        """Why the run is not complete, in words (``""`` when it is).
+
+        Under the MPs it last ran: each point not under its ``*_back`` MP, or not home.
+        """
+        unmet = []
+        for name, x in zip(("a", "b"), self.p, strict=True):
+            if (mp := self._active.get(name)) != f"{name}_back":
+                unmet.append(f"point {name} runs {mp}, not {name}_back")
+            elif abs(x) >= 0.01:
+                unmet.append(f"point {name} is {abs(x):.3f} from home")
+        return "; ".join(unmet)
 
 
 class TwoPointWorld(WorldBase[TwoPointEpisode]):
