@@ -145,6 +145,20 @@ def _about_sparse(r: Mapping[str, JsonValue]) -> str:
         f"{s['episodes']} (sparse − default); `!` marks a cell outside issue #23's bound "
         "(MAE ≤ 1.1x, supports ≤ 0.25x, tick ≤ 0.5x, fit ≤ 2x, C ≥ −1). The machine was "
         "shared with other jobs, so the time columns are noisy; the supports, MAE and C are not."
+        + _about_sparse_sim(r)
+    )
+
+
+def _about_sparse_sim(r: Mapping[str, JsonValue]) -> str:
+    """The sparse section's sentence on its ``sim`` rows (empty for a JSON without them)."""
+    s = r["settings"]
+    if "sim" not in s["worlds"]:
+        return ""
+    note = f" ({r['note']})" if r.get("note") else ""
+    return (
+        f" The `sim` rows: the simulator, the main job's full-run demonstrations of seeds "
+        f"{', '.join(map(str, s['sim_seeds']))} (the balanced D of them), {s['sim_boxes']} "
+        f"reproduction boxes each{note}."
     )
 
 

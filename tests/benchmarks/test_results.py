@@ -217,6 +217,7 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     # klr_sparse against the default: its ratios, a missed bound marked, C as a difference
     assert "| slip | 9 | 0.97 | 0.24 | 0.23 | 0.90 ! | 0.88 | 0.40 | 0.95 | 2.50 ! | +4.0 |" in page
     assert "on every world (slip): per world, D = 9 and seed (0, 1)" in page
+    assert "The `sim` rows" not in page  # none in this JSON
     assert (
         "| r | 4.5 |" in page
         and "| two_point | 12 | 1,234 | 1.2 | 0.50 | 17 | 0.0312 | 5/5 |" in page
@@ -281,3 +282,17 @@ def test_the_command_writes_both_files_and_check_says_when_stale(tmp_path: Path,
     assert main(args) == 2
     assert "README.md: no `<!-- results:begin -->`" in capsys.readouterr().err
     assert list(tmp_path.glob(".*tmp*")) == []  # written atomically: no temporary left
+
+
+def test_the_sparse_section_says_where_its_simulator_rows_come_from(tmp_path: Path) -> None:
+    folder = small_results(tmp_path)
+    sparse = json.loads((folder / "sparse.json").read_text())
+    sparse["settings"] |= {"worlds": ["slip", "sim"], "sim_seeds": [0, 1], "sim_boxes": 20}
+    sparse["note"] = "a run of their own"
+    (folder / "sparse.json").write_text(json.dumps(sparse))
+    page = render_results(folder)
+    assert "on every world (slip): per world" in page  # the simulator is not a synthetic world
+    assert (
+        "The `sim` rows: the simulator, the main job's full-run demonstrations of seeds 0, 1 "
+        "(the balanced D of them), 20 reproduction boxes each (a run of their own)." in page
+    )
