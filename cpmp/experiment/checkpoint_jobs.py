@@ -18,6 +18,7 @@ from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError, CpmpFileError, DataError
 from cpmp.experiment.config import job_fit_settings
 from cpmp.experiment.console import stage
+from cpmp.experiment.output import write_json
 from cpmp.io import atomic_write_text
 from cpmp.records import JsonValue
 
@@ -120,7 +121,6 @@ def train_from_file(cfg: DictConfig, run_dir: str | Path) -> Path:
         The checkpoint's path.
     """
     from cpmp.experiment.fitting import train_sequencer  # lazy: see the imports above
-    from cpmp.experiment.report import write_json
 
     settings = job_fit_settings(cfg)
     path, split = _demo_file(cfg, "train")
@@ -158,7 +158,6 @@ def evaluate_checkpoint(cfg: DictConfig, run_dir: str | Path) -> Path:
     from cpmp.evaluation.checkpoints import load_sequencer  # lazy: see the imports above
     from cpmp.evaluation.offline import evaluate_offline
     from cpmp.experiment.plots import plot_progress_curves
-    from cpmp.experiment.report import write_json
 
     if not cfg.get("checkpoint"):
         raise ConfigError("checkpoint is required: checkpoint=path/to/model.pt")
