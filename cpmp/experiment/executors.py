@@ -20,12 +20,10 @@ its collection is done). The backends (``experiment.executor``, :func:`make_exec
   processes started for the run; one torch thread per job, its log records sent to this
   process prefixed with their job (``distributed`` is imported only by this backend).
 
-Measured (``scripts/bench_executors.py``, :mod:`cpmp.benchmarks.executors`; docs/guide.md,
-"Running the jobs on a Dask cluster"): ``local`` and ``dask`` (local cluster) start in a few
-seconds (workers spawned, torch imported), then a job costs ``local`` under a millisecond and
-``dask`` about ten; ``submitit`` starts a process per job (seconds each). So ``local`` on one
-machine, ``dask`` on a Dask cluster that already runs (its calls and results need no shared
-folder), ``submitit`` on SLURM, ``inline`` for jobs shorter than a worker's start.
+Which backend for what (measured by ``scripts/bench_executors.py``; the numbers are in
+docs/guide.md, "Running the jobs on a Dask cluster"): ``local`` on one machine, ``dask`` on a
+Dask cluster that already runs (its calls and results need no shared folder), ``submitit`` on
+SLURM, ``inline`` for jobs shorter than a worker's start.
 
 Every job seeds itself and depends only on its arguments, so the numbers do not depend on the
 backend, the worker count or the order in which jobs finish (tested).
