@@ -129,12 +129,16 @@ def _sparse(result: Mapping[str, JsonValue]) -> str:
 
 
 def _about_sparse(r: Mapping[str, JsonValue]) -> str:
-    s = r["settings"]
+    s, t = r["settings"], r["targets"]
     worlds = [
         f"{w} (its first {s['tasks']} tasks, each with every seed)" if w == "procedural" else w
         for w in s["worlds"]
         if w != "sim"
     ]
+    bounds = (
+        f"MAE ≤ {t['mae']:g}x, supports ≤ {t['supports']:g}x, tick ≤ {t['tick']:g}x, "
+        f"fit ≤ {t['fit']:g}x, C ≥ {t['complete']:g}".replace("-", "−")
+    )
     return (
         f"`klr_sparse` (its own defaults) against cpmp's default predictor on every world "
         f"({', '.join(worlds)}): per world, D = {' / '.join(map(str, s['sizes']))} "
@@ -143,22 +147,18 @@ def _about_sparse(r: Mapping[str, JsonValue]) -> str:
         f"and {s['episodes']} held-out closed-loop episodes. Each cell is sparse / default "
         "(pooled over seeds), the last column the difference in complete episodes per "
         f"{s['episodes']} (sparse − default); `!` marks a cell outside issue #23's bound "
-        "(MAE ≤ 1.1x, supports ≤ 0.25x, tick ≤ 0.5x, fit ≤ 2x, C ≥ −1). The machine was "
-        "shared with other jobs, so the time columns are noisy; the supports, MAE and C are not."
-        + _about_sparse_sim(r)
+        f"({bounds})." + _about_sparse_sim(s) + (f" {r['note']}." if r.get("note") else "")
     )
 
 
-def _about_sparse_sim(r: Mapping[str, JsonValue]) -> str:
-    """The sparse section's sentence on its ``sim`` rows (empty for a JSON without them)."""
-    s = r["settings"]
+def _about_sparse_sim(s: Mapping[str, JsonValue]) -> str:
+    """The sparse section's sentence on its ``sim`` rows (empty for settings without them)."""
     if "sim" not in s["worlds"]:
         return ""
-    note = f" ({r['note']})" if r.get("note") else ""
     return (
         f" The `sim` rows: the simulator, the main job's full-run demonstrations of seeds "
         f"{', '.join(map(str, s['sim_seeds']))} (the balanced D of them), {s['sim_boxes']} "
-        f"reproduction boxes each{note}."
+        "reproduction boxes each."
     )
 
 
@@ -354,9 +354,10 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "sparse.json",
         "`klr_sparse` as a drop-in on every world",
-        f"python scripts/bench_sparse.py --worlds {SINGLE_WORLDS} procedural --repeats 1 "
+        f"python scripts/bench_sparse.py --worlds {SINGLE_WORLDS} procedural sim --sim-seeds 0 1 "
+        "--repeats 1 "
         "--out results/sparse.json",
-        ("settings", "rows", "summary"),
+        ("settings", "targets", "rows", "summary"),
         _about_sparse,
         _sparse,
     ),

@@ -156,6 +156,7 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
     sparse = {
         "settings": {"worlds": ["slip"], "sizes": [9], "seeds": [0, 1], "held_out": 6}
         | {"episodes": 20, "tasks": 10},
+        "targets": {"mae": 1.1, "supports": 0.25, "tick": 0.5, "fit": 2.0, "complete": -1.0},
         "rows": [],
         "summary": {"slip": {"9": {"seeds": 2, "ratios": ratios}}},
     }
@@ -218,6 +219,8 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "| slip | 9 | 0.97 | 0.24 | 0.23 | 0.90 ! | 0.88 | 0.40 | 0.95 | 2.50 ! | +4.0 |" in page
     assert "on every world (slip): per world, D = 9 and seed (0, 1)" in page
     assert "The `sim` rows" not in page  # none in this JSON
+    bound = "issue #23's bound (MAE ≤ 1.1x, supports ≤ 0.25x, tick ≤ 0.5x, fit ≤ 2x, C ≥ −1)."
+    assert bound in page  # read from the JSON's targets
     assert (
         "| r | 4.5 |" in page
         and "| two_point | 12 | 1,234 | 1.2 | 0.50 | 17 | 0.0312 | 5/5 |" in page
@@ -288,11 +291,12 @@ def test_the_sparse_section_says_where_its_simulator_rows_come_from(tmp_path: Pa
     folder = small_results(tmp_path)
     sparse = json.loads((folder / "sparse.json").read_text())
     sparse["settings"] |= {"worlds": ["slip", "sim"], "sim_seeds": [0, 1], "sim_boxes": 20}
-    sparse["note"] = "a run of their own"
+    sparse["note"] = "The sim rows come from a run of their own"
     (folder / "sparse.json").write_text(json.dumps(sparse))
     page = render_results(folder)
     assert "on every world (slip): per world" in page  # the simulator is not a synthetic world
     assert (
         "The `sim` rows: the simulator, the main job's full-run demonstrations of seeds 0, 1 "
-        "(the balanced D of them), 20 reproduction boxes each (a run of their own)." in page
+        "(the balanced D of them), 20 reproduction boxes each. The sim rows come from a run of "
+        "their own." in page
     )
