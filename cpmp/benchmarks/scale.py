@@ -5,7 +5,8 @@ Issue #34: from a handful to a thousand demonstrations.
 Per world and training size D (default two_point and relay at 12 / 48 / 192 / 768
 demonstrations of seed ``s``), one fresh Python process draws the demonstrations, fits
 :meth:`~cpmp.sequencer.ConcurrentSequencer.fit` with its defaults, and reports the fit's wall
-time (``fit_s``; ``predictor_s``: the predictor's part), its peak resident memory
+time (``fit_s``, Lightning already imported: the fit imports it lazily, once per process;
+``predictor_s``: the predictor's part), its peak resident memory
 (``peak_rss_gb``: the process's ``ru_maxrss`` after the fit, imports and demonstrations
 included; ``base_rss_gb`` the same before the fit), the training samples, the support points
 (``supports``, start heads included), the held-out progress MAE on ``held_out``
@@ -82,6 +83,7 @@ MAE and C at 768 no worse than at 192."""
 _MEASURE = r"""
 import json, resource, sys, time
 args = json.loads(sys.argv[1])
+import lightning  # the fit imports it lazily: a once-per-process cost kept out of fit_s
 import torch
 from cpmp.evaluation.offline import activation_progress, progress_errors
 from cpmp.sequencer import ConcurrentSequencer
@@ -102,6 +104,8 @@ base = rss_gb()
 start = time.perf_counter()
 dtype = args.get("dtype", "auto")
 options = {} if dtype == "auto" else {"dtype": dtype}
+if args.get("accelerator", "auto") != "auto":
+    options["accelerator"] = args["accelerator"]
 seq = ConcurrentSequencer.fit(train, seed=args["seed"], logger=None, **options)
 fit_s = time.perf_counter() - start
 peak = rss_gb()
@@ -122,6 +126,7 @@ print("RESULT " + json.dumps({
     "episodes": args["episodes"],
     "threads": torch.get_num_threads(),
     "dtype": str(getattr(seq.predictor, "dtype_", "")).removeprefix("torch."),
+    "device": str(fact("device")),
 }))
 """
 """The measuring process's program (public API only, so that another checkout runs it)."""
@@ -160,6 +165,9 @@ class ScaleSettings:
             ``auto`` (cpmp's default: ``float32`` from
             :data:`~cpmp.config.FLOAT32_FROM_SAMPLES` training samples), ``float64`` or
             ``float32``; each row reports the type its fit used.
+        accelerator: the fit's Lightning accelerator (the trainer option ``accelerator``):
+            ``auto`` (cpmp's default: a GPU where there is one), ``cpu``, ``gpu``, ...; each
+            row reports the device its fit ran on (``device``).
     """
 
     worlds: tuple[str, ...] = WORLDS
@@ -171,6 +179,7 @@ class ScaleSettings:
     pythonpath: str | None = None
     lerobot: int = LEROBOT_EPISODES
     dtype: str = "auto"
+    accelerator: str = "auto"
 
     def __post_init__(self) -> None:
         from cpmp.worlds.registry import world_names
@@ -190,6 +199,11 @@ class ScaleSettings:
             raise ConfigError(f"lerobot must be >= 0 episodes (0: skip), got {self.lerobot!r}")
         if self.dtype not in DTYPES:
             raise ConfigError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
+        if not isinstance(self.accelerator, str) or not self.accelerator:
+            raise ConfigError(
+                f"accelerator must be a name such as 'auto', 'cpu' or 'gpu', got "
+                f"{self.accelerator!r}"
+            )
         if not self.timeout > 0:
             raise ConfigError(f"timeout must be > 0 seconds, got {self.timeout!r}")
         if self.pythonpath is not None and not (Path(self.pythonpath) / "cpmp").is_dir():
@@ -254,6 +268,7 @@ def measure_size(
         "episodes": settings.episodes,
         "demos_file": demos_file,
         "dtype": settings.dtype,
+        "accelerator": settings.accelerator,
     }
     env = _environment(settings)
     row: dict[str, JsonValue] = {"world": world, "D": demos}
@@ -498,7 +513,8 @@ def _line(row: Mapping[str, JsonValue]) -> str:
     if "error" in row:
         return f"{_label(row)} D={row['D']}: {row['error']}"
     return (
-        f"{_label(row)} D={row['D']}: {row['samples']} samples, fit {row['fit_s']:.1f} s, "
+        f"{_label(row)} D={row['D']}: {row['samples']} samples, fit {row['fit_s']:.1f} s "
+        f"on {row.get('device', 'cpu')}, "
         f"peak RSS {row['peak_rss_gb']:.2f} GB, {row['supports']} supports, MAE "
         f"{row['mae']:.4f}, C {row['complete']}/{row['episodes']}"
     )
@@ -575,6 +591,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--dtype", choices=DTYPES, help="the predictors' float type (auto: cpmp's default)"
     )
+    parser.add_argument(
+        "--accelerator", help="the fit's Lightning accelerator (auto: a GPU where there is one)"
+    )
     args = parser.parse_args(argv)
     names = (
         "worlds",
@@ -586,6 +605,7 @@ def main(argv: list[str] | None = None) -> int:
         "pythonpath",
         "lerobot",
         "dtype",
+        "accelerator",
     )
     return run_settings_benchmark(
         "bench_scale",

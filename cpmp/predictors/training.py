@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+import warnings
 from collections.abc import Iterator
 from typing import Literal
 
@@ -147,7 +148,9 @@ def lightning_logger(logger: Logger | str | None, log_dir: str | None) -> Logger
 def _lightning_console(show: bool) -> Iterator[None]:
     """Keep Lightning's start-up INFO lines (accelerator, devices) off the console.
 
-    Unless ``show``, for the length of one fit; the levels are restored afterwards.
+    Unless ``show``, for the length of one fit; the levels are restored afterwards. Lightning's
+    "GPU available but not used" warning is dropped either way: the accelerator is the user's
+    choice (``trainer.accelerator``), and the fit's log line and report name its device.
     """
     loggers = [logging.getLogger(name) for name in _CONSOLE_LOGGERS]
     levels = [lg.level for lg in loggers]
@@ -155,7 +158,9 @@ def _lightning_console(show: bool) -> Iterator[None]:
         for lg in loggers:
             lg.setLevel(logging.WARNING)
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="GPU available but not used")
+            yield
     finally:
         for lg, level in zip(loggers, levels, strict=True):
             lg.setLevel(level)

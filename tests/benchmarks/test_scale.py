@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 
 import pytest
+import torch
 
 from cpmp.benchmarks import scale
 from cpmp.benchmarks.lerobot_data import import_mapping, write_demonstrations
@@ -70,8 +71,11 @@ def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     }
     # --dtype float32 fits the predictors in float32: the same data, another rounding
     assert result["settings"]["dtype"] == "auto" and small["dtype"] == "float64"  # small data
-    single = measure_size("two_point", 4, ScaleSettings.quick(dtype="float32"))
-    assert "error" not in single and single["dtype"] == "float32"
+    # the fit's accelerator: "auto" takes a GPU where there is one, --accelerator names one
+    assert result["settings"]["accelerator"] == "auto"
+    assert small["device"] == ("cuda:0" if torch.cuda.is_available() else "cpu")
+    single = measure_size("two_point", 4, ScaleSettings.quick(dtype="float32", accelerator="cpu"))
+    assert "error" not in single and single["dtype"] == "float32" and single["device"] == "cpu"
     assert single["samples"] == small["samples"] and single["supports"] > 0
     assert single["mae"] != small["mae"] and abs(single["mae"] - small["mae"]) < 0.01
 
@@ -119,6 +123,7 @@ def test_targets_read_768_against_48_and_192():
         {"pythonpath": "/nonexistent"},
         {"lerobot": -1},
         {"dtype": "float16"},
+        {"accelerator": ""},
     ],
 )
 def test_bad_settings_are_config_errors(options):
