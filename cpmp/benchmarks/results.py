@@ -243,9 +243,9 @@ def _about_scale(r: Mapping[str, JsonValue]) -> str:
         f"{' and '.join(s['worlds'])} (seed {s['seed']}), each size in its own process{cores}: "
         f"fit time, peak resident memory, support points, held-out progress MAE on "
         f"{s['held_out']} demonstrations and C of {s['episodes']} closed-loop episodes; then the "
-        "growth exponents of fit time and memory against the training samples. The machine "
-        "was shared with other jobs (`machine` in the JSON has its load averages), so the "
-        "times are pessimistic." + _about_dtype(r) + _about_lerobot(r)
+        "growth exponents of fit time and memory against the training samples. `fit_s` is the "
+        "fit alone (Lightning, which the fit imports lazily, is imported first); `machine` in "
+        "the JSON has the load averages before and after." + _about_dtype(r) + _about_lerobot(r)
     )
 
 

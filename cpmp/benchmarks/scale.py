@@ -173,7 +173,7 @@ class ScaleSettings:
     worlds: tuple[str, ...] = WORLDS
     sizes: tuple[int, ...] = SIZES
     seed: int = 0
-    held_out: int = 20
+    held_out: int = 100
     episodes: int = 20
     timeout: float = 1800.0
     pythonpath: str | None = None
@@ -576,7 +576,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", nargs="+", help=f"default: {' '.join(WORLDS)}")
     parser.add_argument("--sizes", type=int, nargs="+", help="training sizes D (12 48 192 768)")
     parser.add_argument("--seed", type=int, help="seed of the demonstrations and fit (0)")
-    parser.add_argument("--held-out", type=int, help="held-out demonstrations for the MAE (20)")
+    parser.add_argument("--held-out", type=int, help="held-out demonstrations for the MAE (100)")
     parser.add_argument("--episodes", type=int, help="closed-loop episodes (20)")
     parser.add_argument("--timeout", type=float, help="seconds per size (1800)")
     parser.add_argument(
