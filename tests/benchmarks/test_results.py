@@ -170,6 +170,19 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
         ),
         "procedural.json": synthetic_run({"scripted": 10, "defaults": 4}, "procedural"),
         "clock.json": clock,
+        "clock_sim.json": {
+            "settings": {"sim_seeds": [0, 1], "sim_demos": 6, "sim_boxes": 5},
+            "conditions": clock["conditions"],
+            "reference": "rate_100hz",
+            "worlds": {
+                "sim": {
+                    "conditions": {
+                        "rate_100hz": condition | {"complete": 9, "n_episodes": 10},
+                        "sensor_10hz": condition | {"complete": 8, "n_episodes": 10},
+                    }
+                }
+            },
+        },
         "start.json": {"n_boxes": 10, "seeds": [0], "rows": [], "mean_per_20": {"3": {"r": 4.5}}},
         "scale.json": scale,
         "sparse.json": sparse,
@@ -237,6 +250,9 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "| two_point | 5/5 (12 ms) | 4/5 (50 ms) |" in page
     assert "| two_point (scripted) | 5/5 | 5/5 |" in page
     assert "per world and seed (0) a fit on 6 demonstrations and 5 held-out episodes" in page
+    # the simulator's clock section: its own file, seeds and boxes
+    assert "| sim | 9/10 (50 ms) | 8/10 (50 ms) |" in page
+    assert "per seed (0, 1) a fit on 6 simulated demonstrations and 5 held-out boxes" in page
 
 
 def test_headline_puts_the_simulator_beside_the_paper_and_every_world(tmp_path: Path) -> None:
