@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cpmp.benchmarks.cli import run_settings_benchmark
+from cpmp.benchmarks.cli import given_options, run_settings_benchmark
 from cpmp.errors import ConfigError
 from cpmp.records import JsonValue
 
@@ -278,11 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-main-job", action="store_true", help="skip the main job")
     parser.add_argument("--folder", help="where the runs go (default: a temporary folder)")
     args = parser.parse_args(argv)
-    options: dict[str, object] = {
-        k: tuple(v) if isinstance(v, list) else v
-        for k in ("backends", "jobs", "workers", "folder")
-        if (v := getattr(args, k)) is not None
-    }
+    options = given_options(args, ("backends", "jobs", "workers", "folder"))
     if args.no_main_job:
         options["main_job"] = False
     return run_settings_benchmark(
