@@ -127,7 +127,10 @@ class JobExecutor:
         error: BaseException | None,
         trace: TracebackType | None,
     ) -> None:
-        return None
+        self.close()
+
+    def close(self) -> None:
+        """Release what entering took (leaving the ``with`` block calls it); nothing here."""
 
 
 class _Done(Generic[R]):
@@ -302,12 +305,8 @@ class LocalExecutor(JobExecutor):
             raise
         return self
 
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
+    def close(self) -> None:
+        """Stop the pool and the log listener."""
         self._pool = None
         self._stack.close()
 
@@ -431,12 +430,8 @@ class SubmititExecutor(JobExecutor):
         self._futures.append(future)
         return future
 
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
+    def close(self) -> None:
+        """Cancel the jobs that have not finished."""
         for future in self._futures:
             if not future.done():
                 future.job.cancel(check=False)
@@ -552,7 +547,7 @@ class DaskExecutor(JobExecutor):
                     self.client = self._connect(Client)
             self.client.subscribe_topic(self.topic, _dispatch_event)
         except BaseException:
-            self._close()
+            self.close()
             raise
         log.info("dask: %d jobs at once on %s", self.slots, self.client.scheduler.address)
         return self
@@ -574,7 +569,7 @@ class DaskExecutor(JobExecutor):
                 "local Dask cluster"
             ) from None
 
-    def _close(self) -> None:
+    def close(self) -> None:
         """Close the client and the local cluster (if this executor started one)."""
         client, cluster = self.client, self.cluster
         self.client = self.cluster = None
@@ -589,14 +584,6 @@ class DaskExecutor(JobExecutor):
             if self._quiet is not None:
                 logging.getLogger("distributed").setLevel(self._quiet)
                 self._quiet = None
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
-        self._close()
 
     def submit(self, fn: Callable[..., R], *args: object, label: str = "") -> JobFuture[R]:
         """Submit ``fn(*args)`` as a Dask task (its key named after ``label``)."""
