@@ -45,7 +45,9 @@ class SequencerConfig:
         coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
             hold back a transition while another variable runs an MP never seen at that
             demonstrated switch, or one that has progressed less than at every demonstrated
-            one (learned from the labels; see :mod:`cpmp.sequencer.switching`).
+            one, or while a feature the active MP moves is faster than at every demonstrated
+            instance of that switch (its speed envelope; learned from the labels; see
+            :mod:`cpmp.sequencer.switching` and :mod:`cpmp.sequencer.motion`).
         progress_margin: with ``coupling=context``, another variable's MP counts as not far
             enough while its predicted φ is more than this below the least progress it had at
             a demonstrated switch (``None``: compare MPs only).
@@ -54,7 +56,9 @@ class SequencerConfig:
             the coupling then the most probable, if its ``p`` reaches ``recovery_threshold``;
             with none, give up (a ``give_up`` note) unless the task is at its demonstrated end
             (see :mod:`cpmp.sequencer.switching`).
-        stall_time: seconds without any switch and without motion that count as a stall.
+        stall_time: seconds without any switch and without motion that count as a stall
+            (features that move alike under every demonstrated MP, such as a distractor's
+            wobble, are not motion: :func:`cpmp.sequencer.motion.ambient_features`).
         rest_speed: features count as at rest below this speed, in training ranges per second.
         recovery_threshold: the relaxed threshold of a recovery transition.
         min_exit: a transition also needs the current node's exit probability ``φ`` above this
@@ -92,9 +96,9 @@ class SequencerConfig:
             target φ reads "done" where the demonstrator entered it (a node re-entered in a
             loop: :func:`cpmp.sequencer.branches.entry_scales`).
         joint: with ``coupling=context``, a switch always demonstrated in the same sample as
-            another variable's switch (a bowl served as the last pour ends) waits until that
-            variable has switched or its rule decides to switch in the same tick, and a
-            recovery takes both (:attr:`cpmp.sequencer.switching.Coupling.joint`).
+            another variable's switch into the same MP (a bowl served as the last pour ends)
+            waits until that variable has switched or its rule decides to switch in the same
+            tick, and a recovery takes both (:attr:`cpmp.sequencer.switching.Coupling.joint`).
     """
 
     threshold: float = 0.65

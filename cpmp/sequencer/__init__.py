@@ -7,6 +7,8 @@ ones before it):
 
 * ``inputs``: the checks of what ``step`` is given (time, stamps, features, demonstrations);
 * ``timing``: the measurement time of each tick's features (clock steps, stamps, repeats);
+* ``motion``: what the demonstrations say about motion: each switch's speed envelope and the
+  ambient features (moving alike under every MP);
 * ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule)
   on measurement time, the learned cross-variable coupling and stall recovery;
 * ``fit_data``: each node's training data and the checks after a fit;
@@ -38,6 +40,7 @@ from cpmp.sequencer.episode import SequencerEpisode
 from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
 from cpmp.sequencer.inputs import checked_demonstrations, checked_features, checked_time
 from cpmp.sequencer.model import NodeIndex, TransitionModel
+from cpmp.sequencer.motion import SpeedLimit, SpeedMeter, ambient_features, learn_speed_limits
 from cpmp.sequencer.sequencer import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -48,6 +51,7 @@ from cpmp.sequencer.switching import (
     COUPLINGS,
     SWITCH_RULES,
     Coupling,
+    JointPartner,
     PaperRule,
     PlateauRule,
     StallDetector,
@@ -69,21 +73,26 @@ __all__ = [
     "EpisodeRecord",
     "Features",
     "FittedSequencer",
+    "JointPartner",
     "LabelGlitch",
     "LiveMask",
     "NodeIndex",
     "PaperRule",
     "PlateauRule",
     "SequencerEpisode",
+    "SpeedLimit",
+    "SpeedMeter",
     "StallDetector",
     "Stamps",
     "SwitchRule",
     "Times",
     "TransitionModel",
+    "ambient_features",
     "checked_demonstrations",
     "checked_features",
     "checked_time",
     "indicator_features",
+    "learn_speed_limits",
     "make_rule",
     "repair_glitches",
 ]

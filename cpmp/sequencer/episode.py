@@ -32,6 +32,7 @@ from cpmp.records import (
 from cpmp.sequencer.branches import STAY
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
+from cpmp.sequencer.motion import SpeedLimit, SpeedMeter
 from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
 from cpmp.sequencer.timing import MeasurementClock
 from cpmp.sequencer.watch import ActivationWatch
@@ -67,6 +68,8 @@ class PlanRow(NamedTuple):
             demonstrated together with (:attr:`~cpmp.sequencer.switching.Coupling.joint`).
         entry_scale: per successor, the factor on its entry probability
             (:attr:`~cpmp.sequencer.branches.BranchChoices.entry_scale`; 1 for most).
+        speed: per successor, the switch's speed envelope (one inconsistency while exceeded;
+            ``None``: none, :attr:`~cpmp.sequencer.switching.Coupling.speed`).
     """
 
     variable: str
@@ -78,6 +81,7 @@ class PlanRow(NamedTuple):
     checks: list[PhiCheck]
     joints: list[list[tuple[str, str, str]]]
     entry_scale: list[float]
+    speed: list[SpeedLimit | None]
 
 
 class TransitionPlan(NamedTuple):
@@ -164,7 +168,10 @@ class SequencerEpisode:
             for v in model.graphs
         }
         self._coupled = c.coupling == "context"
-        self._stall = StallDetector(model.feature_range, c.stall_time, c.rest_speed)
+        self._stall = StallDetector(
+            model.feature_range, c.stall_time, c.rest_speed, model.coupling.ambient
+        )
+        self._speed = SpeedMeter(model.feature_range)
         self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
         self._armed: dict[str, str] = {}
@@ -263,7 +270,9 @@ class SequencerEpisode:
         self._holding = {v: None for v in model.graphs}
         self._armed = {}
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        self._stall.reset(self._clock.reset(t, state), state)
+        m = self._clock.reset(t, state)
+        self._stall.reset(m, state)
+        self._speed.reset(m, state)
         self._last_t = t
         self._nonfinite = False
         self.gave_up = None
@@ -333,6 +342,7 @@ class SequencerEpisode:
         m = reading.m
         if reading.fresh:
             self._stall.observe(m, state)
+            self._speed.observe(m, state)
         if self._plan is None:
             context = dict(self.active)
             self._plan = TransitionPlan(context, self._transition_plan(context))
@@ -384,7 +394,8 @@ class SequencerEpisode:
         rows = []
         chosen_by: dict[str, str | None] = {}
         above: set[str] = set()
-        for v, current, names, columns, exit_column, unseen, checks, _, scale in plan:
+        speed = self._speed.speed() if self._coupled else None
+        for v, current, names, columns, exit_column, unseen, checks, _, scale, limits in plan:
             exit_p = phi[exit_column]
             p = [exit_p * min(1.0, (1.0 - phi[i]) * g) for i, g in zip(columns, scale, strict=True)]
             bad = unseen
@@ -393,6 +404,11 @@ class SequencerEpisode:
                 for successor, column, bound in checks:
                     if phi[column] < bound:
                         bad[successor] += 1
+            if speed is not None:
+                for k, limit in enumerate(limits):
+                    if limit is not None and limit.exceeded(speed).size:
+                        bad = list(bad) if bad is unseen else bad
+                        bad[k] += 1
             rows.append(TickRow(v, current, names, p, bad))
             chosen_by[v] = self._branch_choice(v, current, names, unseen, state)
             if self._watch[v][-1].see(t, m, p, stopped):
@@ -569,8 +585,9 @@ class SequencerEpisode:
             if self._coupled and c.joint:
                 # the switches it was always demonstrated together with come along
                 joint = model.coupling.joint.get((v, choice.source, choice.target), {})
-                for u, (a, b) in sorted(joint.items()):
-                    if context.get(u) == a and b in model.nodes.successors[(u, a)].names:
+                for u, (sources, b) in sorted(joint.items()):
+                    a = context.get(u, "")
+                    if a in sources and b in model.nodes.successors[(u, a)].names:
                         row = next(r for r in rows if r.variable == u)
                         q = row.p[row.successors.index(b)]
                         self._switch(t, m, u, b, q, state, phi, "recovery")
@@ -658,11 +675,15 @@ class SequencerEpisode:
             if not names:
                 continue
             unseen_counts, checks, joints = [], [], []
+            limits: list[SpeedLimit | None] = []
             for k, s in enumerate(names):
                 unseen, bounds = model.coupling.gates((v, current, s), context, margin)
                 unseen_counts.append(len(unseen))
                 joint = model.coupling.joint.get((v, current, s), {})
-                joints.append([(u, a, b) for u, (a, b) in sorted(joint.items()) if u in context])
+                joints.append(
+                    [(u, j.source_text, j.target) for u, j in sorted(joint.items()) if u in context]
+                )
+                limits.append(model.coupling.speed.get((v, current, s)))
                 checks += [
                     PhiCheck(k, nodes.index[(b.variable, context[b.variable])], b.bound)
                     for b in bounds
@@ -679,6 +700,7 @@ class SequencerEpisode:
                     checks,
                     joints,
                     [model.branches.entry_scale.get((v, current, s), 1.0) for s in names],
+                    limits,
                 )
             )
         return plan
@@ -706,8 +728,22 @@ class SequencerEpisode:
             why = model.coupling.inconsistent(
                 (v, current, target), context, done, model.config.progress_margin
             )
+            why += self._too_fast((v, current, target))
             text = "; ".join(why) + f", never seen at {v}: {current} -> {target} (held, p={p:.2f})"
         self.notes.append(SequencerNote(t, "hold", v, text))
+
+    def _too_fast(self, edge: tuple[str, str, str]) -> list[str]:
+        """One reason per feature faster than ``edge``'s speed envelope allows, now."""
+        limit = self.model.coupling.speed.get(edge)
+        speed = self._speed.speed()
+        if limit is None or speed is None:
+            return []
+        name = self.model.feature_name
+        return [
+            f"{name(int(limit.features[i]))} moves at {speed[limit.features[i]]:.3g} ranges/s "
+            f"(demonstrated switches allow {limit.limit[i]:.3g})"
+            for i in limit.exceeded(speed)
+        ]
 
     def _note_joint(
         self,

@@ -188,6 +188,7 @@ def fit_parts(
         warnings=tuple(glitch_warnings(graphs, demos) + fit_warnings(model, data)),
     )
     progress = demo_progress(graphs, data, [d.n_samples for d in demos])
+    feature_range = np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0))
     return FittedParts(
         graphs=graphs,
         predictor=model,
@@ -195,8 +196,10 @@ def fit_parts(
         summary=summary,
         glitches=glitches,
         initial_combinations=initial_combinations(demos, sorted(graphs)),
-        coupling=Coupling.learn(demos, sorted(graphs), progress=progress),
-        feature_range=np.where(indicator_features(all_x), 0.0, np.ptp(all_x, axis=0)),
+        coupling=Coupling.learn(
+            demos, sorted(graphs), progress=progress, feature_range=feature_range
+        ),
+        feature_range=feature_range,
         demos=demos,
         progress=progress,
     )

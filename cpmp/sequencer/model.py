@@ -120,6 +120,8 @@ class TransitionModel:
         initial_combinations: the demonstrated initial MP per variable (distinct; what
             ``config.start_rule == "joint"`` chooses among).
         branches: the learned choice at each node with several demonstrated successors.
+        feature_names: the ``d`` feature names (what the notes call the features; empty:
+            by index).
     """
 
     graphs: dict[str, SequenceGraph]
@@ -129,3 +131,8 @@ class TransitionModel:
     feature_range: np.ndarray
     initial_combinations: list[dict[str, str]]
     branches: BranchChoices = field(default_factory=lambda: BranchChoices({}))
+    feature_names: list[str] = field(default_factory=list)
+
+    def feature_name(self, j: int) -> str:
+        """Feature ``j``'s name (``feature j`` without names)."""
+        return self.feature_names[j] if j < len(self.feature_names) else f"feature {j}"

@@ -162,6 +162,7 @@ class ConcurrentSequencer:
             self.feature_range,
             self.initial_combinations,
             self.branches,
+            list(self.feature_names),
         )
         """What each episode reads (:class:`~cpmp.sequencer.model.TransitionModel`)."""
         self._episode = SequencerEpisode(self.transition_model)
@@ -586,7 +587,7 @@ class ConcurrentSequencer:
             parts.append(start.describe(self.feature_names))
         for v in sorted(self.graphs):
             parts.append(self.graphs[v].to_text())
-            lines = self.coupling.describe(v)
+            lines = self.coupling.describe(v, self.feature_names)
             if lines:
                 used = "" if self.config.coupling == "context" else " (not used: coupling=none)"
                 parts.append(f"{v}: switch contexts{used}")
@@ -595,4 +596,10 @@ class ConcurrentSequencer:
             if lines:
                 parts.append(f"{v}: branch choices")
                 parts += lines
+        ambient = self.coupling.ambient
+        if ambient is not None and ambient.any() and self.config.recovery:
+            names = ", ".join(self.feature_names[j] for j in np.flatnonzero(ambient))
+            parts.append(
+                f"ambient features (move alike under every MP; not a stall's motion): {names}"
+            )
         return "\n".join(parts)

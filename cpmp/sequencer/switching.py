@@ -72,6 +72,13 @@ from cpmp.config import COUPLINGS, SWITCH_RULES
 from cpmp.data import Demonstration
 from cpmp.progress import LabelKind, demo_labels
 from cpmp.records import JsonValue
+from cpmp.sequencer.motion import (
+    SPEED_FACTOR,
+    SpeedLimit,
+    ambient_features,
+    learn_speed_limits,
+    motion_data,
+)
 from cpmp.sequencer.timing import EPS_T
 
 
@@ -250,7 +257,24 @@ class SwitchInstance:
         )
 
 
-@dataclass
+class JointPartner(NamedTuple):
+    """Another variable's switch that a switch was always demonstrated together with.
+
+    Attributes:
+        sources: the MPs it switched out of (sorted; several when it came from different ones).
+        target: the MP it always switched into.
+    """
+
+    sources: tuple[str, ...]
+    target: str
+
+    @property
+    def source_text(self) -> str:
+        """The sources as text (``a or b``)."""
+        return " or ".join(self.sources)
+
+
+@dataclass(eq=False)
 class Coupling:
     """Contexts of the demonstrated switches (see module doc).
 
@@ -262,17 +286,45 @@ class Coupling:
         instances: ``(variable, source)`` -> every demonstrated switch of ``variable`` out of
             ``source``: its target, the features at it and the other variables' MPs around
             it (what a recovery reads: :meth:`nearest_target`).
-        joint: ``(variable, source, target)`` -> other variable -> ``(from, to)`` when every
-            demonstration of that switch came in the same sample as the other variable's
-            switch ``from -> to``: the switch is made together with it (a bowl is served as
-            the last pour ends), so it may fire only once the other variable is in ``to`` or
-            ready to switch there (its ``p`` above the threshold and its branch choice there).
+        joint: ``(variable, source, target)`` -> other variable -> :class:`JointPartner` when
+            every demonstration of that switch came in the same sample as a switch of the
+            other variable into the same MP ``to`` (from whichever MP): the switch is made
+            together with it (a bowl is served as the last pour ends), so it may fire only once
+            the other variable is in ``to`` or ready to switch there (its ``p`` above the
+            threshold and its branch choice there).
+        speed: ``(variable, source, target)`` -> the switch's speed envelope
+            (:mod:`cpmp.sequencer.motion`): a transition is inconsistent while a feature its
+            source moves is faster than demonstrated at the switch.
+        ambient: ``(d,)`` the features that move at a similar rate under every MP (the stall
+            detector ignores them); ``None``: none known.
     """
 
     contexts: dict[Edge, dict[str, frozenset[str]]] = field(default_factory=dict)
     progress: dict[Edge, dict[str, dict[str, float]]] = field(default_factory=dict)
     instances: dict[tuple[str, str], list[SwitchInstance]] = field(default_factory=dict)
-    joint: dict[Edge, dict[str, tuple[str, str]]] = field(default_factory=dict)
+    joint: dict[Edge, dict[str, JointPartner]] = field(default_factory=dict)
+    speed: dict[Edge, SpeedLimit] = field(default_factory=dict)
+    ambient: np.ndarray | None = None
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Coupling):
+            return NotImplemented
+        same = (self.contexts, self.progress, self.instances, self.joint) == (
+            other.contexts,
+            other.progress,
+            other.instances,
+            other.joint,
+        )
+        speeds = self.speed.keys() == other.speed.keys() and all(
+            np.array_equal(a, b)
+            for edge, limit in self.speed.items()
+            for a, b in zip(limit, other.speed[edge], strict=True)
+        )
+        mine, theirs = self.ambient, other.ambient
+        ambient = (mine is None) == (theirs is None) and (
+            mine is None or np.array_equal(mine, theirs)
+        )
+        return same and speeds and ambient
 
     @classmethod
     def learn(
@@ -282,6 +334,7 @@ class Coupling:
         transform: Callable[[np.ndarray], np.ndarray] | None = None,
         labels: LabelKind = "path",
         progress: Sequence[Mapping[str, np.ndarray]] | None = None,
+        feature_range: np.ndarray | None = None,
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``.
 
@@ -298,6 +351,9 @@ class Coupling:
             progress: each demonstration's labels per variable ``(n,)`` when the caller has
                 them already (a fit: :func:`cpmp.sequencer.fit_data.demo_progress`);
                 ``transform`` and ``labels`` are then not used.
+            feature_range: ``(d,)`` each feature's training range (0: never moves); with it
+                the speed envelopes and the ambient features are learned too
+                (:mod:`cpmp.sequencer.motion`), without it neither.
 
         Returns:
             The coupling.
@@ -336,14 +392,25 @@ class Coupling:
                     )
         joint = {}
         for edge, seen in together.items():
-            always = {u: pair for u, pair in seen[0].items() if all(s.get(u) == pair for s in seen)}
+            always = {
+                u: JointPartner(tuple(sorted({s[u][0] for s in seen})), to)
+                for u, (_, to) in seen[0].items()
+                if all(u in s and s[u][1] == to for s in seen)
+            }
             if always:
                 joint[edge] = always
+        speed, ambient = {}, None
+        if feature_range is not None:
+            data = motion_data(demos)
+            speed = learn_speed_limits(data, variables, feature_range)
+            ambient = ambient_features(data, variables, len(feature_range))
         return cls(
             {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
             {e: c for e, c in progress_seen.items() if c},
             instances,
             joint,
+            speed,
+            ambient,
         )
 
     def inconsistent(
@@ -435,10 +502,12 @@ class Coupling:
                 best, target = distance, inst.target
         return target
 
-    def describe(self, variable: str) -> list[str]:
+    def describe(self, variable: str, feature_names: Sequence[str] | None = None) -> list[str]:
         """One line per switch of ``variable``: the other variables' demonstrated MPs.
 
-        Each MP is followed by the least progress at which it was seen, where known.
+        Each MP is followed by the least progress at which it was seen, where known; then the
+        switches it is made together with and the features its speed envelope watches (by
+        name, from ``feature_names``, else by index).
         """
         lines = []
         for (v, source, target), ctx in sorted(self.contexts.items()):
@@ -455,8 +524,18 @@ class Coupling:
                         + ")"
                     )
                 parts.append(part)
-            for u, (a, b) in sorted(self.joint.get((v, source, target), {}).items()):
-                parts.append(f"together with {u}: {a} -> {b}")
+            for u, partner in sorted(self.joint.get((v, source, target), {}).items()):
+                parts.append(f"together with {u}: {partner.source_text} -> {partner.target}")
+            limit = self.speed.get((v, source, target))
+            if limit is not None and limit.features.size:
+                names = [
+                    feature_names[j] if feature_names is not None else f"feature {j}"
+                    for j in limit.features.tolist()
+                ]
+                shown = ", ".join(names[:4]) + (
+                    f" and {len(names) - 4} more" if len(names) > 4 else ""
+                )
+                parts.append(f"{shown} at most {SPEED_FACTOR:g}x as fast as demonstrated")
             lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
         return lines
 
@@ -474,11 +553,18 @@ class Coupling:
                         for u, q in sorted(self.progress.get((v, s, t), {}).items())
                     },
                     "joint": {
-                        u: list(pair) for u, pair in sorted(self.joint.get((v, s, t), {}).items())
+                        u: {"from": list(p.sources), "to": p.target}
+                        for u, p in sorted(self.joint.get((v, s, t), {}).items())
                     },
+                    **(
+                        {"speed": self.speed[(v, s, t)].to_dict()}
+                        if (v, s, t) in self.speed
+                        else {}
+                    ),
                 }
                 for (v, s, t), c in sorted(self.contexts.items())
             ],
+            "ambient": None if self.ambient is None else self.ambient.tolist(),
             "instances": [
                 {
                     "variable": v,
@@ -498,7 +584,7 @@ class Coupling:
     ) -> Coupling:
         """Inverse of :meth:`to_dict` (also reads the list form of checkpoint version 2)."""
         rows = data.get("switches", []) if isinstance(data, Mapping) else data
-        contexts, progress, joint = {}, {}, {}
+        contexts, progress, joint, speed = {}, {}, {}, {}
         for r in rows:
             edge = (str(r["variable"]), str(r["source"]), str(r["target"]))
             contexts[edge] = {str(u): frozenset(map(str, m)) for u, m in r["context"].items()}
@@ -508,9 +594,11 @@ class Coupling:
             }
             if prog:
                 progress[edge] = prog
-            pairs = {str(u): (str(a), str(b)) for u, (a, b) in (r.get("joint") or {}).items()}
+            pairs = {str(u): _partner(p) for u, p in (r.get("joint") or {}).items()}
             if pairs:
                 joint[edge] = pairs
+            if r.get("speed") is not None:
+                speed[edge] = SpeedLimit.from_dict(r["speed"])
         instances: dict[tuple[str, str], list[SwitchInstance]] = {}
         for r in data.get("instances", []) if isinstance(data, Mapping) else []:
             instances.setdefault((str(r["variable"]), str(r["source"])), []).append(
@@ -520,7 +608,17 @@ class Coupling:
                     {str(u): frozenset(map(str, m)) for u, m in r["context"].items()},
                 )
             )
-        return cls(contexts, progress, instances, joint)
+        ambient = data.get("ambient") if isinstance(data, Mapping) else None
+        mask = None if ambient is None else np.asarray(ambient, dtype=bool).reshape(-1)
+        return cls(contexts, progress, instances, joint, speed, mask)
+
+
+def _partner(row: JsonValue) -> JointPartner:
+    """A :class:`JointPartner` from its checkpoint form (or the ``[from, to]`` pair of before)."""
+    if isinstance(row, Mapping):
+        return JointPartner(tuple(str(a) for a in row["from"]), str(row["to"]))
+    a, b = row
+    return JointPartner((str(a),), str(b))
 
 
 def indicator_features(x: np.ndarray) -> np.ndarray:
@@ -541,12 +639,21 @@ class StallDetector:
     ``feature_range (d,)``: each feature's range in the training data; motion is measured
     relative to it, so the detector does not depend on the features' units. Features with a
     range of 0 are ignored (:meth:`ConcurrentSequencer.fit` gives indicator features range 0:
-    a touch signal that flickers is not motion).
+    a touch signal that flickers is not motion), and so are those in ``ignore (d,)`` (the
+    ambient features, :attr:`Coupling.ambient`: a distractor's wobble is not progress).
     """
 
-    def __init__(self, feature_range: np.ndarray, stall_time: float, rest_speed: float) -> None:
+    def __init__(
+        self,
+        feature_range: np.ndarray,
+        stall_time: float,
+        rest_speed: float,
+        ignore: np.ndarray | None = None,
+    ) -> None:
         r = np.asarray(feature_range, dtype=np.float64)
         varies = r > 1e-12 * max(float(np.max(r, initial=0.0)), 1e-300)
+        if ignore is not None:
+            varies &= ~np.asarray(ignore, dtype=bool)
         self.inv_range = np.divide(1.0, r, out=np.zeros_like(r), where=varies)
         self.stall_time = stall_time
         self.rest_speed = rest_speed

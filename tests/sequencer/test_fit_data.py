@@ -173,7 +173,13 @@ def test_fit_hands_its_labels_to_the_coupling(noisy_demos):
             for seg in demo.segments(v):  # each activation runs 0 -> 1 (eq. 1 normalised)
                 assert (labels[seg.start], labels[seg.stop - 1]) == (0.0, 1.0)
     relearned = Coupling.learn(
-        noisy_demos, sorted(graphs), predictor.scaler.transform, predictor.labels
+        noisy_demos,
+        sorted(graphs),
+        predictor.scaler.transform,
+        predictor.labels,
+        feature_range=seq.feature_range,
     )
     assert seq.coupling == relearned
+    # the noise moves every feature under every MP; the positions still count as stalls' motion
+    assert not seq.coupling.ambient[:2].any()
     assert seq.coupling.progress  # progress thresholds were learned at all

@@ -298,6 +298,13 @@ def test_indicator_features_and_jitter_are_not_motion():
     for k in range(1, 301):  # a slow drift of 0.02 range/s is motion
         drift.observe(k * DT, np.array([0.0002 * k, 0.0]))
     assert drift.last_motion > 2.4 and not drift.stalled(3.0)
+    ambient = StallDetector(
+        np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01, ignore=np.array([True, False])
+    )
+    ambient.reset(0.0, np.zeros(2))
+    for k in range(1, 301):  # the same drift on an ambient feature is not motion
+        ambient.observe(k * DT, np.array([0.0002 * k, 0.0]))
+    assert ambient.last_motion == 0.0 and ambient.stalled(3.0)
 
 
 def _finished_relay(**config):

@@ -1,0 +1,289 @@
+"""How fast the features moved at each demonstrated switch, and which features always move.
+
+Two facts the labelled demonstrations hold about motion, learned at fit time and read by the
+transition rule (:mod:`cpmp.sequencer.switching`, :mod:`cpmp.sequencer.episode`):
+
+**A speed envelope per demonstrated switch.** Progress (eq. 1) says *where* along an MP the
+state is; it cannot say whether the MP has come to rest there. Many switches ``A -> B`` were
+always demonstrated once some of the features ``A`` moves had slowed down (an arm arrives, a
+lift settles, a partner's hand lets go). For each demonstrated switch the fastest speed of each
+feature at the switch (over the :data:`SPEED_WINDOW` before it) is kept; at run time the
+switch is inconsistent while a watched feature is more than :data:`SPEED_FACTOR` times faster
+than that (with a floor of :data:`SPEED_FLOOR` times the feature's top speed under ``A``). A
+feature is watched when it moves in ``A`` (its path under ``A`` is at least
+:data:`MOVING_SHARE` of the longest feature path under ``A``) and had settled at every
+demonstrated instance of the switch (at most :data:`SETTLED_SHARE` of its mean speed under
+``A``): a feature still moving at its usual speed when the demonstrator switched (another
+arm's reach while the fingers preshape) does not time the switch. All speeds are in units of
+each feature's training range, measured along each demonstration denoised
+(:func:`cpmp.progress.denoise_trajectory`); a feature with white noise in the demonstrations
+(:func:`cpmp.progress.white_noise_std` ``σ``) gets :data:`NOISE_Z` ``· √2 σ /``
+:data:`SPEED_WINDOW` more, what the same noise adds to a speed measured at run time (a noisy
+feature's envelope is then loose: a speed over 100 ms cannot tell its motion from its noise). The
+envelope is one more context of the switch, next to the other variables' MPs and progress
+(:class:`~cpmp.sequencer.switching.Coupling`): it holds a switch back, never fires one.
+
+**Ambient features.** A feature that moves at a similar rate under every MP of every variable
+(a distractor's wobble, a conveyor, a clock) says nothing about whether the task is stuck: its
+mean speed under the MP where it moves least is at least :data:`AMBIENT_RATIO` of its mean
+speed under the MP where it moves most. The mean speeds are measured along each demonstration
+denoised (:func:`cpmp.progress.denoise_trajectory`), so that white sensor noise, which moves
+every feature under every MP, makes no feature ambient. The stall detector ignores those features
+(:class:`~cpmp.sequencer.switching.StallDetector`), so their motion never hides a stall.
+
+Speeds are in training ranges per second (a feature of range 0 never moves).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterator, Mapping, Sequence
+from itertools import pairwise
+from typing import NamedTuple
+
+import numpy as np
+
+from cpmp.data import Demonstration
+from cpmp.progress import denoise_trajectory, white_noise_std
+from cpmp.records import JsonValue
+
+SPEED_WINDOW = 0.1
+"""Seconds over which a speed is measured: the displacement since the newest measurement at
+least this old, over the time between them."""
+SPEED_FACTOR = 2.0
+"""How much faster than demonstrated at a switch a moving feature may be (``inf``: no
+envelope)."""
+SPEED_FLOOR = 0.01
+"""The least envelope, as a share of the feature's top speed under the switch's source MP."""
+MOVING_SHARE = 0.05
+"""A feature moves in an MP when its path there is at least this share of the longest one."""
+SETTLED_SHARE = 0.5
+"""A moving feature is in a switch's envelope only if, at every demonstrated instance of the
+switch, it had slowed to at most this share of its mean speed under the source MP (``inf``:
+every moving feature is)."""
+NOISE_Z = 3.0
+"""How many standard deviations of a noisy feature's run-time speed noise its envelope allows."""
+AMBIENT_RATIO = 0.3
+"""A feature is ambient when its least mean speed over the MPs is at least this share of its
+greatest (``inf``: none is)."""
+
+Edge = tuple[str, str, str]
+"""(variable, source MP, target MP)."""
+
+
+class SpeedLimit(NamedTuple):
+    """The speed envelope of one demonstrated switch.
+
+    Attributes:
+        features: ``(k,)`` the indices of the features its source MP moves.
+        limit: ``(k,)`` the fastest each may move for the switch to be consistent [ranges/s].
+    """
+
+    features: np.ndarray
+    limit: np.ndarray
+
+    def exceeded(self, speed: np.ndarray) -> np.ndarray:
+        """The positions in :attr:`features` moving faster than their limit at ``speed (d,)``."""
+        return np.flatnonzero(speed[self.features] > self.limit)
+
+    def to_dict(self) -> dict[str, JsonValue]:
+        """JSON/checkpoint-friendly form."""
+        return {"features": self.features.tolist(), "limit": self.limit.tolist()}
+
+    @classmethod
+    def from_dict(cls, row: Mapping[str, JsonValue]) -> SpeedLimit:
+        """Inverse of :meth:`to_dict`."""
+        features = np.asarray(row["features"], dtype=np.int64).reshape(-1)
+        limit = np.asarray(row["limit"], dtype=np.float64).reshape(-1)
+        return cls(features, limit)
+
+
+class MotionData(NamedTuple):
+    """One demonstration as the motion learners read it (:func:`motion_data`).
+
+    Attributes:
+        features: ``(T, d)`` denoised (:func:`cpmp.progress.denoise_trajectory`).
+        time: ``(T,)`` [s].
+        labels: variable -> ``(T,)`` MP labels.
+        noise: ``(d,)`` each feature's white-noise standard deviation in the recording.
+    """
+
+    features: np.ndarray
+    time: np.ndarray
+    labels: Mapping[str, np.ndarray]
+    noise: np.ndarray
+
+
+def motion_data(demos: Sequence[Demonstration]) -> list[MotionData]:
+    """Each demonstration denoised once, with its noise level (for both learners)."""
+    out = []
+    for demo in demos:
+        x = np.asarray(demo.features, np.float64)
+        out.append(
+            MotionData(
+                denoise_trajectory(x),
+                np.asarray(demo.time, np.float64),
+                {v: np.asarray(lab) for v, lab in demo.labels.items()},
+                white_noise_std(x),
+            )
+        )
+    return out
+
+
+def _inverse_range(feature_range: np.ndarray) -> np.ndarray:
+    r = np.asarray(feature_range, dtype=np.float64)
+    return np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
+
+
+def _segments(labels: np.ndarray) -> Iterator[tuple[int, int, str]]:
+    """``(start, stop, mp)`` of each activation in a label sequence ``(T,)``."""
+    cuts = [0, *(np.flatnonzero(labels[1:] != labels[:-1]) + 1).tolist(), len(labels)]
+    for a, b in pairwise(cuts):
+        yield a, b, str(labels[a])
+
+
+def window_speed(
+    x: np.ndarray, t: np.ndarray, i: int, inv_range: np.ndarray, window: float = SPEED_WINDOW
+) -> np.ndarray | None:
+    """Each feature's speed at sample ``i`` over the newest sample at least ``window`` older.
+
+    Args:
+        x: features ``(T, d)``.
+        t: their times ``(T,)`` [s].
+        i: the sample.
+        inv_range: ``(d,)`` one over each feature's range (0: ignored).
+        window: [s].
+
+    Returns:
+        ``(d,)`` [ranges/s], or ``None`` when no sample is that old.
+    """
+    j = int(np.searchsorted(t, t[i] - window + 1e-9, side="right")) - 1
+    if j < 0 or j >= i:
+        return None
+    return np.abs(x[i] - x[j]) / (t[i] - t[j]) * inv_range
+
+
+def learn_speed_limits(
+    demos: Sequence[MotionData], variables: Sequence[str], feature_range: np.ndarray
+) -> dict[Edge, SpeedLimit]:
+    """The speed envelope of every demonstrated switch (see the module doc).
+
+    Args:
+        demos: the labelled demonstrations (:func:`motion_data`).
+        variables: the control variables.
+        feature_range: ``(d,)`` each feature's training range (0: never moves).
+
+    Returns:
+        ``(variable, source, target)`` -> its envelope (none with :data:`SPEED_FACTOR` inf).
+    """
+    if not np.isfinite(SPEED_FACTOR):
+        return {}
+    inv = _inverse_range(feature_range)
+    d = inv.size
+    path: dict[tuple[str, str], np.ndarray] = {}
+    duration: dict[tuple[str, str], float] = {}
+    top: dict[tuple[str, str], np.ndarray] = {}
+    at: dict[Edge, np.ndarray] = {}
+    noise = np.zeros(d)
+    for demo in demos:
+        x, t = demo.features, demo.time
+        noise = np.maximum(noise, demo.noise)
+        for v in variables:
+            segments = list(_segments(demo.labels[v]))
+            for a, b, mp in segments:
+                if b - a < 2:
+                    continue
+                step = np.abs(np.diff(x[a:b], axis=0)) * inv
+                path[(v, mp)] = path.get((v, mp), np.zeros(d)) + step.sum(axis=0)
+                duration[(v, mp)] = duration.get((v, mp), 0.0) + float(t[b - 1] - t[a])
+                fastest = (step / np.diff(t[a:b])[:, None]).max(axis=0)
+                top[(v, mp)] = np.maximum(top.get((v, mp), np.zeros(d)), fastest)
+            for (_, _, source), (a, _, target) in pairwise(segments):
+                speed = window_speed(x, t, a, inv)
+                if speed is not None:
+                    edge = (v, source, target)
+                    at[edge] = np.maximum(at.get(edge, np.zeros(d)), speed)
+    allowance = NOISE_Z * np.sqrt(2.0) * noise * inv / SPEED_WINDOW
+    limits = {}
+    for (v, source, target), speed in sorted(at.items()):
+        p = path.get((v, source), np.zeros(d))
+        mean = p / max(duration.get((v, source), 0.0), 1e-12)
+        watched = (p >= MOVING_SHARE * p.max()) & (speed <= SETTLED_SHARE * mean)
+        moving = np.flatnonzero(watched) if p.max() > 0 else np.zeros(0, int)
+        floor = SPEED_FLOOR * top.get((v, source), np.zeros(d))
+        limits[(v, source, target)] = SpeedLimit(
+            moving.astype(np.int64),
+            (np.maximum(SPEED_FACTOR * speed, floor) + allowance)[moving],
+        )
+    return limits
+
+
+def ambient_features(
+    demos: Sequence[MotionData], variables: Sequence[str], n_features: int
+) -> np.ndarray:
+    """``(d,)`` bool: the features that move at a similar rate under every MP (module doc).
+
+    Args:
+        demos: the labelled demonstrations (:func:`motion_data`).
+        variables: the control variables.
+        n_features: ``d``.
+
+    Returns:
+        The mask (all false with fewer than two MPs, or :data:`AMBIENT_RATIO` inf).
+    """
+    path: dict[tuple[str, str], np.ndarray] = {}
+    duration: dict[tuple[str, str], float] = {}
+    for demo in demos:
+        x, t = demo.features, demo.time
+        for v in variables:
+            for a, b, mp in _segments(demo.labels[v]):
+                if b - a < 2:
+                    continue
+                key = (v, mp)
+                path[key] = path.get(key, np.zeros(n_features)) + np.abs(
+                    np.diff(x[a:b], axis=0)
+                ).sum(axis=0)
+                duration[key] = duration.get(key, 0.0) + float(t[b - 1] - t[a])
+    rates = [path[k] / duration[k] for k in sorted(path) if duration[k] > 0]
+    if len(rates) < 2 or not np.isfinite(AMBIENT_RATIO):
+        return np.zeros(n_features, dtype=bool)
+    stacked = np.stack(rates)
+    hi, lo = stacked.max(axis=0), stacked.min(axis=0)
+    return (hi > 0) & (lo >= AMBIENT_RATIO * hi)
+
+
+class SpeedMeter:
+    """Each feature's speed over the last :data:`SPEED_WINDOW` of measurements, at run time.
+
+    Feed it new measurements only (as the stall detector). Args: ``feature_range (d,)`` as
+    in :func:`learn_speed_limits`.
+    """
+
+    def __init__(self, feature_range: np.ndarray) -> None:
+        self.inv_range = _inverse_range(feature_range)
+        self._seen: deque[tuple[float, np.ndarray]] = deque()
+
+    def reset(self, t: float, x: np.ndarray) -> None:
+        """Start an episode at ``t`` [s] with features ``x (d,)``."""
+        self._seen.clear()
+        self._seen.append((t, np.array(x, dtype=np.float64)))
+
+    def observe(self, t: float, x: np.ndarray) -> None:
+        """Feed the measurement ``x (d,)`` taken at ``t`` [s] (later than the last one)."""
+        seen = self._seen
+        seen.append((t, np.array(x, dtype=np.float64)))
+        while len(seen) > 2 and t - seen[1][0] >= SPEED_WINDOW - 1e-9:
+            seen.popleft()
+
+    def speed(self) -> np.ndarray | None:
+        """``(d,)`` [ranges/s] over the newest measurement at least :data:`SPEED_WINDOW` old.
+
+        ``None`` before one is that old.
+        """
+        seen = self._seen
+        if len(seen) < 2:
+            return None
+        (t0, x0), (t1, x1) = seen[0], seen[-1]
+        if t1 - t0 < SPEED_WINDOW - 1e-9:
+            return None
+        return np.abs(x1 - x0) / (t1 - t0) * self.inv_range

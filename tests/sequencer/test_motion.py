@@ -1,0 +1,142 @@
+"""Speed envelopes and ambient features (cpmp.sequencer.motion), learned from labelled
+demonstrations and read by the transition rule."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cpmp.data import Demonstration
+from cpmp.progress import white_noise_std
+from cpmp.sequencer import ConcurrentSequencer, motion
+from cpmp.sequencer.motion import (
+    SpeedLimit,
+    SpeedMeter,
+    ambient_features,
+    learn_speed_limits,
+    motion_data,
+    window_speed,
+)
+from cpmp.sequencer.switching import Coupling
+
+DT = 0.01
+
+
+def _demo(x: np.ndarray, labels: dict[str, list[str]]) -> Demonstration:
+    n = len(x)
+    names = [f"f{j}" for j in range(x.shape[1])]
+    return Demonstration(np.arange(n) * DT, x, labels, names)
+
+
+def _arrival(n_move: int = 100, n_rest: int = 50, speed_at_end: float = 0.0) -> np.ndarray:
+    """Feature 0 moves 0 -> 1 and slows to ``speed_at_end`` [1/s]; feature 1 never moves."""
+    s = np.linspace(0.0, 1.0, n_move)
+    f0 = 1.0 - (1.0 - s) ** 2  # decelerates to 0 at s = 1
+    f0 = np.concatenate([f0, 1.0 + speed_at_end * DT * np.arange(1, n_rest + 1)])
+    return np.stack([f0, np.zeros_like(f0)], axis=1)
+
+
+def test_window_speed_is_the_displacement_over_the_newest_sample_a_window_old():
+    t = np.arange(30) * DT
+    x = np.stack([t * 2.0, np.zeros_like(t)], axis=1)
+    inv = np.array([0.5, 0.0])  # range 2 for feature 0; feature 1 ignored
+    np.testing.assert_allclose(window_speed(x, t, 20, inv), [1.0, 0.0])
+    assert window_speed(x, t, 5, inv) is None  # nothing 0.1 s old yet
+
+
+def test_a_switch_made_at_rest_gets_a_tight_envelope_on_the_features_its_source_moves():
+    x = _arrival()
+    demo = _demo(x, {"arm": ["go"] * 100 + ["back"] * 50})
+    limits = learn_speed_limits(motion_data([demo]), ["arm"], np.ptp(x, axis=0))
+    limit = limits[("arm", "go", "back")]
+    np.testing.assert_array_equal(limit.features, [0])  # feature 1 never moves under go
+    at_switch = window_speed(x, demo.time, 100, np.array([1.0, 0.0]))[0]
+    top = np.abs(np.diff(x[:100, 0])).max() / DT
+    want = max(motion.SPEED_FACTOR * at_switch, motion.SPEED_FLOOR * top)
+    np.testing.assert_allclose(limit.limit, [want])
+    # the source's top speed is far above the envelope: a switch mid-motion is held
+    assert limit.exceeded(np.array([top / 2, 0.0])).tolist() == [0]
+    assert limit.exceeded(np.array([want / 2, 5.0])).size == 0
+    back = SpeedLimit.from_dict(limit.to_dict())
+    np.testing.assert_array_equal(back.features, limit.features)
+    np.testing.assert_allclose(back.limit, limit.limit)
+
+
+def test_the_speed_meter_reads_the_newest_measurement_a_window_old():
+    meter = SpeedMeter(np.array([2.0, 0.0]))
+    meter.reset(0.0, np.zeros(2))
+    assert meter.speed() is None
+    for k in range(1, 31):
+        meter.observe(k * DT, np.array([k * DT * 4.0, 1.0]))
+    np.testing.assert_allclose(meter.speed(), [2.0, 0.0])  # 4 per s over range 2
+    assert len(meter._seen) <= 12  # it keeps one window, not the episode
+    meter.reset(1.0, np.zeros(2))  # a new episode forgets the last one
+    assert meter.speed() is None
+
+
+def test_a_feature_moving_alike_under_every_mp_is_ambient():
+    n = 200
+    t = np.arange(n) * DT
+    wobble = 0.1 * np.sin(2 * np.pi * 2.0 * t)  # moves the same under every MP
+    arm = np.concatenate([np.linspace(0, 1, 100), np.ones(100)])  # moves under go only
+    x = np.stack([arm, wobble, np.zeros(n)], axis=1)
+    demo = _demo(x, {"arm": ["go"] * 100 + ["rest"] * 100})
+    data = motion_data([demo])
+    np.testing.assert_array_equal(ambient_features(data, ["arm"], 3), [False, True, False])
+    one_mp = _demo(x, {"arm": ["go"] * n})
+    assert not ambient_features(motion_data([one_mp]), ["arm"], 3).any()  # nothing to compare
+
+
+def test_coupling_keeps_the_motion_facts_through_its_checkpoint_form():
+    x = _arrival()
+    demo = _demo(x, {"arm": ["go"] * 100 + ["back"] * 50})
+    coupling = Coupling.learn([demo], ["arm"], feature_range=np.ptp(x, axis=0))
+    assert ("arm", "go", "back") in coupling.speed and coupling.ambient is not None
+    assert Coupling.from_dict(coupling.to_dict()) == coupling
+    assert "f0 at most 2x as fast as demonstrated" in "\n".join(
+        coupling.describe("arm", demo.feature_names)
+    )
+    plain = Coupling.learn([demo], ["arm"])
+    assert not plain.speed and plain.ambient is None
+    assert Coupling.from_dict(plain.to_dict()) == plain
+
+
+def test_an_envelope_holds_a_switch_while_the_source_still_moves(train_demos, monkeypatch):
+    """Replaying a demonstration: with the learned envelopes the sequencer makes the
+    demonstrated switches; with zero envelopes a switch out of a moving MP is held (the hold
+    note names the speed) and fewer switches come."""
+
+    def replay(seq: ConcurrentSequencer, demo: Demonstration) -> tuple[list[float], list[str]]:
+        seq.reset(float(demo.time[0]), demo.features[0])
+        for t, x in zip(demo.time[1:], demo.features[1:], strict=True):
+            seq.step(float(t), x)
+        return [e.t for e in seq.events], [n.text for n in seq.notes if n.kind == "hold"]
+
+    learned = ConcurrentSequencer.fit(train_demos, seed=0, logger=None)
+    monkeypatch.setattr(motion, "SPEED_FACTOR", 0.0)
+    monkeypatch.setattr(motion, "SPEED_FLOOR", 0.0)
+    strict = ConcurrentSequencer.fit(train_demos, seed=0, logger=None)
+    demo = train_demos[0]
+    times, _ = replay(learned, demo)
+    late, holds = replay(strict, demo)
+    demonstrated = sum(len(demo.switch_indices(v)) for v in demo.variables)
+    assert len(times) == demonstrated
+    assert any("ranges/s (demonstrated switches allow 0)" in h for h in holds)
+    assert len(late) < len(times)
+
+
+def test_a_noisy_feature_gets_the_speed_its_noise_adds_at_run_time():
+    """Learned along the denoised demonstration, plus NOISE_Z x the speed noise of a 100 ms
+    window: sensor noise at run time does not hold the switch."""
+    x = _arrival()
+    labels = {"arm": ["go"] * 100 + ["back"] * 50}
+    noisy = x.copy()
+    noisy[:, 0] += np.random.default_rng(0).normal(0.0, 0.01, len(x))
+    r = np.ptp(x, axis=0)
+    clean = learn_speed_limits(motion_data([_demo(x, labels)]), ["arm"], r)
+    loud = learn_speed_limits(motion_data([_demo(noisy, labels)]), ["arm"], r)
+    edge = ("arm", "go", "back")
+    np.testing.assert_array_equal(loud[edge].features, clean[edge].features)
+    sigma = white_noise_std(noisy)[0]  # the estimate of the 0.01 the demonstration has
+    assert 0.5 * 0.01 < sigma < 1.5 * 0.01
+    allowance = motion.NOISE_Z * np.sqrt(2.0) * sigma / motion.SPEED_WINDOW / r[0]
+    assert loud[edge].limit[0] >= allowance > clean[edge].limit[0]
