@@ -15,11 +15,14 @@ so jitter changes how far the world moves between ticks; the simulator runs in
 :func:`cpmp.sim.run_episodes` at the condition's control rate (for jitter: at 500 Hz with the
 policy woken on the jittered schedule, rounded to the 2 ms ticks).
 
-An episode is ``complete`` when every variable ran exactly the demonstrator's MP sequence for
-that episode and the goal was reached; a synthetic episode stops at its first wrong transition.
-The switch-time error pairs the k-th switch of each variable with the demonstrator's k-th
-switch on the same episode (the demonstrator at the world's own rate and an ideal clock), in
-seconds of true time, over complete episodes.
+A synthetic episode is scored as the world scores it (:meth:`~cpmp.worlds.protocol.World.score`,
+the count of the worlds table): ``complete`` when the goal was reached (for a ``strict`` world,
+also with exactly the demonstrator's MP sequences of that episode), ``wrong_start`` when the
+initial MPs were not the demonstrator's. ``same_sequences`` counts the complete episodes whose
+every variable ran exactly the demonstrator's MP sequence. The switch-time error pairs the k-th
+switch of each variable with the demonstrator's k-th switch on the same episode (the
+demonstrator at the world's own rate and an ideal clock), in seconds of true time, over those
+episodes.
 """
 
 from __future__ import annotations
@@ -49,6 +52,10 @@ SYNTHETIC_WORLDS = world_names()
 """Every registered synthetic world (:mod:`cpmp.worlds.registry`)."""
 WORLDS = (*SYNTHETIC_WORLDS, "sim")
 REFERENCE = "rate_100hz"
+SCORING = "world"
+"""How a synthetic episode is scored: as the world scores it (see the module doc). A result
+without ``scoring`` comes from an earlier bench that counted an episode complete only with the
+demonstrator's MP sequences, stopping it at the first switch that left them."""
 """The condition every other one is compared with: the worlds' own 100 Hz loop."""
 HELD_OUT_SEED = 1000
 """Evaluation episodes of seed ``s`` are drawn with ``HELD_OUT_SEED + s``."""
@@ -280,7 +287,7 @@ def _finish(
         if record.outcome == "complete":
             record.outcome = "incomplete"
     record.calls, record.dropped = policy.calls, policy.dropped
-    if record.outcome == "complete":
+    if record.outcome == "complete" and record.sequences == record.expected:
         ref = _switch_times(reference)
         record.switch_errors = [
             got - want
@@ -308,8 +315,7 @@ def run_synthetic_episode(
 
     Every tick lasts ``policy.next_period(t)``; the world integrates it in sub-steps of at most
     its own ``dt``. The episode ends when the run is done (the goal state, or a failure), at
-    ``max_time``, at the first switch that leaves the demonstrator's sequence, or when the
-    inner policy raised.
+    ``max_time``, or when the inner policy raised; it is scored by ``world.score``.
 
     Args:
         world: the world (:class:`~cpmp.worlds.protocol.World`).
@@ -326,9 +332,9 @@ def run_synthetic_episode(
     seqs = {v: [active[v]] for v in want}
     times: dict[str, list[float]] = {v: [] for v in want}
     t = 0.0
-    on_track = all(seqs[v][0] == want[v][0] for v in want)
+    initial = dict(active)
     over = run.done(active)
-    while on_track and not over and policy.error is None and t < world.max_time - 1e-9:
+    while not over and policy.error is None and t < world.max_time - 1e-9:
         h = policy.next_period(t)
         run.advance(active, h)
         t = round(t + h, 10)
@@ -337,14 +343,9 @@ def run_synthetic_episode(
             if new[v] != active[v]:
                 seqs[v].append(new[v])
                 times[v].append(t)
-                on_track = on_track and seqs[v] == want[v][: len(seqs[v])]
         active = new
         over = run.done(active)
-    reached = run.complete(active)
-    if any(seqs[v][0] != want[v][0] for v in want):
-        outcome = "wrong_start"
-    else:
-        outcome = "complete" if reached and seqs == want else "incomplete"
+    outcome = world.score(episode, initial, seqs, run.complete(active))
     record = EpisodeRecord(outcome, world.strategy(episode), t, seqs, want, times)
     return _finish(record, policy, reference)
 
@@ -450,6 +451,9 @@ def summarise(records: Sequence[EpisodeRecord]) -> dict[str, JsonValue]:
     strategies = sorted({r.strategy for r in records})
     return {
         **counts,
+        "same_sequences": sum(
+            r.outcome == "complete" and r.sequences == r.expected for r in records
+        ),
         "n_episodes": len(records),
         "errors": sum(r.error is not None for r in records),
         "dropped_ticks": sum(r.dropped for r in records),
@@ -637,13 +641,15 @@ def run_clock_benchmark(
         log: called with a line per world, seed and condition as each is done.
 
     Returns:
-        ``{"settings", "conditions": {name: ClockCondition fields}, "reference",
-        "worlds": {world: ...}}`` (per world: :func:`bench_synthetic_world`).
+        ``{"settings", "conditions": {name: ClockCondition fields}, "reference", "scoring",
+        "worlds": {world: ...}}`` (per world: :func:`bench_synthetic_world`; ``scoring``:
+        :data:`SCORING`).
     """
     result: dict[str, JsonValue] = {
         "settings": asdict(settings),
         "conditions": {c.name: asdict(c) for c in _conditions(settings)},
         "reference": REFERENCE,
+        "scoring": SCORING,
         "worlds": {},
     }
     for name in settings.worlds:

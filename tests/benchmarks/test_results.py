@@ -316,3 +316,25 @@ def test_the_sparse_section_says_where_its_simulator_rows_come_from(tmp_path: Pa
         "(the balanced D of them), 20 reproduction boxes each. The sim rows come from a run of "
         "their own." in page
     )
+
+
+def test_the_clock_sections_say_how_their_run_scored_and_which_sequencer_ran(
+    tmp_path: Path,
+) -> None:
+    """A clock run written by the current bench (``scoring: world``) is described as scored
+    like the worlds table; one without it as the earlier bench's stricter count, run with the
+    sequencer before the speed envelopes."""
+    folder = small_results(tmp_path)
+    for name in ("clock.json", "clock_sim.json"):
+        clock = json.loads((folder / name).read_text())
+        clock.pop("scoring", None)
+        (folder / name).write_text(json.dumps(clock))
+    old = render_results(folder)
+    assert "This run predates the worlds' scoring in bench_clock" in old
+    assert old.count("before its speed envelopes") == 2  # both clock sections
+    for name in ("clock.json", "clock_sim.json"):
+        clock = json.loads((folder / name).read_text())
+        (folder / name).write_text(json.dumps({**clock, "scoring": "world"}))
+    new = render_results(folder)
+    assert "Episodes are scored as in the worlds table" in new
+    assert "before its speed envelopes" not in new and "predates" not in new
