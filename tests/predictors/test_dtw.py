@@ -118,8 +118,11 @@ def test_dtw_progress_keeps_rising_while_the_features_move(fitted, test_demos):
 
 
 def test_dtw_batched_episodes_decide_as_single_ones(fitted, test_demos):
+    # two parallel-strategy replays: in the sequential ones dtw's p for a_go -> a_wait peaks
+    # while p_a still moves faster than the switch's speed envelope allows, and has fallen
+    # below the threshold by the time it settles (no switch; docs/benchmarks.md, session 19)
     seq = fitted["dtw"]
-    demos = [test_demos[0], test_demos[3]]
+    demos = [test_demos[1], test_demos[3]]
     n = min(d.n_samples for d in demos)
     single = []
     for demo in demos:

@@ -37,7 +37,8 @@ def test_a_batch_runs_each_episode_as_run_policy_does(relay_seq):
         )
         assert (b.state.carrier == s.state.carrier).all() and b.state.holder == s.state.holder
     ended = {(r.reached_goal, r.time == pytest.approx(task.max_time)) for r in batched}
-    assert ended == {(True, False), (False, True)}  # goals at different ticks, and time-outs
+    # goals at different ticks (one may come at the last tick), and time-outs
+    assert {(True, False), (False, True)} <= ended
     assert len({r.time for r in batched if r.reached_goal}) > 1
 
 
