@@ -52,11 +52,11 @@ SYNTHETIC_WORLDS = world_names()
 """Every registered synthetic world (:mod:`cpmp.worlds.registry`)."""
 WORLDS = (*SYNTHETIC_WORLDS, "sim")
 REFERENCE = "rate_100hz"
+"""The condition every other one is compared with: the worlds' own 100 Hz loop."""
 SCORING = "world"
 """How a synthetic episode is scored: as the world scores it (see the module doc). A result
 without ``scoring`` comes from an earlier bench that counted an episode complete only with the
 demonstrator's MP sequences, stopping it at the first switch that left them."""
-"""The condition every other one is compared with: the worlds' own 100 Hz loop."""
 HELD_OUT_SEED = 1000
 """Evaluation episodes of seed ``s`` are drawn with ``HELD_OUT_SEED + s``."""
 SIM_BASE_DT = 0.002

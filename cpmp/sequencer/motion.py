@@ -37,7 +37,7 @@ Speeds are in training ranges per second (a feature of range 0 never moves).
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from itertools import pairwise
 from typing import NamedTuple
 
@@ -104,13 +104,14 @@ class MotionData(NamedTuple):
     Attributes:
         features: ``(T, d)`` denoised (:func:`cpmp.progress.denoise_trajectory`).
         time: ``(T,)`` [s].
-        labels: variable -> ``(T,)`` MP labels.
+        segments: variable -> its activations in time order, ``(start, stop, mp)``
+            (:meth:`~cpmp.data.Demonstration.segments`).
         noise: ``(d,)`` each feature's white-noise standard deviation in the recording.
     """
 
     features: np.ndarray
     time: np.ndarray
-    labels: Mapping[str, np.ndarray]
+    segments: Mapping[str, list[tuple[int, int, str]]]
     noise: np.ndarray
 
 
@@ -119,27 +120,45 @@ def motion_data(demos: Sequence[Demonstration]) -> list[MotionData]:
     out = []
     for demo in demos:
         x = np.asarray(demo.features, np.float64)
+        segments = {v: [(s.start, s.stop, s.mp) for s in demo.segments(v)] for v in demo.variables}
         out.append(
             MotionData(
                 denoise_trajectory(x),
                 np.asarray(demo.time, np.float64),
-                {v: np.asarray(lab) for v, lab in demo.labels.items()},
+                segments,
                 white_noise_std(x),
             )
         )
     return out
 
 
+def _mp_paths(
+    demos: Sequence[MotionData], variables: Sequence[str], n_features: int
+) -> tuple[dict[tuple[str, str], np.ndarray], dict[tuple[str, str], float]]:
+    """Each MP's motion: per ``(variable, mp)``, the L1 path of each feature.
+
+    Returns:
+        ``(path, duration)``: per ``(variable, mp)``, each feature's path ``(d,)`` [feature
+        units] and the time [s], summed over its activations of at least two samples.
+    """
+    path: dict[tuple[str, str], np.ndarray] = {}
+    duration: dict[tuple[str, str], float] = {}
+    for demo in demos:
+        x, t = demo.features, demo.time
+        for v in variables:
+            for a, b, mp in demo.segments[v]:
+                if b - a < 2:
+                    continue
+                key = (v, mp)
+                step = np.abs(np.diff(x[a:b], axis=0)).sum(axis=0)
+                path[key] = path.get(key, np.zeros(n_features)) + step
+                duration[key] = duration.get(key, 0.0) + float(t[b - 1] - t[a])
+    return path, duration
+
+
 def _inverse_range(feature_range: np.ndarray) -> np.ndarray:
     r = np.asarray(feature_range, dtype=np.float64)
     return np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
-
-
-def _segments(labels: np.ndarray) -> Iterator[tuple[int, int, str]]:
-    """``(start, stop, mp)`` of each activation in a label sequence ``(T,)``."""
-    cuts = [0, *(np.flatnonzero(labels[1:] != labels[:-1]) + 1).tolist(), len(labels)]
-    for a, b in pairwise(cuts):
-        yield a, b, str(labels[a])
 
 
 def window_speed(
@@ -180,8 +199,7 @@ def learn_speed_limits(
         return {}
     inv = _inverse_range(feature_range)
     d = inv.size
-    path: dict[tuple[str, str], np.ndarray] = {}
-    duration: dict[tuple[str, str], float] = {}
+    path, duration = _mp_paths(demos, variables, d)
     top: dict[tuple[str, str], np.ndarray] = {}
     at: dict[Edge, np.ndarray] = {}
     noise = np.zeros(d)
@@ -189,13 +207,11 @@ def learn_speed_limits(
         x, t = demo.features, demo.time
         noise = np.maximum(noise, demo.noise)
         for v in variables:
-            segments = list(_segments(demo.labels[v]))
+            segments = demo.segments[v]
             for a, b, mp in segments:
                 if b - a < 2:
                     continue
                 step = np.abs(np.diff(x[a:b], axis=0)) * inv
-                path[(v, mp)] = path.get((v, mp), np.zeros(d)) + step.sum(axis=0)
-                duration[(v, mp)] = duration.get((v, mp), 0.0) + float(t[b - 1] - t[a])
                 fastest = (step / np.diff(t[a:b])[:, None]).max(axis=0)
                 top[(v, mp)] = np.maximum(top.get((v, mp), np.zeros(d)), fastest)
             for (_, _, source), (a, _, target) in pairwise(segments):
@@ -206,7 +222,7 @@ def learn_speed_limits(
     allowance = NOISE_Z * np.sqrt(2.0) * noise * inv / SPEED_WINDOW
     limits = {}
     for (v, source, target), speed in sorted(at.items()):
-        p = path.get((v, source), np.zeros(d))
+        p = path.get((v, source), np.zeros(d)) * inv  # [ranges]
         mean = p / max(duration.get((v, source), 0.0), 1e-12)
         watched = (p >= MOVING_SHARE * p.max()) & (speed <= SETTLED_SHARE * mean)
         moving = np.flatnonzero(watched) if p.max() > 0 else np.zeros(0, int)
@@ -231,19 +247,7 @@ def ambient_features(
     Returns:
         The mask (all false with fewer than two MPs, or :data:`AMBIENT_RATIO` inf).
     """
-    path: dict[tuple[str, str], np.ndarray] = {}
-    duration: dict[tuple[str, str], float] = {}
-    for demo in demos:
-        x, t = demo.features, demo.time
-        for v in variables:
-            for a, b, mp in _segments(demo.labels[v]):
-                if b - a < 2:
-                    continue
-                key = (v, mp)
-                path[key] = path.get(key, np.zeros(n_features)) + np.abs(
-                    np.diff(x[a:b], axis=0)
-                ).sum(axis=0)
-                duration[key] = duration.get(key, 0.0) + float(t[b - 1] - t[a])
+    path, duration = _mp_paths(demos, variables, n_features)
     rates = [path[k] / duration[k] for k in sorted(path) if duration[k] > 0]
     if len(rates) < 2 or not np.isfinite(AMBIENT_RATIO):
         return np.zeros(n_features, dtype=bool)
