@@ -172,6 +172,8 @@ class SequencerEpisode:
             model.feature_range, c.stall_time, c.rest_speed, model.coupling.ambient
         )
         self._speed = SpeedMeter(model.feature_range)
+        self._since: dict[str, float] = {}
+        """Per variable, the measurement time [s] at which its active MP became active."""
         self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
         self._armed: dict[str, str] = {}
@@ -273,6 +275,7 @@ class SequencerEpisode:
         m = self._clock.reset(t, state)
         self._stall.reset(m, state)
         self._speed.reset(m, state)
+        self._since = dict.fromkeys(model.graphs, m)
         self._last_t = t
         self._nonfinite = False
         self.gave_up = None
@@ -394,7 +397,6 @@ class SequencerEpisode:
         rows = []
         chosen_by: dict[str, str | None] = {}
         above: set[str] = set()
-        speed = self._speed.speed() if self._coupled else None
         for v, current, names, columns, exit_column, unseen, checks, _, scale, limits in plan:
             exit_p = phi[exit_column]
             p = [exit_p * min(1.0, (1.0 - phi[i]) * g) for i, g in zip(columns, scale, strict=True)]
@@ -404,6 +406,8 @@ class SequencerEpisode:
                 for successor, column, bound in checks:
                     if phi[column] < bound:
                         bad[successor] += 1
+            # the speeds since the source MP became active (over SPEED_WINDOW at most)
+            speed = self._speed.speed(self._since[v]) if self._coupled else None
             if speed is not None:
                 for k, limit in enumerate(limits):
                     if limit is not None and limit.exceeded(speed).size:
@@ -735,7 +739,7 @@ class SequencerEpisode:
     def _too_fast(self, edge: tuple[str, str, str]) -> list[str]:
         """One reason per feature faster than ``edge``'s speed envelope allows, now."""
         limit = self.model.coupling.speed.get(edge)
-        speed = self._speed.speed()
+        speed = self._speed.speed(self._since.get(edge[0]))
         if limit is None or speed is None:
             return []
         name = self.model.feature_name
@@ -806,4 +810,5 @@ class SequencerEpisode:
         self._observe_entry(v, m, phi)
         self._holding[v] = None
         self._stall.switched(m)
+        self._since[v] = m
         self._plan = None

@@ -9,7 +9,10 @@ always demonstrated once some of the features ``A`` moves had slowed down (an ar
 lift settles, a partner's hand lets go). For each demonstrated switch the fastest speed of each
 feature at the switch (over the :data:`SPEED_WINDOW` before it) is kept; at run time the
 switch is inconsistent while a watched feature is more than :data:`SPEED_FACTOR` times faster
-than that (with a floor of :data:`SPEED_FLOOR` times the feature's top speed under ``A``). A
+than that (with a floor of :data:`SPEED_FLOOR` times the feature's top speed under ``A``),
+measured since ``A`` became active when that is less than :data:`SPEED_WINDOW` ago (a re-align
+that starts from rest moves fast at once, while a window reaching back into the still retract
+before it would read half that). A
 feature is watched when it moves in ``A`` (its path under ``A`` is at least
 :data:`MOVING_SHARE` of the longest feature path under ``A``) and had settled at every
 demonstrated instance of the switch (at most :data:`SETTLED_SHARE` of its mean speed under
@@ -53,8 +56,11 @@ least this old, over the time between them."""
 SPEED_FACTOR = 2.0
 """How much faster than demonstrated at a switch a moving feature may be (``inf``: no
 envelope)."""
-SPEED_FLOOR = 0.01
-"""The least envelope, as a share of the feature's top speed under the switch's source MP."""
+SPEED_FLOOR = 0.002
+"""The least envelope, as a share of the feature's top speed under the switch's source MP (for
+a feature at rest at every demonstrated instance). A first-order attractor moves at this share
+of its top speed when it is this share of its move from its goal: 0.2 % lets a switch wait for
+a precise arrival (a 2.5 mm hole mouth at the end of a 30 cm reach), which 1 % did not."""
 MOVING_SHARE = 0.05
 """A feature moves in an MP when its path there is at least this share of the longest one."""
 SETTLED_SHARE = 0.5
@@ -279,15 +285,27 @@ class SpeedMeter:
         while len(seen) > 2 and t - seen[1][0] >= SPEED_WINDOW - 1e-9:
             seen.popleft()
 
-    def speed(self) -> np.ndarray | None:
+    def speed(self, since: float | None = None) -> np.ndarray | None:
         """``(d,)`` [ranges/s] over the newest measurement at least :data:`SPEED_WINDOW` old.
 
-        ``None`` before one is that old.
+        Args:
+            since: the measurement time [s] at which the MP whose motion is asked about
+                became active: a window reaching before it is cut there, so that the speed
+                is the MP's own (a re-align that has just started from rest moves fast
+                although the 100 ms before it were still). ``None``: the whole window.
+
+        Returns:
+            The speed; ``None`` before a measurement is :data:`SPEED_WINDOW` old (or, with
+            ``since``, before one was taken after it).
         """
         seen = self._seen
         if len(seen) < 2:
             return None
         (t0, x0), (t1, x1) = seen[0], seen[-1]
-        if t1 - t0 < SPEED_WINDOW - 1e-9:
+        if since is not None and since > t0 + 1e-9:
+            t0, x0 = next((t, x) for t, x in seen if t >= since - 1e-9)
+            if t1 - t0 <= 1e-9:
+                return None
+        elif t1 - t0 < SPEED_WINDOW - 1e-9:
             return None
         return np.abs(x1 - x0) / (t1 - t0) * self.inv_range

@@ -4,8 +4,12 @@ demonstrations and read by the transition rule."""
 from __future__ import annotations
 
 import numpy as np
+from progress_doubles import FirstColumnsAreProgress
 
+from cpmp.config import SequencerConfig
 from cpmp.data import Demonstration
+from cpmp.graph import SequenceGraph
+from cpmp.predictors import PredictorConfig
 from cpmp.progress import white_noise_std
 from cpmp.sequencer import ConcurrentSequencer, motion
 from cpmp.sequencer.motion import (
@@ -71,6 +75,21 @@ def test_the_speed_meter_reads_the_newest_measurement_a_window_old():
     assert len(meter._seen) <= 12  # it keeps one window, not the episode
     meter.reset(1.0, np.zeros(2))  # a new episode forgets the last one
     assert meter.speed() is None
+
+
+def test_speed_since_an_mp_began_is_its_own_motion():
+    """A re-align that starts from rest: over the whole window its speed reads half what the
+    arm moves since the MP began, so the speed is cut at the MP's start."""
+    meter = SpeedMeter(np.array([1.0]))
+    meter.reset(0.0, np.zeros(1))
+    for k in range(1, 21):  # still until 0.2 s, then 2 per s from the switch at 0.2 s
+        meter.observe(k * DT, np.zeros(1))
+    for k in range(21, 26):
+        meter.observe(k * DT, np.array([(k - 20) * DT * 2.0]))
+    np.testing.assert_allclose(meter.speed(), [1.0])  # 0.1 m over the last 0.1 s
+    np.testing.assert_allclose(meter.speed(since=0.2), [2.0])  # 0.1 m over 0.05 s
+    assert meter.speed(since=0.25) is None  # nothing measured after the MP began yet
+    np.testing.assert_allclose(meter.speed(since=0.1), [1.0])  # began before the window
 
 
 def test_a_feature_moving_alike_under_every_mp_is_ambient():
@@ -140,3 +159,37 @@ def test_a_noisy_feature_gets_the_speed_its_noise_adds_at_run_time():
     assert 0.5 * 0.01 < sigma < 1.5 * 0.01
     allowance = motion.NOISE_Z * np.sqrt(2.0) * sigma / motion.SPEED_WINDOW / r[0]
     assert loud[edge].limit[0] >= allowance > clean[edge].limit[0]
+
+
+def test_a_switch_waits_for_its_source_mps_own_motion_not_the_rest_before_it():
+    """v: R -> A -> B, where A -> B was demonstrated with x settled (envelope 1 range/s). A
+    starts from rest and moves x at 1.5 ranges/s for 0.2 s while its p is already 0.9 (a
+    re-align that starts where the last align ended): the switch waits until A stops moving.
+    Over the whole 100 ms window (half of it the rest before A) x read 0.75: it fired early."""
+    g = SequenceGraph("v")
+    for mp in "RAB":
+        g.add_node(mp)
+    g.initial_nodes = {"R"}
+    g.edges = {("R", "A"), ("A", "B")}
+    limit = SpeedLimit(np.array([3]), np.array([1.0]))
+    coupling = Coupling(speed={("v", "A", "B"): limit})
+    order = g.ordered_nodes()
+    model = FirstColumnsAreProgress([("v", mp) for mp in order], 4, PredictorConfig())
+    names = [mp.lower() for mp in order] + ["x"]
+    seq = ConcurrentSequencer({"v": g}, model, names, SequencerConfig(), None, None, coupling)
+    seq.reset(0.0, [0.0, 0.0, 0.0, 0.0])
+    t, x, began, stopped = 0.0, 0.0, None, None
+    while t < 1.0 - 1e-9 and seq.active["v"] != "B":
+        t = round(t + DT, 10)
+        if seq.active["v"] == "A":
+            began = t if began is None else began
+            if t - began < 0.2 - 1e-9:
+                x += 1.5 * DT
+            elif stopped is None:
+                stopped = t
+        ahead = "R" if seq.active["v"] == "R" else "A"  # the active MP's φ is 0.9
+        seq.step(t, [0.9 if mp == ahead else 0.0 for mp in order] + [x], stamp=t)
+    (into_a, into_b) = [(e.source, e.target, e.t) for e in seq.events]
+    assert into_a[:2] == ("R", "A") and into_b[:2] == ("A", "B")
+    assert stopped is not None and into_b[2] >= stopped
+    assert any("x moves at 1.5 ranges/s" in n.text for n in seq.notes)

@@ -7,6 +7,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 import torch
+from progress_doubles import FirstColumnsAreProgress
 
 from cpmp.config import SequencerConfig
 from cpmp.data.demonstration import Demonstration
@@ -385,15 +386,6 @@ def test_recovery_never_takes_a_transition_inconsistent_with_the_coupling():
     _run_to(seq, [0.1, 0.0, 0.9, 0.0], 1.5)  # u: p = 0.1 < 0.3; w: p = 0.9, held
     assert seq.active == {"u": "U1", "w": "W1"} and not seq.events
     assert [n.kind for n in seq.notes] == ["hold", "give_up"]
-
-
-class FirstColumnsAreProgress(ProgressPredictor):
-    """Test double: node k's progress is feature k; the features after the nodes' are state."""
-
-    kind: ClassVar[str] = "first_columns_are_progress"
-
-    def logits(self, z: torch.Tensor) -> torch.Tensor:
-        return torch.logit(z[:, : self.n_nodes].clamp(1e-9, 1 - 1e-9))
 
 
 def test_recovery_goes_where_the_demonstrator_went_from_the_nearest_state():
