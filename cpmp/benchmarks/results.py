@@ -240,7 +240,7 @@ def _sources(r: Mapping[str, JsonValue]) -> str:
     if len(by_source) < 2:
         return ""
     parts = [f"{', '.join(p)} from `{s}`" for s, p in by_source.items()]
-    return " Merged from two runs (`sources` in the JSON): " + "; ".join(parts) + "."
+    return f" Merged from {len(by_source)} runs (`sources` in the JSON): " + "; ".join(parts) + "."
 
 
 def _about_worlds(r: Mapping[str, JsonValue]) -> str:

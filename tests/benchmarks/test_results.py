@@ -227,6 +227,7 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "#### Reproduction (Table I)" in page  # the report's headings under the section's
     assert "| two_point | defaults | 70 / 30 / 0 |" in page  # the later run's row
     assert "`defaults` from `new.json`" in page  # and where it came from
+    assert "Merged from 2 runs (`sources` in the JSON)" in page
     assert "| procedural | defaults | 40 / 60 / 0 (40 % of scripted) |" in page
     # klr_sparse against the default: its ratios, a missed bound marked, C as a difference
     assert "| slip | 9 | 0.97 | 0.24 | 0.23 | 0.90 ! | 0.88 | 0.40 | 0.95 | 2.50 ! | +4.0 |" in page
