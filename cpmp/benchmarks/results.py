@@ -175,6 +175,7 @@ def _about_clock(r: Mapping[str, JsonValue]) -> str:
         "absolute switch-time error; the row below a world is its feature-only scripted "
         "policy on the same episodes. " + _clock_scoring(r) + " Issue #32's target: every "
         "condition within 1 episode per 20 of the 100 Hz run."
+        + (f" {r['note']}" if r.get("note") else "")
     )
 
 

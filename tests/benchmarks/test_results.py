@@ -339,3 +339,9 @@ def test_the_clock_sections_say_how_their_run_scored_and_which_sequencer_ran(
     new = render_results(folder)
     assert "Episodes are scored as in the worlds table" in new
     assert "before its speed envelopes" not in new and "predates" not in new
+    # a merged run says where its rows come from (its note)
+    clock = json.loads((folder / "clock.json").read_text())
+    (folder / "clock.json").write_text(json.dumps({**clock, "note": "Merged from 2 runs."}))
+    assert "condition within 1 episode per 20 of the 100 Hz run. Merged from 2 runs." in (
+        render_results(folder)
+    )
