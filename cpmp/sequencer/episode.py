@@ -406,8 +406,11 @@ class SequencerEpisode:
                 for successor, column, bound in checks:
                     if phi[column] < bound:
                         bad[successor] += 1
-            # the speeds since the source MP became active (over SPEED_WINDOW at most)
-            speed = self._speed.speed(self._since[v]) if self._coupled else None
+            # the speeds since the source MP became active (over SPEED_WINDOW at most), for the
+            # variables with a speed envelope on a successor
+            speed = None
+            if self._coupled and any(limit is not None for limit in limits):
+                speed = self._speed.speed(self._since[v])
             if speed is not None:
                 for k, limit in enumerate(limits):
                     if limit is not None and limit.exceeded(speed).size:
@@ -739,7 +742,7 @@ class SequencerEpisode:
     def _too_fast(self, edge: tuple[str, str, str]) -> list[str]:
         """One reason per feature faster than ``edge``'s speed envelope allows, now."""
         limit = self.model.coupling.speed.get(edge)
-        speed = self._speed.speed(self._since.get(edge[0]))
+        speed = self._speed.speed(self._since[edge[0]])
         if limit is None or speed is None:
             return []
         name = self.model.feature_name
