@@ -2,28 +2,19 @@
 
 import dataclasses
 from pathlib import Path
-from typing import ClassVar
 
 import numpy as np
 import pytest
 import torch
+from progress_doubles import FirstColumnsAreProgress
 
 from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
 from cpmp.evaluation.offline import replay_demonstrations
 from cpmp.graph import SequenceGraph
-from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.predictors import PredictorConfig
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.worlds.two_point import SyntheticTask, make_demonstrations
-
-
-class FeatureIsProgress(ProgressPredictor):
-    """Test double with known outputs: node k's progress is feature k."""
-
-    kind: ClassVar[str] = "feature_is_progress"
-
-    def logits(self, z: torch.Tensor) -> torch.Tensor:
-        return torch.logit(z.clamp(1e-9, 1 - 1e-9))
 
 
 def _chain_sequencer(**config):
@@ -33,7 +24,7 @@ def _chain_sequencer(**config):
         g.add_node(mp)
     g.initial_nodes = {"A", "B"}
     g.edges = {("A", "B"), ("B", "C")}
-    model = FeatureIsProgress([("v", "A"), ("v", "B"), ("v", "C")], 3, PredictorConfig())
+    model = FirstColumnsAreProgress([("v", "A"), ("v", "B"), ("v", "C")], 3, PredictorConfig())
     return ConcurrentSequencer({"v": g}, model, ["pa", "pb", "pc"], SequencerConfig(**config))
 
 
@@ -260,7 +251,7 @@ def _two_graph_sequencer(start_rule):
         g.initial_nodes = set(names)
         graphs[v] = g
     keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2")]
-    model = FeatureIsProgress(keys, 4, PredictorConfig())
+    model = FirstColumnsAreProgress(keys, 4, PredictorConfig())
     combos = [{"u": "U1", "w": "W1"}, {"u": "U2", "w": "W2"}]
     return ConcurrentSequencer(
         graphs, model, ["a", "b", "c", "d"], SequencerConfig(start_rule=start_rule), None, combos

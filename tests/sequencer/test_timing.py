@@ -3,30 +3,20 @@ times at any control rate, with jitter and dropped ticks; stale features, clock 
 non-finite features add no evidence."""
 
 import math
-from typing import ClassVar
 
 import numpy as np
 import pytest
-import torch
+from progress_doubles import FirstColumnsAreProgress
 
 from cpmp.config import SequencerConfig
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
-from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.predictors import PredictorConfig
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sequencer.switching import PaperRule
 from cpmp.sequencer.timing import MeasurementClock
 
 THRESHOLD, PATIENCE, MIN_IMPROVEMENT = 0.65, 0.05, 1e-3
-
-
-class FeatureIsProgress(ProgressPredictor):
-    """Test double: node k's progress is feature k."""
-
-    kind: ClassVar[str] = "feature_is_progress"
-
-    def logits(self, z: torch.Tensor) -> torch.Tensor:
-        return torch.logit(z.clamp(1e-9, 1 - 1e-9))
 
 
 def _chain(**config) -> ConcurrentSequencer:
@@ -36,7 +26,7 @@ def _chain(**config) -> ConcurrentSequencer:
         g.add_node(mp)
     g.initial_nodes = {"A"}
     g.edges = {("A", "B")}
-    model = FeatureIsProgress([("v", "A"), ("v", "B")], 2, PredictorConfig())
+    model = FirstColumnsAreProgress([("v", "A"), ("v", "B")], 2, PredictorConfig())
     return ConcurrentSequencer({"v": g}, model, ["a", "b"], SequencerConfig(**config))
 
 
