@@ -68,6 +68,7 @@ def test_guide_python_api_runs(tmp_path, monkeypatch):
     paper = ns["paper"]
     assert (paper.config.coupling, paper.config.recovery) == ("none", False)
     assert paper.config.start_rule == "independent"
+    assert (paper.config.switch_rule, seq.config.switch_rule) == ("paper", "peak")
     # the worlds block: a fitted sequencer and the world's scripted policy on held-out contexts
     learned, fair = ns["learned"], ns["fair"]
     assert fair.counts == {"complete": 10, "wrong_start": 0, "incomplete": 0}

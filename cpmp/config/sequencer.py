@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError
 
-SWITCH_RULES = ("paper", "plateau")
+SWITCH_RULES = ("paper", "peak", "plateau")
 """Values of :attr:`SequencerConfig.switch_rule` (see :mod:`cpmp.sequencer.switching`)."""
 COUPLINGS = ("none", "context")
 """Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.sequencer.switching`)."""
@@ -26,8 +26,8 @@ class SequencerConfig:
     """The transition rule's parameters.
 
     The defaults are cpmp's recommended configuration (``sequencer=coupled``); ``sequencer=paper``
-    and :data:`cpmp.sequencer.PAPER_OPTIONS` set ``coupling``, ``recovery``, ``start_rule`` and
-    ``start_kernel`` back to the paper's.
+    and :data:`cpmp.sequencer.PAPER_OPTIONS` set ``switch_rule``, ``coupling``, ``recovery``,
+    ``start_rule``, ``start_kernel``, ``branch`` and ``joint`` back to the paper's.
 
     Attributes:
         threshold: a transition fires only when ``p = φ_current · (1 - φ_next) > threshold``
@@ -39,9 +39,11 @@ class SequencerConfig:
             asymptotically, so ``p`` keeps creeping up by tiny amounts; with a strict
             comparison (``0``) such a transition might never fire.
         switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
-            min_improvement``, the paper's sentence read literally) or ``plateau`` (``p`` above
-            the threshold for ``patience`` without a new maximum, cpmp's earlier rule); see
-            :mod:`cpmp.sequencer.switching`.
+            min_improvement``, the paper's sentence read literally), ``peak`` (the default:
+            ``paper``, and also when ``p`` has fallen back from a peak above the threshold
+            within the last ``patience``, as it does right after an event) or ``plateau``
+            (``p`` above the threshold for ``patience`` without a new maximum, cpmp's earlier
+            rule); see :mod:`cpmp.sequencer.switching`.
         coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
             hold back a transition while another variable runs an MP never seen at that
             demonstrated switch, or one that has progressed less than at every demonstrated
@@ -104,7 +106,7 @@ class SequencerConfig:
     threshold: float = 0.65
     patience: float = 0.05
     min_improvement: float = 1e-3
-    switch_rule: str = "paper"
+    switch_rule: str = "peak"
     coupling: str = "context"
     progress_margin: float | None = 0.2
     recovery: bool = True

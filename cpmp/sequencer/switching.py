@@ -12,6 +12,14 @@ fires, given its transition probability ``p_s = φ_current(x) · (1 - φ_s(x))``
   the same successor's ``p`` interpolated linearly between the two measurements around
   ``m - patience``. A ``p`` that peaks above the threshold and then falls back fires; a ``p``
   still rising waits.
+* ``peak`` (the default) — the ``paper`` rule, and also a ``p`` that has fallen back from a
+  peak above the threshold within the last ``patience``: ``p(m) > threshold`` and ``p(m) <
+  max p(m') - min_improvement`` over the measurements ``m - patience <= m' < m``, with that
+  maximum above the threshold. An event (contact lost, a force read) makes ``p`` jump within
+  one measurement, and the MPs still running then carry the state away from where the
+  demonstrator switched: its ``p`` peaks for less than ``patience``, and the ``paper`` rule,
+  which compares with ``p(m - patience)`` from before the jump, sees it still improving until
+  it has fallen below the threshold. A ``p`` that rises and settles fires as with ``paper``.
 * ``plateau`` — ``p`` must stay above the threshold for ``patience`` seconds without a new
   maximum (cpmp's earlier rule). It misses switches whose ``p`` crosses the threshold near its
   peak and then declines as the next MPs start to move.
@@ -164,6 +172,29 @@ class PaperRule:
         return best if p[best] <= p_ref + self.min_improvement else None
 
 
+class PeakRule(PaperRule):
+    """:class:`PaperRule`, or ``p`` fallen back from a peak above ``threshold`` (see module doc).
+
+    The peak is the highest ``p`` of the same successor over the earlier measurements of the
+    last ``patience`` (the history :class:`PaperRule` keeps, from the node's first
+    measurement on).
+    """
+
+    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
+        """Record ``p`` measured at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
+        fired = super().update(t, p, allowed)
+        if fired is not None:
+            return fired
+        best = _best(p, allowed)
+        if best is None or p[best] <= self.threshold:
+            return None
+        window = t - self.patience - EPS_T
+        peak = max((q[best] for tq, q in self._history if window <= tq < t - EPS_T), default=-1.0)
+        if peak > self.threshold and p[best] < peak - self.min_improvement:
+            return best
+        return None
+
+
 class PlateauRule:
     """``p`` above ``threshold`` for ``patience`` seconds without a new maximum."""
 
@@ -200,7 +231,7 @@ class PlateauRule:
 
 def make_rule(name: str, threshold: float, patience: float, min_improvement: float) -> SwitchRule:
     """A fresh switching rule ``name`` (one of :data:`SWITCH_RULES`)."""
-    cls = {"paper": PaperRule, "plateau": PlateauRule}[name]
+    cls = {"paper": PaperRule, "peak": PeakRule, "plateau": PlateauRule}[name]
     return cls(threshold, patience, min_improvement)
 
 
@@ -745,6 +776,7 @@ __all__ = [
     "Coupling",
     "Gates",
     "PaperRule",
+    "PeakRule",
     "PlateauRule",
     "ProgressBound",
     "StallDetector",

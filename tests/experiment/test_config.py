@@ -125,6 +125,7 @@ def test_sequencer_configs_mean_what_they_say():
     coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
     assert (coupled.start_rule, coupled.start_kernel) == ("learned", "shared")
     assert (coupled.coupling, coupled.recovery) == ("context", True)
+    assert (paper.switch_rule, coupled.switch_rule) == ("paper", "peak")
     assert coupled.threshold == paper.threshold
 
 

@@ -19,6 +19,7 @@ from cpmp.sequencer.switching import (
     Candidate,
     Coupling,
     PaperRule,
+    PeakRule,
     PlateauRule,
     recovery_choice,
 )
@@ -82,6 +83,53 @@ def test_paper_rule_waits_while_rising_and_before_patience():
         assert rule.update(k * DT, [0.9], [True]) is None
     assert rule.update(5 * DT, [0.9], [True]) is None  # reference would be t = 0
     assert rule.update(6 * DT, [0.9], [True]) == 0
+
+
+def _peak():
+    return PeakRule(threshold=0.65, patience=0.05, min_improvement=1e-3)
+
+
+def test_peak_rule_fires_on_a_spike_shorter_than_patience():
+    # an event: p jumps within one tick, then falls as the running MPs carry the state away
+    spike = [0.01] * 20 + [0.81, 0.77, 0.71, 0.66, 0.6, 0.54, 0.48] + [0.4] * 20
+    assert _run(_paper(), spike) is None  # still "improving" on 50 ms ago until below 0.65
+    assert _run(PlateauRule(0.65, 0.05, 1e-3), spike) is None
+    assert _run(_peak(), spike) == 22  # the first tick below the peak
+    # a spike that never reaches the threshold, or a p that only wobbles below it, never fires
+    assert _run(_peak(), [0.01] * 20 + [0.64, 0.6, 0.5] + [0.4] * 20) is None
+    # a fall of no more than the tolerance is not a fall
+    assert _run(_peak(), [0.01] * 20 + [0.81, 0.8095] + [0.1] * 5) is None
+
+
+def test_peak_rule_fires_like_the_paper_rule_on_a_p_that_rises_and_settles():
+    streams = {
+        "rise then decline": list(np.linspace(0.5, 0.8, 31))
+        + [0.8 - 0.004 * k for k in range(1, 40)],
+        "creep": [0.7 + 1e-4 * k for k in range(30)],
+        "converging": [0.9 - 0.5 * np.exp(-k * DT / 0.2) for k in range(300)],
+        "rising": [0.66 + 0.003 * k for k in range(60)],
+    }
+    for name, stream in streams.items():
+        paper = _run(_paper(), stream)
+        # a monotone p never falls from a peak: the same tick; the declining one falls from
+        # its peak (0.8) by more than 1e-3 one tick after it, before the paper rule fires
+        if name == "rise then decline":
+            assert _run(_peak(), stream) == 32 < paper
+        else:
+            assert _run(_peak(), stream) == paper, name
+    # the peak is the same successor's, and only an allowed one fires
+    rule = _peak()
+    for k, (a, b) in enumerate([(0.1, 0.1)] * 10 + [(0.9, 0.7), (0.85, 0.72)], start=1):
+        fired = rule.update(k * DT, [a, b], [False, True])
+    assert fired is None  # the allowed successor's p is still rising
+
+
+def test_peak_rule_forgets_peaks_older_than_patience():
+    rule = _peak()
+    stream = [0.2] * 10 + [0.9] + [0.2] * 10 + [0.7, 0.71, 0.72]
+    fired = [rule.update(k * DT, [p], [True]) for k, p in enumerate(stream, start=1)]
+    assert fired[11] is None  # 0.2 after the 0.9 peak: below the threshold
+    assert all(f is None for f in fired[-3:])  # rising again: the old peak is forgotten
 
 
 def test_rules_only_fire_allowed_successors():

@@ -13,7 +13,7 @@ from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig
 from cpmp.sequencer.sequencer import ConcurrentSequencer
-from cpmp.sequencer.switching import PaperRule
+from cpmp.sequencer.switching import PaperRule, PeakRule
 from cpmp.sequencer.timing import MeasurementClock
 
 THRESHOLD, PATIENCE, MIN_IMPROVEMENT = 0.65, 0.05, 1e-3
@@ -94,6 +94,29 @@ def test_the_rule_switches_within_one_tick_of_the_ideal_time_at_any_rate(
         # at or after the ideal time, and no later than the tick interval that contains it
         # (1e-3 s: the linear interpolation of p between ticks, ~2e-5 of p at 30 Hz)
         assert ideal - 1e-3 <= fired <= ideal + longest + 1e-3, (fired, ideal, longest)
+
+
+@pytest.mark.parametrize(
+    ("rate", "jitter", "drop"),
+    [(100.0, 0.0, 0.0), (250.0, 0.0, 0.0), (1000.0, 0.0, 0.0), (100.0, 0.3, 0.0),
+     (100.0, 0.3, 0.1)],
+)  # fmt: skip
+def test_the_peak_rule_catches_an_event_spike_at_any_rate(rate, jitter, drop):
+    """p jumps at 0.5 s and falls below the threshold 50 ms later (an event, then the running
+    MPs carry the state away): the peak rule fires on the first measurement after the jump's,
+    the paper rule never."""
+    spike = lambda t: 0.01 if t < 0.5 else 0.85 - 4.0 * (t - 0.5)  # noqa: E731
+    for seed in range(3):
+        ticks = _ticks(rate, 2.0, jitter, drop, seed)
+        fired = {}
+        for name, cls in (("paper", PaperRule), ("peak", PeakRule)):
+            rule = cls(THRESHOLD, PATIENCE, MIN_IMPROVEMENT)
+            rule.observe(0.0, [spike(0.0)])
+            fired[name] = next(
+                (t for t in ticks if rule.update(t, [spike(t)], [True]) is not None), None
+            )
+        after = [t for t in ticks if t >= 0.5]
+        assert fired == {"paper": None, "peak": after[1]}, (fired, after[:3])
 
 
 def test_a_slow_sensor_read_every_tick_is_not_evidence_of_convergence():
