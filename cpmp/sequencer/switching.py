@@ -160,16 +160,20 @@ class PaperRule:
         best = _best(p, allowed)
         if best is None or p[best] <= self.threshold:
             return None
+        return best if self._stopped(t, p[best], best) else None
+
+    def _stopped(self, t: float, q: float, k: int) -> bool:
+        """Whether successor ``k``'s ``p`` (``q`` at ``t`` [s], recorded) has not improved."""
         history = self._history
         reference = t - self.patience
         t0, p0 = history[0]
         if t0 > reference + EPS_T:
-            return None  # the measurements do not span `patience` yet
-        p_ref = p0[best]
+            return False  # the measurements do not span `patience` yet
+        p_ref = p0[k]
         if len(history) >= 2 and reference - t0 > EPS_T:
             t1, p1 = history[1]
-            p_ref += (reference - t0) / (t1 - t0) * (p1[best] - p_ref)
-        return best if p[best] <= p_ref + self.min_improvement else None
+            p_ref += (reference - t0) / (t1 - t0) * (p1[k] - p_ref)
+        return q <= p_ref + self.min_improvement
 
 
 class PeakRule(PaperRule):
@@ -180,19 +184,13 @@ class PeakRule(PaperRule):
     measurement on).
     """
 
-    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record ``p`` measured at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
-        fired = super().update(t, p, allowed)
-        if fired is not None:
-            return fired
-        best = _best(p, allowed)
-        if best is None or p[best] <= self.threshold:
-            return None
+    def _stopped(self, t: float, q: float, k: int) -> bool:
+        """Not improved (:class:`PaperRule`), or fallen back from a peak above the threshold."""
+        if super()._stopped(t, q, k):
+            return True
         window = t - self.patience - EPS_T
-        peak = max((q[best] for tq, q in self._history if window <= tq < t - EPS_T), default=-1.0)
-        if peak > self.threshold and p[best] < peak - self.min_improvement:
-            return best
-        return None
+        peak = max((h[k] for th, h in self._history if window <= th < t - EPS_T), default=-1.0)
+        return peak > self.threshold and q < peak - self.min_improvement
 
 
 class PlateauRule:
