@@ -101,6 +101,9 @@ class SequencerConfig:
             another variable's switch into the same MP (a bowl served as the last pour ends)
             waits until that variable has switched or its rule decides to switch in the same
             tick, and a recovery takes both (:attr:`cpmp.sequencer.switching.Coupling.joint`).
+            A partner whose ``p`` was below the switch's at every demonstrated instance, and
+            below the threshold at one, is taken along instead of waited for
+            (:attr:`cpmp.sequencer.switching.JointPartner.carried`).
     """
 
     threshold: float = 0.65

@@ -33,7 +33,13 @@ from cpmp.sequencer.branches import STAY
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.motion import SpeedLimit, SpeedMeter
-from cpmp.sequencer.switching import Candidate, StallDetector, make_rule, recovery_choice
+from cpmp.sequencer.switching import (
+    Candidate,
+    JointPartner,
+    StallDetector,
+    make_rule,
+    recovery_choice,
+)
 from cpmp.sequencer.timing import MeasurementClock
 from cpmp.sequencer.watch import ActivationWatch
 
@@ -64,8 +70,8 @@ class PlanRow(NamedTuple):
         unseen: per successor, the number of other variables running an MP never seen at
             that switch (:meth:`~cpmp.sequencer.switching.Coupling.gates`).
         checks: the φ that add one inconsistency each while below their bound.
-        joints: per successor, the other variables' switches ``(variable, from, to)`` it is
-            demonstrated together with (:attr:`~cpmp.sequencer.switching.Coupling.joint`).
+        joints: per successor, the other variables' switches it is demonstrated together
+            with, as ``(variable, partner)`` (:attr:`~cpmp.sequencer.switching.Coupling.joint`).
         entry_scale: per successor, the factor on its entry probability
             (:attr:`~cpmp.sequencer.branches.BranchChoices.entry_scale`; 1 for most).
         speed: per successor, the switch's speed envelope (one inconsistency while exceeded;
@@ -79,7 +85,7 @@ class PlanRow(NamedTuple):
     exit_column: int
     unseen: list[int]
     checks: list[PhiCheck]
-    joints: list[list[tuple[str, str, str]]]
+    joints: list[list[tuple[str, JointPartner]]]
     entry_scale: list[float]
     speed: list[SpeedLimit | None]
 
@@ -356,7 +362,8 @@ class SequencerEpisode:
         # 2. each variable's rule decides; the coupling and the branch choice hold some back
         held: dict[str, str] = {}
         going = {} if stopped else self._rule_decisions(t, m, phi, plan, probs, context, held)
-        # 3. the switches fire, those demonstrated together with another's waiting for it
+        # 3. the switches fire, those demonstrated together with another's waiting for it (or
+        #    taking it along)
         ready = {**self._armed, **going}
         fired = self._fire(t, m, state, phi, plan, probs.rows, ready, context, held)
         # 4. no switch and the features at rest: recover, or give up
@@ -487,21 +494,36 @@ class SequencerEpisode:
         """Fire the ``ready`` switches (variable -> target); whether any fired.
 
         With joint switches, one always demonstrated together with another variable's switch
-        waits (armed, held and noted) until that one is ready too.
+        waits (armed, held and noted) until that one is ready too; a partner it carries
+        (:attr:`~cpmp.sequencer.switching.JointPartner.carried`) and that is ready for nothing
+        else switches with it.
         """
         joint = self._coupled and self.model.config.joint
+        by_variable = {row.variable: row for row in rows}
+        carried: set[str] = set()
         fired = False
         for plan_row, row in zip(plan, rows, strict=True):
             v = row.variable
             target = ready.get(v)
-            if target is None:
+            if target is None or v in carried:
                 continue
             k = row.successors.index(target)
-            waits = [
-                (u, a, b)
-                for u, a, b in (plan_row.joints[k] if joint else [])
-                if context[u] != b and ready.get(u) != b
-            ]
+            waits, along = [], []
+            for u, partner in plan_row.joints[k] if joint else []:
+                b = partner.target
+                if context[u] == b or ready.get(u) == b:
+                    continue
+                other = by_variable.get(u)
+                if (
+                    partner.carried
+                    and ready.get(u) is None
+                    and context[u] in partner.sources
+                    and other is not None
+                    and b in other.successors
+                ):
+                    along.append((u, b, other.p[other.successors.index(b)]))
+                else:
+                    waits.append((u, partner.source_text, b))
             if waits:
                 if self._armed.get(v) != target:
                     self._armed[v] = target
@@ -512,6 +534,10 @@ class SequencerEpisode:
                 continue
             self._armed.pop(v, None)
             self._switch(t, m, v, target, row.p[k], state, phi, "switch")
+            for u, b, q in along:
+                if u not in carried:
+                    carried.add(u)
+                    self._switch(t, m, u, b, q, state, phi, "switch")
             fired = True
         return fired
 
@@ -592,7 +618,7 @@ class SequencerEpisode:
             if self._coupled and c.joint:
                 # the switches it was always demonstrated together with come along
                 joint = model.coupling.joint.get((v, choice.source, choice.target), {})
-                for u, (sources, b) in sorted(joint.items()):
+                for u, (sources, b, _) in sorted(joint.items()):
                     a = context.get(u, "")
                     if a in sources and b in model.nodes.successors[(u, a)].names:
                         row = next(r for r in rows if r.variable == u)
@@ -687,9 +713,7 @@ class SequencerEpisode:
                 unseen, bounds = model.coupling.gates((v, current, s), context, margin)
                 unseen_counts.append(len(unseen))
                 joint = model.coupling.joint.get((v, current, s), {})
-                joints.append(
-                    [(u, j.source_text, j.target) for u, j in sorted(joint.items()) if u in context]
-                )
+                joints.append([(u, j) for u, j in sorted(joint.items()) if u in context])
                 limits.append(model.coupling.speed.get((v, current, s)))
                 checks += [
                     PhiCheck(k, nodes.index[(b.variable, context[b.variable])], b.bound)

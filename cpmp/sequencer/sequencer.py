@@ -261,13 +261,15 @@ class ConcurrentSequencer:
         stays = seq._confusing(stays)
         start = StartChoice.learn(fitted.demos, sorted(graphs), fitted.feature_range)
         scales = seq._entry_scales()
+        coupling = seq._carried(scales)
         seq.fit_summary = dataclasses.replace(
             fitted.summary,
             stay_choices=tuple(sorted(f"{v}: {mp}" for v, mp in stays)),
             entry_scale={f"{v}: {a} -> {b}": g for (v, a, b), g in scales.items()},
         )
         return seq._with_branches(
-            BranchChoices.learn(fitted.coupling, fitted.feature_range, stays, start, scales)
+            BranchChoices.learn(fitted.coupling, fitted.feature_range, stays, start, scales),
+            coupling,
         )
 
     def _entry_scales(self) -> dict[tuple[str, str, str], float]:
@@ -292,6 +294,18 @@ class ConcurrentSequencer:
             self.config.threshold,
         )
 
+    def _carried(self, scales: Mapping[tuple[str, str, str], float]) -> Coupling:
+        """The coupling with the joint partners its switches take along marked.
+
+        See :meth:`~cpmp.sequencer.switching.Coupling.with_carried`; none for a stateful
+        predictor, whose φ of a state alone means nothing.
+        """
+        if self.predictor.stateful:
+            return self.coupling
+        return self.coupling.with_carried(
+            self.progress, self.nodes.index, self.config.threshold, scales
+        )
+
     def _confusing(
         self, stays: Mapping[tuple[str, str], list[np.ndarray]]
     ) -> dict[tuple[str, str], list[np.ndarray]]:
@@ -314,8 +328,10 @@ class ConcurrentSequencer:
                 out[(v, mp)] = list(states)
         return out
 
-    def _with_branches(self, branches: BranchChoices) -> ConcurrentSequencer:
-        """This sequencer with the learned choices ``branches``."""
+    def _with_branches(
+        self, branches: BranchChoices, coupling: Coupling | None = None
+    ) -> ConcurrentSequencer:
+        """This sequencer with the learned choices ``branches`` (and ``coupling``, if given)."""
         return ConcurrentSequencer(
             self.graphs,
             self.predictor,
@@ -323,7 +339,7 @@ class ConcurrentSequencer:
             self.config,
             self.fit_summary,
             self.initial_combinations,
-            self.coupling,
+            self.coupling if coupling is None else coupling,
             self.feature_range,
             branches,
         )

@@ -51,7 +51,12 @@ product of marginal sets, more lenient than requiring a demonstrated joint conte
 that every demonstration made in the same sample as another variable's switch (a bowl served as
 the last pour ends) is *joint* with it (``joint=true``): it waits until the other variable has
 switched, or fires in the tick its rule decides to (a waiting switch stays armed while its ``p``
-is above the threshold), and a recovery takes both.
+is above the threshold), and a recovery takes both. Where the other variable's ``p`` was below
+this switch's at every demonstrated instance, and below the threshold at one, its progress does
+not time the pair (the gripper's ``close -> open`` after a slip: its ``close`` ended early, and
+the arm's ``lift -> lower`` is what the lost contact times): the switch takes it along
+(:attr:`JointPartner.carried`, learned after the fit from the fitted φ at the demonstrated
+instances).
 
 **Recovery** resolves a stall: no transition of any variable for ``stall_time`` seconds of
 measurement time while the features are at rest (every feature moves slower than
@@ -71,7 +76,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -292,10 +297,16 @@ class JointPartner(NamedTuple):
     Attributes:
         sources: the MPs it switched out of (sorted; several when it came from different ones).
         target: the MP it always switched into.
+        carried: the switch takes it along instead of waiting for it: at every demonstrated
+            instance the partner's own ``p`` was below the switch's, and at one below the
+            threshold (:meth:`Coupling.with_carried`). Its progress does not time the pair:
+            the gripper's ``close -> open`` after a slip, whose ``close`` ended early, comes
+            with the arm's ``lift -> lower``, which the lost contact times.
     """
 
     sources: tuple[str, ...]
     target: str
+    carried: bool = False
 
     @property
     def source_text(self) -> str:
@@ -442,6 +453,59 @@ class Coupling:
             ambient,
         )
 
+    def with_carried(
+        self,
+        progress: Callable[[np.ndarray], np.ndarray],
+        index: Mapping[tuple[str, str], int],
+        threshold: float,
+        entry_scale: Mapping[Edge, float] | None = None,
+    ) -> Coupling:
+        """This coupling with the joint partners its switches take along marked ``carried``.
+
+        For a joint switch ``v: s -> t`` and its partner ``u: a -> b``, the transition
+        probabilities at every demonstrated instance (the state at the switch, from
+        :attr:`instances`): the switch's own ``φ_s · (1 - φ_t)`` and the partner's
+        ``φ_a · (1 - φ_b)``, each entry scaled as an episode scales it. The partner is carried
+        when its ``p`` was below the switch's at every instance and below ``threshold`` at one
+        or more: then the switch's ``p``, not the partner's, times the pair. Where the
+        partners' ``p`` are alike (a bowl served as the last pour ends), the switch waits.
+
+        Args:
+            progress: φ of every node for states ``(N, d)``: ``(N, K)``.
+            index: (variable, MP) -> its column of φ.
+            threshold: the switching threshold.
+            entry_scale: (variable, source, target) -> the factor on the entry probability
+                (:attr:`~cpmp.sequencer.branches.BranchChoices.entry_scale`; 1 if absent).
+
+        Returns:
+            A new coupling; the same but for ``carried``.
+        """
+        scale = entry_scale or {}
+
+        def p(phi: np.ndarray, v: str, source: str, target: str) -> np.ndarray:
+            entry = (1.0 - phi[:, index[(v, target)]]) * scale.get((v, source, target), 1.0)
+            return phi[:, index[(v, source)]] * np.minimum(1.0, entry)
+
+        joint: dict[Edge, dict[str, JointPartner]] = {}
+        for (v, s, t), partners in sorted(self.joint.items()):
+            seen = [inst for inst in self.instances.get((v, s), []) if inst.target == t]
+            phi = progress(np.stack([inst.state for inst in seen])) if seen else None
+            out = {}
+            for u, partner in sorted(partners.items()):
+                b = partner.target
+                sources = [next(iter(inst.context.get(u, {b}) - {b}), None) for inst in seen]
+                keys = [(v, s), (v, t), (u, b), *((u, a) for a in sources)]
+                carried = False
+                if phi is not None and all(k in index for k in keys):  # None is never a key
+                    own = p(phi, v, s, t)
+                    theirs = np.array(
+                        [p(phi[[i]], u, a, b)[0] for i, a in enumerate(sources) if a is not None]
+                    )
+                    carried = bool(theirs.max() < own.min() and theirs.min() < threshold)
+                out[u] = partner._replace(carried=carried)
+            joint[(v, s, t)] = out
+        return replace(self, joint=joint)
+
     def inconsistent(
         self,
         edge: Edge,
@@ -554,7 +618,10 @@ class Coupling:
                     )
                 parts.append(part)
             for u, partner in sorted(self.joint.get((v, source, target), {}).items()):
-                parts.append(f"together with {u}: {partner.source_text} -> {partner.target}")
+                carried = " (taken along)" if partner.carried else ""
+                parts.append(
+                    f"together with {u}: {partner.source_text} -> {partner.target}{carried}"
+                )
             limit = self.speed.get((v, source, target))
             if limit is not None and limit.features.size:
                 names = [
@@ -583,6 +650,7 @@ class Coupling:
                     },
                     "joint": {
                         u: {"from": list(p.sources), "to": p.target}
+                        | ({"carried": True} if p.carried else {})
                         for u, p in sorted(self.joint.get((v, s, t), {}).items())
                     },
                     **(
@@ -645,7 +713,9 @@ class Coupling:
 def _partner(row: JsonValue) -> JointPartner:
     """A :class:`JointPartner` from its checkpoint form (or the ``[from, to]`` pair of before)."""
     if isinstance(row, Mapping):
-        return JointPartner(tuple(str(a) for a in row["from"]), str(row["to"]))
+        return JointPartner(
+            tuple(str(a) for a in row["from"]), str(row["to"]), bool(row.get("carried", False))
+        )
     a, b = row
     return JointPartner((str(a),), str(b))
 

@@ -131,6 +131,51 @@ def test_a_joint_switch_is_keyed_by_the_mp_the_other_variable_switches_into():
     assert ("v", "w", "x") not in Coupling.learn([from_a, into_d], ["u", "v"]).joint
 
 
+def _constant_progress(values: dict[tuple[str, str], float]):
+    """φ of the nodes ``values`` (in that order), the same for every state."""
+    index = {key: k for k, key in enumerate(values)}
+    row = np.array(list(values.values()))
+    return (lambda x: np.tile(row, (len(x), 1))), index
+
+
+@pytest.mark.parametrize(
+    ("phi_u", "carried"),
+    [
+        ((0.5, 0.2), True),  # u's p 0.4: below v's 0.9 and below the threshold
+        ((0.95, 0.05), False),  # u's p 0.9025: as high as v's, its own p times the pair
+        ((0.8, 0.1), False),  # u's p 0.72: below v's, but above the threshold: it can fire
+    ],
+)
+def test_a_joint_partner_is_carried_only_when_its_p_lags_at_every_instance(phi_u, carried):
+    together = _demo({"u": ["a"] * 4 + ["b"] * 4, "v": ["w"] * 4 + ["x"] * 4})
+    coupling = Coupling.learn([together, together], ["u", "v"])
+    phi, index = _constant_progress(
+        {("u", "a"): phi_u[0], ("u", "b"): phi_u[1], ("v", "w"): 0.9, ("v", "x"): 0.0}
+    )
+    out = coupling.with_carried(phi, index, threshold=0.65)
+    assert out.joint[("v", "w", "x")]["u"].carried is carried
+    assert out.joint[("u", "a", "b")]["v"].carried is False  # v's p is never the lower one
+    assert (
+        out.contexts == coupling.contexts and coupling.joint[("v", "w", "x")]["u"].carried is False
+    )
+    back = Coupling.from_dict(out.to_dict())
+    assert back.joint == out.joint
+    assert ("(taken along)" in "\n".join(out.describe("v"))) is carried
+
+
+def test_an_entry_scale_counts_in_the_carried_test():
+    together = _demo({"u": ["a"] * 4 + ["b"] * 4, "v": ["w"] * 4 + ["x"] * 4})
+    coupling = Coupling.learn([together], ["u", "v"])
+    phi, index = _constant_progress(
+        {("u", "a"): 0.9, ("u", "b"): 0.6, ("v", "w"): 0.9, ("v", "x"): 0.0}
+    )
+    # u's p 0.36 lags v's 0.9; with u's entry scaled x2 (a factor the fit found) it is 0.72,
+    # above the threshold
+    assert coupling.with_carried(phi, index, 0.65).joint[("v", "w", "x")]["u"].carried
+    scaled = coupling.with_carried(phi, index, 0.65, {("u", "a", "b"): 2.0})
+    assert not scaled.joint[("v", "w", "x")]["u"].carried
+
+
 @pytest.fixture(scope="module")
 def repetition_fit():
     """A sequencer fitted on 6 repetition-world demonstrations (2 per strategy)."""

@@ -14,6 +14,7 @@ from cpmp.evaluation.offline import replay_demonstrations
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig
 from cpmp.sequencer.sequencer import ConcurrentSequencer
+from cpmp.sequencer.switching import Coupling, JointPartner
 from cpmp.worlds.two_point import SyntheticTask, make_demonstrations
 
 
@@ -256,6 +257,52 @@ def _two_graph_sequencer(start_rule):
     return ConcurrentSequencer(
         graphs, model, ["a", "b", "c", "d"], SequencerConfig(start_rule=start_rule), None, combos
     )
+
+
+def _joint_pair_sequencer(carried: bool) -> ConcurrentSequencer:
+    """u: A -> B and v: W -> X, always demonstrated in the same sample; v's switch carries u's
+    when ``carried``. Features are the four nodes' φ in order A, B, W, X, then a clock."""
+    graphs = {}
+    for v, (a, b) in (("u", ("A", "B")), ("v", ("W", "X"))):
+        g = SequenceGraph(v)
+        g.add_node(a)
+        g.add_node(b)
+        g.initial_nodes = {a}
+        g.edges = {(a, b)}
+        graphs[v] = g
+    keys = [("u", "A"), ("u", "B"), ("v", "W"), ("v", "X")]
+    model = FirstColumnsAreProgress(keys, 5, PredictorConfig())
+    coupling = Coupling(
+        contexts={
+            ("u", "A", "B"): {"v": frozenset({"W", "X"})},
+            ("v", "W", "X"): {"u": frozenset({"A", "B"})},
+        },
+        joint={
+            ("u", "A", "B"): {"v": JointPartner(("W",), "X")},
+            ("v", "W", "X"): {"u": JointPartner(("A",), "B", carried)},
+        },
+    )
+    return ConcurrentSequencer(
+        graphs, model, ["a", "b", "w", "x", "clock"], SequencerConfig(), None, None, coupling
+    )
+
+
+@pytest.mark.parametrize("carried", [True, False])
+def test_a_joint_switch_takes_a_carried_partner_along_and_waits_for_the_others(carried):
+    seq = _joint_pair_sequencer(carried)
+    assert seq.reset(0.0, np.array([0.1, 0.9, 0.1, 0.9, 0.0])) == {"u": "A", "v": "W"}
+    # v's p = 1 from here on, u's p = 0.5 * (1 - 0.2) = 0.4: below the threshold throughout
+    for i in range(1, 21):
+        active = seq.step(i * 0.01, np.array([0.5, 0.2, 1.0, 0.0, i * 0.01]))
+    if carried:
+        assert active == {"u": "B", "v": "X"}
+        ev_v, ev_u = sorted(seq.events, key=lambda e: e.variable, reverse=True)
+        assert (ev_v.variable, ev_v.t) == ("v", ev_u.t)  # in the same tick
+        assert ev_u.probability == pytest.approx(0.4)
+    else:
+        assert active == {"u": "A", "v": "W"}
+        assert any("waits for u: A -> B" in n.text for n in seq.notes)
+    assert "(taken along)" in seq.describe() if carried else "(taken along)" not in seq.describe()
 
 
 def test_joint_start_never_mixes_strategies():

@@ -234,3 +234,26 @@ def test_every_strategy_meets_every_slip_count(max_slips):
         seen.setdefault(c.strategy, set()).add(c.n_slips)
     assert seen == {s: set(range(max_slips + 1)) for s in STRATEGIES}
     assert world.max_time == 25.0
+
+
+@pytest.mark.slow
+def test_the_arm_takes_the_gripper_along_after_a_slip(world):
+    """After a slip the arm's ``lift -> lower`` is timed by the lost contact; the gripper's
+    ``close -> open``, demonstrated in the same sample, has a ``p`` that never reaches the
+    threshold there (its ``close`` ended early). The fit marks the gripper carried, and
+    without that the arm waits for it."""
+    from cpmp.sequencer import ConcurrentSequencer
+
+    seq = ConcurrentSequencer.fit(list(world.demonstrations(6, 0)), seed=0, logger=None)
+    partner = seq.coupling.joint[("arm", "lift", "lower")]["gripper"]
+    assert partner.carried
+    assert "together with gripper: close -> open (taken along)" in seq.describe()
+    assert not seq.coupling.joint[("gripper", "close", "open")]["arm"].carried
+    joint = {
+        edge: {u: p._replace(carried=False) for u, p in partners.items()}
+        for edge, partners in seq.coupling.joint.items()
+    }
+    waiting = seq._with_branches(seq.branches, dataclasses.replace(seq.coupling, joint=joint))
+    carried = evaluate(world, seq, 10, 1000).counts["complete"]
+    waited = evaluate(world, waiting, 10, 1000).counts["complete"]
+    assert carried >= 8 and carried > waited
