@@ -22,7 +22,7 @@ each feature's training range, measured along each demonstration denoised
 (:func:`cpmp.progress.denoise_trajectory`); a feature with white noise in the demonstrations
 (:func:`cpmp.progress.white_noise_std` ``σ``) gets :data:`NOISE_Z` ``· √2 σ /``
 :data:`SPEED_WINDOW` more, what the same noise adds to a speed measured at run time (a noisy
-feature's envelope is then loose: a speed over 100 ms cannot tell its motion from its noise). The
+feature's envelope is then loose: a speed over 50 ms cannot tell its motion from its noise). The
 envelope is one more context of the switch, next to the other variables' MPs and progress
 (:class:`~cpmp.sequencer.switching.Coupling`): it holds a switch back, never fires one.
 
@@ -50,9 +50,12 @@ from cpmp.data import Demonstration
 from cpmp.progress import denoise_trajectory, white_noise_std
 from cpmp.records import JsonValue
 
-SPEED_WINDOW = 0.1
+SPEED_WINDOW = 0.05
 """Seconds over which a speed is measured: the displacement since the newest measurement at
-least this old, over the time between them."""
+least this old, over the time between them. The switching rule's 50 ms: after an event (a jam
+stops an arm) the demonstrator's switch comes within tens of milliseconds, and a longer window
+still reads the motion before the event when the rule decides (100 ms held the procedural
+family's retries until their ``p`` had fallen back)."""
 SPEED_FACTOR = 2.0
 """How much faster than demonstrated at a switch a moving feature may be (``inf``: no
 envelope)."""
@@ -292,7 +295,7 @@ class SpeedMeter:
             since: the measurement time [s] at which the MP whose motion is asked about
                 became active: a window reaching before it is cut there, so that the speed
                 is the MP's own (a re-align that has just started from rest moves fast
-                although the 100 ms before it were still). ``None``: the whole window.
+                although the 50 ms before it were still). ``None``: the whole window.
 
         Returns:
             The speed; ``None`` before a measurement is :data:`SPEED_WINDOW` old (or, with

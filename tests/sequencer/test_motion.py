@@ -44,7 +44,7 @@ def test_window_speed_is_the_displacement_over_the_newest_sample_a_window_old():
     x = np.stack([t * 2.0, np.zeros_like(t)], axis=1)
     inv = np.array([0.5, 0.0])  # range 2 for feature 0; feature 1 ignored
     np.testing.assert_allclose(window_speed(x, t, 20, inv), [1.0, 0.0])
-    assert window_speed(x, t, 5, inv) is None  # nothing 0.1 s old yet
+    assert window_speed(x, t, round(motion.SPEED_WINDOW / DT) - 1, inv) is None  # none old yet
 
 
 def test_a_switch_made_at_rest_gets_a_tight_envelope_on_the_features_its_source_moves():
@@ -84,12 +84,15 @@ def test_speed_since_an_mp_began_is_its_own_motion():
     meter.reset(0.0, np.zeros(1))
     for k in range(1, 21):  # still until 0.2 s, then 2 per s from the switch at 0.2 s
         meter.observe(k * DT, np.zeros(1))
-    for k in range(21, 26):
+    moving = 3  # ticks of motion, less than a window
+    assert moving * DT < motion.SPEED_WINDOW
+    for k in range(21, 21 + moving):
         meter.observe(k * DT, np.array([(k - 20) * DT * 2.0]))
-    np.testing.assert_allclose(meter.speed(), [1.0])  # 0.1 m over the last 0.1 s
-    np.testing.assert_allclose(meter.speed(since=0.2), [2.0])  # 0.1 m over 0.05 s
-    assert meter.speed(since=0.25) is None  # nothing measured after the MP began yet
-    np.testing.assert_allclose(meter.speed(since=0.1), [1.0])  # began before the window
+    # over the whole window, part of it still: 0.06 m over the window
+    np.testing.assert_allclose(meter.speed(), [2.0 * moving * DT / motion.SPEED_WINDOW])
+    np.testing.assert_allclose(meter.speed(since=0.2), [2.0])  # 0.06 m over 0.03 s
+    assert meter.speed(since=0.2 + moving * DT) is None  # nothing measured after it began yet
+    np.testing.assert_allclose(meter.speed(since=0.1), meter.speed())  # began before the window
 
 
 def test_a_feature_moving_alike_under_every_mp_is_ambient():
