@@ -537,6 +537,7 @@ class SequencerEpisode:
             for u, b, q in along:
                 if u not in carried:
                     carried.add(u)
+                    held.pop(u, None)
                     self._switch(t, m, u, b, q, state, phi, "switch")
             fired = True
         return fired
