@@ -1,4 +1,5 @@
-"""Test doubles of progress predictors shared by the sequencer tests."""
+"""Test doubles of progress predictors (and the small graphs they drive) shared by the sequencer
+tests."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from typing import ClassVar
 
 import torch
 
+from cpmp.graph import SequenceGraph
 from cpmp.predictors import ProgressPredictor
 
 
@@ -16,3 +18,16 @@ class FirstColumnsAreProgress(ProgressPredictor):
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
         return torch.logit(z[:, : self.n_nodes].clamp(1e-9, 1 - 1e-9))
+
+
+def chain_graphs(chains: dict[str, tuple[str, str]]) -> dict[str, SequenceGraph]:
+    """One graph per variable: ``variable -> (a, b)`` is the chain ``a -> b``, starting at ``a``."""
+    graphs = {}
+    for v, (a, b) in chains.items():
+        g = SequenceGraph(v)
+        g.add_node(a)
+        g.add_node(b)
+        g.initial_nodes = {a}
+        g.edges = {(a, b)}
+        graphs[v] = g
+    return graphs

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from progress_doubles import FirstColumnsAreProgress
+from progress_doubles import FirstColumnsAreProgress, chain_graphs
 
 from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
@@ -262,14 +262,7 @@ def _two_graph_sequencer(start_rule):
 def _joint_pair_sequencer(carried: bool) -> ConcurrentSequencer:
     """u: A -> B and v: W -> X, always demonstrated in the same sample; v's switch carries u's
     when ``carried``. Features are the four nodes' φ in order A, B, W, X, then a clock."""
-    graphs = {}
-    for v, (a, b) in (("u", ("A", "B")), ("v", ("W", "X"))):
-        g = SequenceGraph(v)
-        g.add_node(a)
-        g.add_node(b)
-        g.initial_nodes = {a}
-        g.edges = {(a, b)}
-        graphs[v] = g
+    graphs = chain_graphs({"u": ("A", "B"), "v": ("W", "X")})
     keys = [("u", "A"), ("u", "B"), ("v", "W"), ("v", "X")]
     model = FirstColumnsAreProgress(keys, 5, PredictorConfig())
     coupling = Coupling(

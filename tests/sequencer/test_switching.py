@@ -7,7 +7,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 import torch
-from progress_doubles import FirstColumnsAreProgress
+from progress_doubles import FirstColumnsAreProgress, chain_graphs
 
 from cpmp.config import SequencerConfig
 from cpmp.data.demonstration import Demonstration
@@ -210,14 +210,7 @@ def test_coupling_learns_how_far_the_others_had_progressed():
 def _two_chains(**config):
     """Variables u: U1 -> U2 and w: W1 -> W2; features are (φ_U1, φ_U2, φ_W1, φ_W2); w's switch
     was demonstrated only while u ran U2."""
-    graphs = {}
-    for v, (a, b) in {"u": ("U1", "U2"), "w": ("W1", "W2")}.items():
-        g = SequenceGraph(v)
-        g.add_node(a)
-        g.add_node(b)
-        g.initial_nodes = {a}
-        g.edges = {(a, b)}
-        graphs[v] = g
+    graphs = chain_graphs({"u": ("U1", "U2"), "w": ("W1", "W2")})
     keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2")]
     model = FeatureIsProgress(keys, 4, PredictorConfig())
     demo = _labels_demo({"u": ["U1"] * 3 + ["U2"] * 4, "w": ["W1"] * 4 + ["W2"] * 3})
