@@ -147,6 +147,22 @@ class _PendingTick(NamedTuple):
     held: dict[str, str]
 
 
+def _partner_p(
+    u: str, partner: JointPartner, context: Mapping[str, str], rows: Sequence[TickRow]
+) -> float | None:
+    """The ``p`` of joint partner ``u``'s switch into ``partner.target`` at this tick.
+
+    ``None`` unless ``u`` runs one of the partner's source MPs (``context``) and that switch is
+    one of its successors (``rows``: the tick's rows, one per variable with successors).
+    """
+    row = next((r for r in rows if r.variable == u), None)
+    if context.get(u) not in partner.sources or row is None:
+        return None
+    if partner.target not in row.successors:
+        return None
+    return row.p[row.successors.index(partner.target)]
+
+
 class SequencerEpisode:
     """The state of one episode of a fitted sequencer.
 
@@ -499,7 +515,6 @@ class SequencerEpisode:
         else switches with it.
         """
         joint = self._coupled and self.model.config.joint
-        by_variable = {row.variable: row for row in rows}
         carried: set[str] = set()
         fired = False
         for plan_row, row in zip(plan, rows, strict=True):
@@ -513,15 +528,9 @@ class SequencerEpisode:
                 b = partner.target
                 if context[u] == b or ready.get(u) == b:
                     continue
-                other = by_variable.get(u)
-                if (
-                    partner.carried
-                    and ready.get(u) is None
-                    and context[u] in partner.sources
-                    and other is not None
-                    and b in other.successors
-                ):
-                    along.append((u, b, other.p[other.successors.index(b)]))
+                q = _partner_p(u, partner, context, rows)
+                if partner.carried and ready.get(u) is None and q is not None:
+                    along.append((u, b, q))
                 else:
                     waits.append((u, partner.source_text, b))
             if waits:
@@ -619,13 +628,12 @@ class SequencerEpisode:
             if self._coupled and c.joint:
                 # the switches it was always demonstrated together with come along
                 joint = model.coupling.joint.get((v, choice.source, choice.target), {})
-                for u, (sources, b, _) in sorted(joint.items()):
-                    a = context.get(u, "")
-                    if a in sources and b in model.nodes.successors[(u, a)].names:
-                        row = next(r for r in rows if r.variable == u)
-                        q = row.p[row.successors.index(b)]
+                for u, partner in sorted(joint.items()):
+                    q = _partner_p(u, partner, context, rows)
+                    if q is not None:
+                        b = partner.target
                         self._switch(t, m, u, b, q, state, phi, "recovery")
-                        text += f" with {u}: {a} -> {b} (p={q:.2f}, demonstrated together)"
+                        text += f" with {u}: {context[u]} -> {b} (p={q:.2f}, demonstrated together)"
             self.notes.append(
                 SequencerNote(t, "recovery", v, f"stall of {c.stall_time:g} s resolved: {text}")
             )

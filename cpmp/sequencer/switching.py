@@ -496,11 +496,9 @@ class Coupling:
                 sources = [next(iter(inst.context.get(u, {b}) - {b}), None) for inst in seen]
                 keys = [(v, s), (v, t), (u, b), *((u, a) for a in sources)]
                 carried = False
-                if phi is not None and all(k in index for k in keys):  # None is never a key
+                if phi is not None and all(k in index for k in keys):  # (u, None) is not a key
                     own = p(phi, v, s, t)
-                    theirs = np.array(
-                        [p(phi[[i]], u, a, b)[0] for i, a in enumerate(sources) if a is not None]
-                    )
+                    theirs = np.array([p(phi[[i]], u, a, b)[0] for i, a in enumerate(sources)])
                     carried = bool(theirs.max() < own.min() and theirs.min() < threshold)
                 out[u] = partner._replace(carried=carried)
             joint[(v, s, t)] = out
