@@ -25,8 +25,9 @@ only what told the demonstrated starts apart decides.
 **Staying** is a choice too. While a cycle repeats, the variable that waits across it (the bowl
 held out in ``hold``) sees, between two repetitions, a state much like the one in which it moved
 on after the last. Every switch of another variable is a moment the demonstrator decided
-something; the states at which a variable kept its MP then, while clearly inside it (its label
-below ``1 - progress_margin``), are examples of :data:`STAY` (:func:`stay_examples`). A fit keeps
+something; the states at which a variable kept its MP then and through the next such moment
+(its own switch did not come first: it was not waiting for this one) are examples of
+:data:`STAY` (:func:`stay_examples`). A fit keeps
 them for the nodes where the progress predictor alone would have switched at one of them (a
 transition's ``p`` above the threshold), and the choice then has one more class: while
 :data:`STAY` is the most probable, no transition of that node fires (a ``hold`` note says so).
@@ -54,11 +55,16 @@ MIN_SPREAD = 0.01
 L2 = 1e-4
 """The L2 penalty on the weights, per example (features in training ranges)."""
 _NEWTON_STEPS = 50
-START_POWER = 0.5
-"""The start weighs features by the square root of their :func:`separability`: its examples
-are one first state per demonstration, so separability rests on a handful of states, and the
-softer weighting keeps every separating feature in play when each separates only some of the
-starts (in the simulator box width decides one strategy and depth the other two)."""
+SOFT_POWER = 0.5
+"""The start and every stay choice weigh features by the square root of their
+:func:`separability` (a branch choice among successors by separability itself). The start's
+examples are one first state per demonstration, so separability rests on a handful of states,
+and the softer weighting keeps every separating feature in play when each separates only some
+of the starts (in the simulator box width decides one strategy and depth the other two). A stay
+choice's :data:`STAY` examples come from across the whole activation, so every feature the
+activation moves spreads widely within that class and separates little on its own: what tells
+staying from going is often a combination (at peg's ``hold``, the peg's depth against the
+hole's, which alone separates nothing)."""
 MIN_ENTRY = 0.05
 """The least demonstrated entry :func:`entry_scales` divides by (a factor of at most 20)."""
 
@@ -209,7 +215,7 @@ class StartChoice:
             return cls(combinations, counts, None)
         y = np.array([classes.index(c) for c in keys])
         states = np.stack([np.asarray(d.features[0], dtype=np.float64) for d in demos])
-        model = learn_choice(states, y, len(classes), feature_range, START_POWER)
+        model = learn_choice(states, y, len(classes), feature_range, SOFT_POWER)
         return cls(combinations, counts, model)
 
     def probabilities(self, x: np.ndarray) -> np.ndarray:
@@ -367,7 +373,8 @@ class BranchChoices:
             if len(targets) < 2:
                 continue
             y = np.array([targets.index(t) for t in labels])
-            model = learn_choice(np.stack(states), y, len(targets), feature_range)
+            power = SOFT_POWER if kept else 1.0
+            model = learn_choice(np.stack(states), y, len(targets), feature_range, power)
             counts = [int(np.sum(y == i)) for i in range(len(targets))]
             choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
         return cls(choices, start, dict(entry_scale or {}))
@@ -456,39 +463,44 @@ def entry_scales(
 
 
 def stay_examples(
-    demos: Sequence[Demonstration],
-    variables: Sequence[str],
-    progress: Sequence[Mapping[str, np.ndarray]],
-    margin: float,
+    demos: Sequence[Demonstration], variables: Sequence[str]
 ) -> dict[tuple[str, str], list[np.ndarray]]:
     """The states at which each variable kept its MP while another variable switched.
 
-    Another variable's switch is a moment the demonstrator decided something; a variable that
-    kept its MP then, while less than ``1 - margin`` through it (its eq. 1 label), chose to
-    stay — between two repetitions of a cycle, the waiting variable does so.
+    Another variable's switch is a moment the demonstrator decided something. A variable that
+    kept its MP then and also through the next such moment chose to stay — between two
+    repetitions of a cycle, the waiting variable does so; at peg's half-inserted deep hole, the
+    holder keeps holding while the inserter releases and pushes. A variable whose own switch
+    comes before the next moment was waiting for this one (the bowl served as the last pour
+    ends, a drawer shut once the arm is out): that moment is no stay. How far the variable is
+    through its MP does not matter: a node whose last part is short in the features (the
+    holder's ``hold`` while the peg is pushed home) is still staying there.
 
     Args:
         demos: the fit's demonstrations.
         variables: the control variables.
-        progress: per demonstration, per variable, the fit's progress labels ``(n,)``.
-        margin: a variable at least ``1 - margin`` through its MP is near its own switch, not
-            staying.
 
     Returns:
         ``(variable, MP)`` -> the features ``(d,)`` at each such moment (the first sample after
         the other variable's switch).
     """
     out: dict[tuple[str, str], list[np.ndarray]] = {}
-    for demo, done in zip(demos, progress, strict=True):
+    for demo in demos:
         labels = {v: np.asarray(demo.labels[v]) for v in variables}
-        moments = sorted(
-            {int(i) for v in variables for i in np.flatnonzero(labels[v][1:] != labels[v][:-1]) + 1}
-        )
-        for i in moments:
-            for v in variables:
-                lab = labels[v]
-                if lab[i - 1] == lab[i] and float(done[v][i]) < 1.0 - margin:
-                    out.setdefault((v, str(lab[i])), []).append(demo.features[i].copy())
+        changed = {v: np.flatnonzero(lab[1:] != lab[:-1]) + 1 for v, lab in labels.items()}
+        for v in variables:
+            others = np.unique(
+                np.concatenate([changed[u] for u in variables if u != v] + [np.zeros(0, int)])
+            )
+            own = changed[v]
+            for k, i in enumerate(others):
+                if np.isin(i, own):
+                    continue
+                nxt_own = own[own > i]
+                until = nxt_own[0] if len(nxt_own) else len(labels[v])
+                nxt_other = others[k + 1] if k + 1 < len(others) else len(labels[v]) + 1
+                if until >= nxt_other:
+                    out.setdefault((v, str(labels[v][i])), []).append(demo.features[i].copy())
     return out
 
 

@@ -113,8 +113,6 @@ class FittedParts:
         feature_range: ``(d,)`` range of each feature over the training samples (0 for
             indicator features).
         demos: the training demonstrations (glitches repaired, validation ones taken out).
-        progress: per training demonstration, variable -> its progress labels ``(T,)`` as its
-            nodes trained on them.
     """
 
     graphs: dict[str, SequenceGraph]
@@ -126,7 +124,6 @@ class FittedParts:
     coupling: Coupling
     feature_range: np.ndarray
     demos: list[Demonstration]
-    progress: list[dict[str, np.ndarray]]
 
 
 def fit_parts(
@@ -201,5 +198,4 @@ def fit_parts(
         ),
         feature_range=feature_range,
         demos=demos,
-        progress=progress,
     )

@@ -254,11 +254,7 @@ class ConcurrentSequencer:
             fitted.coupling,
             fitted.feature_range,
         )
-        margin = config.sequencer.progress_margin
-        stays = stay_examples(
-            fitted.demos, sorted(graphs), fitted.progress, 0.2 if margin is None else margin
-        )
-        stays = seq._confusing(stays)
+        stays = seq._confusing(stay_examples(fitted.demos, sorted(graphs)))
         start = StartChoice.learn(fitted.demos, sorted(graphs), fitted.feature_range)
         scales = seq._entry_scales()
         coupling = seq._carried(scales)

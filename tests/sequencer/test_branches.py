@@ -8,11 +8,13 @@ import pytest
 from cpmp.data import Demonstration
 from cpmp.sequencer import ConcurrentSequencer
 from cpmp.sequencer.branches import (
+    SOFT_POWER,
     STAY,
     BranchChoices,
     StartChoice,
     entry_scales,
     fit_softmax,
+    separability,
     stay_examples,
 )
 from cpmp.sequencer.switching import Coupling, JointPartner, SwitchInstance
@@ -79,6 +81,40 @@ def test_no_choice_without_a_branch_or_a_stay():
     assert choice.choose(np.array([0.0, 0.0]), ["serve"]) == "serve"
 
 
+def test_a_stay_choice_reads_a_combination_and_weighs_features_softly():
+    # peg's holder: it goes when the peg's depth (x[0]) reaches the hole's (x[1]); it stayed
+    # with the peg half way in a deep hole and with the peg out; x[2] is jitter. Neither depth
+    # separates staying from going on its own.
+    rng = np.random.default_rng(0)
+    go = [np.array([h, h, rng.uniform(-1, 1)]) for h in (0.13, 0.16, 0.19, 0.33, 0.38, 0.43)]
+    stays = [np.array([h / 2, h, rng.uniform(-1, 1)]) for h in (0.31, 0.34, 0.37, 0.40, 0.43)]
+    stays += [np.array([0.0, h, rng.uniform(-1, 1)]) for h in (0.14, 0.18, 0.32, 0.41)]
+    coupling = Coupling(
+        instances={("holder", "hold"): [SwitchInstance("retreat", x, {}) for x in go]}
+    )
+    feature_range = np.array([0.45, 0.32, 2.0])
+    choices = BranchChoices.learn(coupling, feature_range, {("holder", "hold"): stays})
+    choice = choices.get("holder", "hold")
+    assert choice is not None and choice.targets == [STAY, "retreat"]
+    assert choice.choose(np.array([0.18, 0.36, 0.0]), ["retreat"]) == STAY
+    assert choice.choose(np.array([0.21, 0.42, 0.5]), ["retreat"]) == STAY
+    assert choice.choose(np.array([0.36, 0.36, 0.0]), ["retreat"]) == "retreat"
+    assert choice.choose(np.array([0.15, 0.15, -0.5]), ["retreat"]) == "retreat"
+    # the stay choice weighs by the square root of separability, a branch choice by itself
+    z = np.stack(go + stays) / feature_range
+    y = np.array([1] * len(go) + [0] * len(stays))
+    np.testing.assert_allclose(
+        choice.model.scale, separability(z, y, 2) ** SOFT_POWER / feature_range
+    )
+    branch = BranchChoices.learn(_cycle_coupling(np.random.default_rng(1)), np.array([2.0, 2.0]))
+    cycle = _cycle_coupling(np.random.default_rng(1)).instances[("ladle", "pour")]
+    zc = np.stack([inst.state for inst in cycle]) / 2.0
+    yc = np.array([["rest", "scoop"].index(inst.target) for inst in cycle])
+    np.testing.assert_allclose(
+        branch.get("ladle", "pour").model.scale, separability(zc, yc, 2) / 2.0
+    )
+
+
 def test_choices_survive_to_dict():
     choices = BranchChoices.learn(_cycle_coupling(np.random.default_rng(2)), np.array([2.0, 2.0]))
     back = BranchChoices.from_dict(choices.to_dict())
@@ -94,16 +130,29 @@ def _demo(labels: dict[str, list[str]]) -> Demonstration:
     return Demonstration(np.arange(n) * 0.1, x, labels, ["a", "b"])
 
 
-def test_stay_examples_are_the_other_variables_switches_before_the_end():
-    demo = _demo({"u": ["a"] * 3 + ["b"] * 5, "v": ["w"] * 6 + ["x"] * 2})
-    early = {"u": np.zeros(8), "v": np.linspace(0.0, 1.0, 8)}
-    out = stay_examples([demo], ["u", "v"], [early], margin=0.2)
-    # u switched at sample 3 while v (progress 0.43) kept w; v's own switch at 6 is no stay of
-    # v, and u kept b there while near 0 progress: a stay of u.
-    assert sorted(out) == [("u", "b"), ("v", "w")]
-    np.testing.assert_array_equal(out[("v", "w")][0], demo.features[3])
-    late = {"u": np.zeros(8), "v": np.full(8, 0.9)}
-    assert ("v", "w") not in stay_examples([demo], ["u", "v"], [late], margin=0.2)
+def test_stay_examples_are_the_other_variables_switches_a_variable_stays_through():
+    # u switches at 2 and 4, v at 6: v stayed in w through u's switch at 2 (u switched again
+    # before v did), but at u's switch at 4 v was waiting (its own switch came next). u kept b
+    # through v's switch at 6 (the end of the data comes first: no stay).
+    demo = _demo({"u": ["a"] * 2 + ["b"] * 2 + ["c"] * 4, "v": ["w"] * 6 + ["x"] * 2})
+    out = stay_examples([demo], ["u", "v"])
+    assert sorted(out) == [("v", "w")]
+    assert len(out[("v", "w")]) == 1
+    np.testing.assert_array_equal(out[("v", "w")][0], demo.features[2])
+
+
+def test_a_stay_through_the_last_part_of_a_node_counts_and_a_shared_moment_too():
+    # v's own switch in the same sample as u's next one (the holder's hold -> retreat as the
+    # push ends) still makes u's earlier switch a stay of v, however far v is through w.
+    demo = _demo({"u": ["a"] * 5 + ["b"] * 2 + ["c"], "v": ["w"] * 7 + ["x"]})
+    out = stay_examples([demo], ["u", "v"])
+    assert list(out) == [("v", "w")]
+    np.testing.assert_array_equal(out[("v", "w")][0], demo.features[5])
+    # a switch of v in the same sample as u's is no stay of v
+    together = _demo({"u": ["a"] * 4 + ["b"] * 4, "v": ["w"] * 4 + ["x"] * 4})
+    assert stay_examples([together], ["u", "v"]) == {}
+    # one variable: no other variable's switch, no stay
+    assert stay_examples([together], ["u"]) == {}
 
 
 def test_joint_switches_are_learned_only_when_always_together():

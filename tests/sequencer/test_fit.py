@@ -70,7 +70,7 @@ def test_fit_config_builds_the_sequencer_on_fit_parts(train_demos: list[Demonstr
         phi = parts.predictor.eval()(torch.from_numpy(np.ascontiguousarray(x))).numpy()
     np.testing.assert_array_equal(phi, seq.heads(x))  # the same seed: the same fit
     assert parts.summary.n_demos == seq.fit_summary.n_demos == len(train_demos)
-    assert len(parts.progress) == len(parts.demos) == len(train_demos)
+    assert len(parts.demos) == len(train_demos)
 
 
 def test_fit_demos_holds_out_a_seeded_share(train_demos: list[Demonstration]) -> None:
