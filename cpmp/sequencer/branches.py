@@ -471,8 +471,8 @@ def stay_examples(
     kept its MP then and also through the next such moment chose to stay — between two
     repetitions of a cycle, the waiting variable does so; at peg's half-inserted deep hole, the
     holder keeps holding while the inserter releases and pushes. A variable whose own switch
-    comes before the next moment was waiting for this one (the bowl served as the last pour
-    ends, a drawer shut once the arm is out): that moment is no stay. How far the variable is
+    comes before the next moment was waiting for this one (it switched in response to it):
+    that moment is no stay, nor is one at which it switched too. How far the variable is
     through its MP does not matter: a node whose last part is short in the features (the
     holder's ``hold`` while the peg is pushed home) is still staying there.
 
