@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import NamedTuple
 
 import numpy as np
@@ -493,13 +494,12 @@ def stay_examples(
                 np.concatenate([changed[u] for u in variables if u != v] + [np.zeros(0, int)])
             )
             own = changed[v]
-            for k, i in enumerate(others):
-                if np.isin(i, own):
-                    continue
-                nxt_own = own[own > i]
-                until = nxt_own[0] if len(nxt_own) else len(labels[v])
-                nxt_other = others[k + 1] if k + 1 < len(others) else len(labels[v]) + 1
-                if until >= nxt_other:
+            # the last moment has no next one to stay through
+            for i, following in pairwise(others):
+                later = own[own >= i]
+                if len(later) and later[0] == i:
+                    continue  # it switched at this moment too
+                if not len(later) or later[0] >= following:
                     out.setdefault((v, str(labels[v][i])), []).append(demo.features[i].copy())
     return out
 

@@ -106,8 +106,9 @@ def test_a_stay_choice_reads_a_combination_and_weighs_features_softly():
     np.testing.assert_allclose(
         choice.model.scale, separability(z, y, 2) ** SOFT_POWER / feature_range
     )
-    branch = BranchChoices.learn(_cycle_coupling(np.random.default_rng(1)), np.array([2.0, 2.0]))
-    cycle = _cycle_coupling(np.random.default_rng(1)).instances[("ladle", "pour")]
+    cycle_coupling = _cycle_coupling(np.random.default_rng(1))
+    branch = BranchChoices.learn(cycle_coupling, np.array([2.0, 2.0]))
+    cycle = cycle_coupling.instances[("ladle", "pour")]
     zc = np.stack([inst.state for inst in cycle]) / 2.0
     yc = np.array([["rest", "scoop"].index(inst.target) for inst in cycle])
     np.testing.assert_allclose(
