@@ -79,7 +79,9 @@ class SequencerConfig:
             default): the demonstrated combination that a multinomial logistic regression on
             the demonstrations' first states gives the highest probability, on the features
             weighted by how well they separate the demonstrated starts, so features that vary
-            at the start without deciding it (a home jitter, a distractor) cannot mislead it
+            at the start without deciding it (a home jitter, a distractor) cannot mislead it,
+            and without the ambient features (moving alike under every MP: a drift separates
+            a handful of first states by chance)
             (:class:`cpmp.sequencer.branches.StartChoice`; the branch choice of a virtual
             root). A sequencer built without it (not by a fit) uses ``joint``.
         nonfinite: what a tick with non-finite features or φ does: ``hold`` (keep every MP,

@@ -65,9 +65,26 @@ of the starts (in the simulator box width decides one strategy and depth the oth
 choice's :data:`STAY` examples come from across the whole activation, so every feature the
 activation moves spreads widely within that class and separates little on its own: what tells
 staying from going is often a combination (at peg's ``hold``, the peg's depth against the
-hole's, which alone separates nothing)."""
+hole's, which alone separates nothing).
+
+Both also leave out the ambient features (:attr:`~cpmp.sequencer.switching.Coupling.ambient`,
+moving alike under every MP: the world's drift, not the task's state; :func:`without_ambient`):
+their examples come from different demonstrations and moments, so a drift that differs between
+them (a light level, a table-height estimate) separates them by chance."""
 MIN_ENTRY = 0.05
 """The least demonstrated entry :func:`entry_scales` divides by (a factor of at most 20)."""
+
+
+def without_ambient(feature_range: np.ndarray, ambient: np.ndarray | None) -> np.ndarray:
+    """``feature_range (d,)`` with the ``ambient (d,)`` features' ranges set to 0 (left out).
+
+    A choice on those ranges (:func:`learn_choice`) does not read the ambient features. ``None``
+    (no mask learned): the ranges as they are.
+    """
+    r = np.asarray(feature_range, dtype=np.float64)
+    if ambient is None:
+        return r
+    return np.where(np.asarray(ambient, dtype=bool), 0.0, r)
 
 
 class LinearChoice(NamedTuple):
@@ -199,7 +216,11 @@ class StartChoice:
 
     @classmethod
     def learn(
-        cls, demos: Sequence[Demonstration], variables: Sequence[str], feature_range: np.ndarray
+        cls,
+        demos: Sequence[Demonstration],
+        variables: Sequence[str],
+        feature_range: np.ndarray,
+        ambient: np.ndarray | None = None,
     ) -> StartChoice:
         """Learn the start from each demonstration's first state and initial MPs.
 
@@ -207,6 +228,7 @@ class StartChoice:
             demos: the fit's demonstrations (at least one).
             variables: the control variables.
             feature_range: ``(d,)`` each feature's range in the training data.
+            ambient: ``(d,)`` bool, features left out (:func:`without_ambient`); ``None``: none.
         """
         keys = [tuple(str(d.labels[v][0]) for v in variables) for d in demos]
         classes = sorted(set(keys))
@@ -216,7 +238,9 @@ class StartChoice:
             return cls(combinations, counts, None)
         y = np.array([classes.index(c) for c in keys])
         states = np.stack([np.asarray(d.features[0], dtype=np.float64) for d in demos])
-        model = learn_choice(states, y, len(classes), feature_range, SOFT_POWER)
+        model = learn_choice(
+            states, y, len(classes), without_ambient(feature_range, ambient), SOFT_POWER
+        )
         return cls(combinations, counts, model)
 
     def probabilities(self, x: np.ndarray) -> np.ndarray:
@@ -352,7 +376,8 @@ class BranchChoices:
         """One choice per node that branches or whose demonstrator stayed where φ says go.
 
         Args:
-            coupling: the learned coupling, whose switch instances are the examples.
+            coupling: the learned coupling, whose switch instances are the examples (and
+                whose ambient features the stay choices leave out).
             feature_range: ``(d,)`` each feature's range in the training data (features of
                 range 0 are left out).
             stays: ``(variable, MP)`` -> states ``(d,)`` at which the demonstrator kept the MP
@@ -366,6 +391,7 @@ class BranchChoices:
         """
         stays = stays or {}
         choices = {}
+        stay_range = without_ambient(feature_range, coupling.ambient)
         for (v, source), instances in sorted(coupling.instances.items()):
             kept = [np.asarray(x, dtype=np.float64) for x in stays.get((v, source), [])]
             states = [inst.state for inst in instances] + kept
@@ -374,8 +400,8 @@ class BranchChoices:
             if len(targets) < 2:
                 continue
             y = np.array([targets.index(t) for t in labels])
-            power = SOFT_POWER if kept else 1.0
-            model = learn_choice(np.stack(states), y, len(targets), feature_range, power)
+            power, ranges = (SOFT_POWER, stay_range) if kept else (1.0, feature_range)
+            model = learn_choice(np.stack(states), y, len(targets), ranges, power)
             counts = [int(np.sum(y == i)) for i in range(len(targets))]
             choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
         return cls(choices, start, dict(entry_scale or {}))
@@ -515,4 +541,5 @@ __all__ = [
     "fit_softmax",
     "learn_choice",
     "stay_examples",
+    "without_ambient",
 ]

@@ -255,7 +255,9 @@ class ConcurrentSequencer:
             fitted.feature_range,
         )
         stays = seq._confusing(stay_examples(fitted.demos, sorted(graphs)))
-        start = StartChoice.learn(fitted.demos, sorted(graphs), fitted.feature_range)
+        start = StartChoice.learn(
+            fitted.demos, sorted(graphs), fitted.feature_range, fitted.coupling.ambient
+        )
         scales = seq._entry_scales()
         coupling = seq._carried(scales)
         seq.fit_summary = dataclasses.replace(
@@ -609,9 +611,10 @@ class ConcurrentSequencer:
                 parts.append(f"{v}: branch choices")
                 parts += lines
         ambient = self.coupling.ambient
-        if ambient is not None and ambient.any() and self.config.recovery:
+        if ambient is not None and ambient.any():
             names = ", ".join(self.feature_names[j] for j in np.flatnonzero(ambient))
             parts.append(
-                f"ambient features (move alike under every MP; not a stall's motion): {names}"
+                "ambient features (move alike under every MP; left out of the learned start and"
+                f" stay choices, not a stall's motion): {names}"
             )
         return "\n".join(parts)

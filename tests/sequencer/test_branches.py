@@ -16,6 +16,7 @@ from cpmp.sequencer.branches import (
     fit_softmax,
     separability,
     stay_examples,
+    without_ambient,
 )
 from cpmp.sequencer.switching import Coupling, JointPartner, SwitchInstance
 from cpmp.worlds import repetition
@@ -106,7 +107,21 @@ def test_a_stay_choice_reads_a_combination_and_weighs_features_softly():
     np.testing.assert_allclose(
         choice.model.scale, separability(z, y, 2) ** SOFT_POWER / feature_range
     )
+    # an ambient feature (x[2] drifting alike under every MP) is left out of the stay choice
+    drifting = Coupling(instances=coupling.instances, ambient=np.array([False, False, True]))
+    without = BranchChoices.learn(drifting, feature_range, {("holder", "hold"): stays})
+    scale = without.get("holder", "hold").model.scale
+    assert scale[2] == 0.0 and scale[0] > 0.0 and scale[1] > 0.0
+    assert without.get("holder", "hold").choose(np.array([0.18, 0.36, 0.9]), ["retreat"]) == STAY
     cycle_coupling = _cycle_coupling(np.random.default_rng(1))
+    # ... but not out of a branch choice among successors
+    drifting_cycle = Coupling(instances=cycle_coupling.instances, ambient=np.array([False, True]))
+    assert (
+        BranchChoices.learn(drifting_cycle, np.array([2.0, 2.0]))
+        .get("ladle", "pour")
+        .model.scale[1]
+        > 0.0
+    )
     branch = BranchChoices.learn(cycle_coupling, np.array([2.0, 2.0]))
     cycle = cycle_coupling.instances[("ladle", "pour")]
     zc = np.stack([inst.state for inst in cycle]) / 2.0
@@ -297,6 +312,33 @@ def test_start_choice_reads_the_feature_that_separates_the_starts_not_the_jitter
     back = StartChoice.from_dict(choice.to_dict())
     x = np.array([[0.2, 1.0, -1.0], [0.9, -1.5, 0.3]])
     np.testing.assert_allclose(back.probabilities(x), choice.probabilities(x))
+
+
+def test_the_start_leaves_out_an_ambient_feature_that_separates_the_starts_by_chance():
+    # x[0] decides (0 / 0.4 shut, 1 open); the light x[2] drifts and, by chance, was low in
+    # both shut demonstrations: alone it would say "shut" at every low light.
+    demos = [
+        _start_demo("a", np.array([0.0, 0.1, 0.2]), ("pull", "wait")),
+        _start_demo("b", np.array([0.4, -0.1, 0.22]), ("pull", "wait")),
+        _start_demo("c", np.array([1.0, 0.0, 1.2]), ("hold", "wait")),
+    ]
+    feature_range = np.array([1.0, 1.0, 1.5])
+    open_in_low_light, shut_in_bright_light = np.array([1.0, 0.0, 0.21]), np.array([0.0, 0.0, 1.2])
+    misled = StartChoice.learn(demos, ["arm", "gripper"], feature_range)
+    assert misled.combinations[int(np.argmax(misled.probabilities(open_in_low_light)))] == {
+        "arm": "pull",
+        "gripper": "wait",
+    }
+    choice = StartChoice.learn(
+        demos, ["arm", "gripper"], feature_range, np.array([False, False, True])
+    )
+    assert choice.model is not None and choice.model.scale[2] == 0.0
+    for x, arm in ((open_in_low_light, "hold"), (shut_in_bright_light, "pull")):
+        assert choice.combinations[int(np.argmax(choice.probabilities(x)))]["arm"] == arm
+    np.testing.assert_array_equal(
+        without_ambient(feature_range, np.array([False, False, True])), [1.0, 1.0, 0.0]
+    )
+    np.testing.assert_array_equal(without_ambient(feature_range, None), feature_range)
 
 
 def test_one_demonstrated_start_needs_no_choice():
