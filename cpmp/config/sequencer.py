@@ -59,8 +59,9 @@ class SequencerConfig:
             with none, give up (a ``give_up`` note) unless the task is at its demonstrated end
             (see :mod:`cpmp.sequencer.switching`).
         stall_time: seconds without any switch and without motion that count as a stall
-            (features that move alike under every demonstrated MP, such as a distractor's
-            wobble, are not motion: :func:`cpmp.sequencer.motion.ambient_features`).
+            (features that move alike under every demonstrated MP and go on through its
+            switches unbent, such as a distractor's wobble, are not motion:
+            :func:`cpmp.sequencer.motion.ambient_features`).
         rest_speed: features count as at rest below this speed, in training ranges per second.
         recovery_threshold: the relaxed threshold of a recovery transition.
         min_exit: a transition also needs the current node's exit probability ``φ`` above this

@@ -29,7 +29,13 @@ envelope is one more context of the switch, next to the other variables' MPs and
 **Ambient features.** A feature that moves at a similar rate under every MP of every variable
 (a distractor's wobble, a conveyor, a clock) says nothing about whether the task is stuck: its
 mean speed under the MP where it moves least is at least :data:`AMBIENT_RATIO` of its mean
-speed under the MP where it moves most. The mean speeds are measured along each demonstration
+speed under the MP where it moves most, and the switches do not bend its motion. A robot's own
+coordinate whose variable never rests (a ladle always on its way, an arm that lifts while it
+carries) also moves at a similar rate under every MP, but its velocity turns where its variable
+switches (a new attractor pulls it elsewhere), while a drift goes on as before: a feature is
+ambient only if, at the switches of every variable, its velocity changes over
+:data:`SPEED_WINDOW` (after minus before) by less than :data:`KINK_RATIO` times its mean change
+anywhere. The mean speeds and changes are measured along each demonstration
 denoised (:func:`cpmp.progress.denoise_trajectory`), so that white sensor noise, which moves
 every feature under every MP, makes no feature ambient. The stall detector ignores those features
 (:class:`~cpmp.sequencer.switching.StallDetector`), so their motion never hides a stall.
@@ -75,6 +81,12 @@ NOISE_Z = 3.0
 AMBIENT_RATIO = 0.3
 """A feature is ambient when its least mean speed over the MPs is at least this share of its
 greatest (``inf``: none is)."""
+KINK_RATIO = 2.5
+"""A feature whose velocity changes at some variable's switches by more than this many times
+its mean change is not ambient, however alike its rates (``inf``: the rates alone decide). A
+drift reads about 1 (peg's light level and table-height estimate 0.9–1.6 at 3–9
+demonstrations); a first-order attractor's coordinate 3.5–9 (slip's arm height, repetition's
+ladle, the procedural family's always-moving robots)."""
 
 Edge = tuple[str, str, str]
 """(variable, source MP, target MP)."""
@@ -262,7 +274,70 @@ def ambient_features(
         return np.zeros(n_features, dtype=bool)
     stacked = np.stack(rates)
     hi, lo = stacked.max(axis=0), stacked.min(axis=0)
-    return (hi > 0) & (lo >= AMBIENT_RATIO * hi)
+    alike = (hi > 0) & (lo >= AMBIENT_RATIO * hi)
+    if alike.any() and np.isfinite(KINK_RATIO):
+        alike &= ~_bent_at_switches(demos, variables, n_features)
+    return alike
+
+
+def _bent_at_switches(
+    demos: Sequence[MotionData], variables: Sequence[str], n_features: int
+) -> np.ndarray:
+    """``(d,)`` bool: the features whose velocity turns at some variable's switches.
+
+    The velocity change at sample ``i`` is the velocity over the :data:`SPEED_WINDOW` after
+    ``i`` minus the one over the window before; a feature is bent when its mean change at the
+    first samples of one variable's activations exceeds :data:`KINK_RATIO` times its mean change
+    at every sample (and a negligible floor, for a feature moving at a constant velocity).
+    """
+    total, count, speed, duration = np.zeros(n_features), 0, np.zeros(n_features), 0.0
+    at = {v: np.zeros(n_features) for v in variables}
+    seen = dict.fromkeys(variables, 0)
+    for demo in demos:
+        x, t = demo.features, demo.time
+        if len(t) < 3:
+            continue
+        change = _velocity_change(x, t)  # (T, d), NaN where a window does not fit
+        fits = ~np.isnan(change[:, 0])
+        total += change[fits].sum(axis=0)
+        count += int(fits.sum())
+        speed += np.abs(np.diff(x, axis=0)).sum(axis=0)
+        duration += float(t[-1] - t[0])
+        for v in variables:
+            for a, _, _ in demo.segments[v][1:]:
+                if fits[a]:
+                    at[v] += change[a]
+                    seen[v] += 1
+    if count == 0:
+        return np.zeros(n_features, dtype=bool)
+    mean = total / count
+    floor = 1e-3 * speed / max(duration, 1e-12)
+    bent = np.zeros(n_features, dtype=bool)
+    for v in variables:
+        if seen[v]:
+            at_switch = at[v] / seen[v]
+            bent |= (at_switch > KINK_RATIO * mean) & (at_switch > floor)
+    return bent
+
+
+def _velocity_change(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(T, d)`` |velocity over the window after each sample − over the window before|.
+
+    Each window reaches to the nearest sample at least :data:`SPEED_WINDOW` away (irregular
+    sampling allowed); NaN rows where either window leaves the recording.
+    """
+    n = len(t)
+    before = np.searchsorted(t, t - SPEED_WINDOW + 1e-9, side="right") - 1
+    after = np.searchsorted(t, t + SPEED_WINDOW - 1e-9, side="left")
+    out = np.full(x.shape, np.nan)
+    ok = (before >= 0) & (after < n)
+    i = np.flatnonzero(ok)
+    if i.size:
+        j, k = before[i], after[i]
+        v_before = (x[i] - x[j]) / (t[i] - t[j])[:, None]
+        v_after = (x[k] - x[i]) / (t[k] - t[i])[:, None]
+        out[i] = np.abs(v_after - v_before)
+    return out
 
 
 class SpeedMeter:

@@ -108,6 +108,28 @@ def test_a_feature_moving_alike_under_every_mp_is_ambient():
     assert not ambient_features(motion_data([one_mp]), ["arm"], 3).any()  # nothing to compare
 
 
+def test_a_coordinate_whose_variable_never_rests_is_not_ambient(monkeypatch):
+    """A ladle on its way out and back, switched before it arrives: its rate is alike under
+    both MPs, but its velocity turns at every switch; a slow drift's and a conveyor's do not."""
+    tau, dt, n = 0.2, DT, 600
+    t = np.arange(n) * dt
+    ladle, labels, pos, goal = np.zeros(n), [], 0.0, 1.0
+    for i in range(n):
+        if abs(goal - pos) < 0.4:  # switched well before arriving: never at rest
+            goal = -goal
+        labels.append("out" if goal > 0 else "back")
+        pos += (goal - pos) * dt / tau
+        ladle[i] = pos
+    drift = 0.05 * np.sin(2 * np.pi * 0.3 * t)
+    conveyor = 0.2 * t
+    x = np.stack([ladle, drift, conveyor], axis=1)
+    data = motion_data([_demo(x, {"ladle": labels})])
+    assert len(set(labels)) == 2 and labels.count("out") > 100 and labels.count("back") > 100
+    np.testing.assert_array_equal(ambient_features(data, ["ladle"], 3), [False, True, True])
+    monkeypatch.setattr(motion, "KINK_RATIO", float("inf"))  # the rates alone misread the ladle
+    np.testing.assert_array_equal(ambient_features(data, ["ladle"], 3), [True, True, True])
+
+
 def test_coupling_keeps_the_motion_facts_through_its_checkpoint_form():
     x = _arrival()
     demo = _demo(x, {"arm": ["go"] * 100 + ["back"] * 50})
