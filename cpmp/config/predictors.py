@@ -50,8 +50,11 @@ class PredictorConfig:
             eq. 1, and the support points and feature weights that follow it, are measured
             on each training activation after removing the white noise estimated on it
             (:func:`cpmp.progress.denoise_trajectory`; a trajectory without detected noise is
-            used as recorded), and so are the ranges of ``feature_scaling``; ``none``
-            measures them on the features as recorded.
+            used as recorded), and so are the ranges of ``feature_scaling``; in a sequencer's
+            fit the ambient features' drift is left out of that path too (held still: no
+            progress, weight 0 in a ``path``-weighted kernel;
+            :func:`cpmp.sequencer.fit_data.node_training_data`). ``none`` measures them on the
+            features as recorded.
     """
 
     feature_scaling: str = "global"

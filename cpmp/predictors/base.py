@@ -40,10 +40,14 @@ class NodeData:
         activations: the node's activations as separate (n_j, d) trajectories.
         paths: the same activations as eq. 1 measures them (n_j, d): denoised once per fit
             (:func:`cpmp.progress.path_trajectory`) for a bank with ``path_denoised``
-            labels, the ``activations`` themselves otherwise; support points and feature
-            weights are placed along these.
+            labels, the ``activations`` themselves otherwise, with the ``ignored`` features
+            held at their first value; support points and feature weights are placed along
+            these.
         labels: each activation's progress labels (n_j,), of which ``target`` keeps a
             subsample.
+        ignored: ``(d,)`` bool, the features eq. 1 leaves out (the ambient drift, not the
+            task's motion; :func:`cpmp.sequencer.motion.ambient_features`): a path-weighted
+            kernel gives them weight 0. ``None``: none.
     """
 
     key: NodeKey
@@ -52,6 +56,7 @@ class NodeData:
     activations: list[np.ndarray] = field(default_factory=list)
     paths: list[np.ndarray] = field(default_factory=list)
     labels: list[np.ndarray] = field(default_factory=list)
+    ignored: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:

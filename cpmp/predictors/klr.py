@@ -347,12 +347,18 @@ class KLRPredictor(ProgressPredictor):
         return out
 
     def _path_weights(self, node: NodeData) -> torch.Tensor:
-        """``(d,)`` kernel weights from each feature's share of the node's L1 path length."""
+        """``(d,)`` kernel weights from each feature's share of the node's L1 path length.
+
+        The node's ignored features (:attr:`NodeData.ignored`) weigh 0: the floor is for the
+        task's features that do not move in the node (a context that decides a branch).
+        """
         per_feature = sum(feature_path_lengths(p) for p in node.paths)
         total = float(np.sum(per_feature))
         d = self.n_features
         share = per_feature / total if total > 0 else np.full(d, 1.0 / d)
         weights = np.maximum(d * share, self.config.weight_floor)
+        if node.ignored is not None:
+            weights = np.where(node.ignored, 0.0, weights)
         return torch.as_tensor(weights, dtype=self.dtype_)
 
     def _set_supports(self, per_node: list[np.ndarray]) -> None:

@@ -2,8 +2,10 @@
 
 :func:`fit_parts` is everything :meth:`cpmp.sequencer.ConcurrentSequencer.fit_config` learns
 before the sequencer itself is built: label glitches repaired, the training / validation split,
-the sequence graphs, the predictor bank fitted (:func:`cpmp.predictors.training.fit_predictor`),
-the checks and warnings, the demonstrated starts, the coupling and the features' ranges.
+the sequence graphs, the ambient features (left out of eq. 1's paths:
+:func:`~cpmp.sequencer.fit_data.node_training_data`), the predictor bank fitted
+(:func:`cpmp.predictors.training.fit_predictor`), the checks and warnings, the demonstrated
+starts, the coupling and the features' ranges.
 
 This is the only module of :mod:`cpmp.sequencer` that imports the training stack (Lightning):
 ``fit_config`` imports it when it is called, so that loading a checkpoint and stepping it
@@ -39,6 +41,7 @@ from cpmp.sequencer.fit_data import (
 )
 from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
 from cpmp.sequencer.inputs import checked_demonstrations
+from cpmp.sequencer.motion import ambient_features, motion_data
 from cpmp.sequencer.switching import Coupling, indicator_features
 
 __all__ = ["FitDemos", "FittedParts", "fit_demos", "fit_parts"]
@@ -167,7 +170,9 @@ def fit_parts(
         options = dataclasses.replace(options, dtype=dtype)
     model = PREDICTORS[predictor](node_keys, len(feature_names), options)
     model.scaler.fit(all_x, model.config.feature_scaling)
-    data = node_training_data(graphs, model, config.subsample)
+    motion = motion_data(demos)
+    ambient = ambient_features(motion, sorted(graphs), len(feature_names))
+    data = node_training_data(graphs, model, config.subsample, ambient)
     val = None
     if split.validation is not None:
         val = node_validation_data(graphs, model, split.validation)
@@ -194,7 +199,7 @@ def fit_parts(
         glitches=glitches,
         initial_combinations=initial_combinations(demos, sorted(graphs)),
         coupling=Coupling.learn(
-            demos, sorted(graphs), progress=progress, feature_range=feature_range
+            demos, sorted(graphs), progress=progress, feature_range=feature_range, motion=motion
         ),
         feature_range=feature_range,
         demos=demos,

@@ -54,7 +54,10 @@ def initial_combinations(
 
 
 def node_training_data(
-    graphs: Mapping[str, SequenceGraph], predictor: ProgressPredictor, subsample: int = 1
+    graphs: Mapping[str, SequenceGraph],
+    predictor: ProgressPredictor,
+    subsample: int = 1,
+    ambient: np.ndarray | None = None,
 ) -> list[NodeData]:
     """Per-node training samples (scaled features) and progress targets, in the predictor's order.
 
@@ -62,9 +65,19 @@ def node_training_data(
     ``subsample`` keeps every k-th sample (and the last) for the loss. Each activation is
     scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for ``path_denoised``
     labels) and labelled once; a start head shares its node's.
+
+    With ``path_denoised`` labels (cpmp's eq. 1: the task's motion) the ``ambient (d,)``
+    features (:func:`cpmp.sequencer.motion.ambient_features`) are held at each activation's
+    first value along its path: their drift is no progress, so it adds nothing to the labels,
+    the support points' spacing or the path weights, and the nodes mark them
+    :attr:`~cpmp.predictors.NodeData.ignored` (a path-weighted kernel weighs them 0). Other
+    labels (the paper's, time) keep every feature.
     """
     denoised = predictor.labels == "path_denoised"  # then eq. 1 ("path") along denoised paths
     noise, kind = ("auto", "path") if denoised else ("none", predictor.labels)
+    ignored = None
+    if denoised and ambient is not None and np.any(ambient):
+        ignored = np.asarray(ambient, dtype=bool)
     measured: dict[tuple[str, str], tuple[list[np.ndarray], ...]] = {}
     out = []
     for v, key_mp in predictor.node_keys:
@@ -74,7 +87,7 @@ def node_training_data(
             if not acts:
                 raise DataError(f"node {v}/{mp} has no activation data to train on")
             scaled = [predictor.scaler.transform(a.features) for a in acts]
-            paths = [path_trajectory(f, noise) for f in scaled]
+            paths = [_held(path_trajectory(f, noise), ignored) for f in scaled]
             targets = [progress_labels(p, a.time, kind) for p, a in zip(paths, acts, strict=True)]
             measured[(v, mp)] = (scaled, paths, targets)
         scaled, paths, targets = measured[(v, mp)]
@@ -90,8 +103,18 @@ def node_training_data(
                 activations=scaled,
                 paths=paths,
                 labels=targets,
+                ignored=ignored,
             )
         )
+    return out
+
+
+def _held(path: np.ndarray, ignored: np.ndarray | None) -> np.ndarray:
+    """``path (n, d)`` with the ``ignored`` features held at their first value."""
+    if ignored is None:
+        return path
+    out = path.copy()
+    out[:, ignored] = path[:1, ignored]
     return out
 
 

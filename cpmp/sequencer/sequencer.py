@@ -614,7 +614,8 @@ class ConcurrentSequencer:
         if ambient is not None and ambient.any():
             names = ", ".join(self.feature_names[j] for j in np.flatnonzero(ambient))
             parts.append(
-                "ambient features (move alike under every MP; left out of the learned start and"
-                f" stay choices, not a stall's motion): {names}"
+                "ambient features (move alike under every MP, unbent by its switches; left out"
+                " of progress, the learned start and stay choices, not a stall's motion): "
+                f"{names}"
             )
         return "\n".join(parts)

@@ -87,6 +87,7 @@ from cpmp.progress import LabelKind, demo_labels
 from cpmp.records import JsonValue
 from cpmp.sequencer.motion import (
     SPEED_FACTOR,
+    MotionData,
     SpeedLimit,
     ambient_features,
     learn_speed_limits,
@@ -375,6 +376,7 @@ class Coupling:
         labels: LabelKind = "path",
         progress: Sequence[Mapping[str, np.ndarray]] | None = None,
         feature_range: np.ndarray | None = None,
+        motion: Sequence[MotionData] | None = None,
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``.
 
@@ -394,6 +396,8 @@ class Coupling:
             feature_range: ``(d,)`` each feature's training range (0: never moves); with it
                 the speed envelopes and the ambient features are learned too
                 (:mod:`cpmp.sequencer.motion`), without it neither.
+            motion: ``demos`` as :func:`~cpmp.sequencer.motion.motion_data` gives them, when
+                the caller has them already (a fit); ``None``: made here.
 
         Returns:
             The coupling.
@@ -441,7 +445,7 @@ class Coupling:
                 joint[edge] = always
         speed, ambient = {}, None
         if feature_range is not None:
-            data = motion_data(demos)
+            data = motion_data(demos) if motion is None else motion
             speed = learn_speed_limits(data, variables, feature_range)
             ambient = ambient_features(data, variables, len(feature_range))
         return cls(

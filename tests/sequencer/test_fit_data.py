@@ -183,3 +183,56 @@ def test_fit_hands_its_labels_to_the_coupling(noisy_demos):
     # the noise moves every feature under every MP; the positions still count as stalls' motion
     assert not seq.coupling.ambient[:2].any()
     assert seq.coupling.progress  # progress thresholds were learned at all
+
+
+def _drifting_demos() -> list[Demonstration]:
+    """An arm out (0 -> 1) and back under ``go`` and ``back`` (first-order attractors), a light
+    level drifting at the same rate under both from a different start per demonstration, a
+    constant context."""
+    out = []
+    for k, (light0, context) in enumerate([(1.0, 0.2), (1.1, 0.4), (1.2, 0.3)]):
+        t = np.arange(200) * 0.01
+        s = 1.0 - np.exp(-5.0 * np.linspace(0.0, 1.0, 100))  # fast, then slowing down
+        arm = np.concatenate([s, s[-1] - s]) / s[-1]
+        x = np.stack([arm, light0 + 0.5 * t, np.full(200, context)], axis=1)
+        labels = {"arm": np.array(["go"] * 100 + ["back"] * 100)}
+        out.append(Demonstration(t, x, labels, ["arm", "light", "context"], f"demo_{k}"))
+    return out
+
+
+def test_an_ambient_drift_is_no_progress():
+    """The light level drifts alike under both MPs and is ambient: eq. 1 holds it still along
+    every activation (labels from the arm alone, the nodes mark it ignored), the path-weighted
+    kernel weighs it 0, and φ reads the arm whatever the light; the context, which does not
+    move, keeps the floor weight. The paper's labels keep every feature."""
+    demos = _drifting_demos()
+    seq = ConcurrentSequencer.fit(demos, "klr", seed=0, logger=None, variables=["arm"])
+    assert seq.coupling.ambient.tolist() == [False, True, False]
+    data = node_training_data(seq.graphs, seq.predictor, ambient=seq.coupling.ambient)
+    drifting = node_training_data(seq.graphs, seq.predictor)
+    for node, with_drift in zip(data, drifting, strict=True):
+        assert node.ignored.tolist() == [False, True, False] and with_drift.ignored is None
+        for path, labels, scaled in zip(node.paths, node.labels, node.activations, strict=True):
+            assert np.ptp(path[:, 1]) == 0.0 and np.ptp(scaled[:, 1]) > 0.0
+            arm_only = progress.expected_progress(scaled[:, :1], np.arange(len(scaled)) * 0.01)
+            np.testing.assert_allclose(labels, arm_only, atol=0.02)
+        # counted, the drift (steady while the arm slows down) would move the labels
+        moved = [np.abs(a - b).max() for a, b in zip(node.labels, with_drift.labels, strict=True)]
+        assert max(moved) > 0.05
+    weights = seq.predictor.feature_scale[: len(seq.nodes.keys)]
+    assert (weights[:, 1] == 0).all() and (weights[:, 2] >= 0.1).all()
+    x = np.array([[0.5, 0.2, 0.3], [0.5, 3.0, 0.3]])  # the light far outside the demos
+    phi = seq.progress(x)
+    np.testing.assert_allclose(phi[0], phi[1])
+    go = seq.nodes.index[("arm", "go")]
+    assert (
+        seq.progress(np.array([0.1, 0.2, 0.3]))[go]
+        < 0.3
+        < 0.7
+        < seq.progress(np.array([0.9, 3.0, 0.3]))[go]
+    )
+    paper = ConcurrentSequencer.fit(
+        demos, "klr", seed=0, logger=None, variables=["arm"], path_noise="none"
+    )
+    for node in node_training_data(paper.graphs, paper.predictor, ambient=seq.coupling.ambient):
+        assert node.ignored is None and all(np.ptp(p[:, 1]) > 0 for p in node.paths)
