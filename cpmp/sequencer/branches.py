@@ -47,6 +47,7 @@ import numpy as np
 
 from cpmp.data import Demonstration
 from cpmp.records import JsonValue
+from cpmp.sequencer.motion import without_ambient
 from cpmp.sequencer.switching import Coupling
 
 STAY = "(stay)"
@@ -67,24 +68,14 @@ activation moves spreads widely within that class and separates little on its ow
 staying from going is often a combination (at peg's ``hold``, the peg's depth against the
 hole's, which alone separates nothing).
 
-Both also leave out the ambient features (:attr:`~cpmp.sequencer.switching.Coupling.ambient`,
-moving alike under every MP: the world's drift, not the task's state; :func:`without_ambient`):
-their examples come from different demonstrations and moments, so a drift that differs between
-them (a light level, a table-height estimate) separates them by chance."""
+Every choice (the start, stay choices, branch choices among successors) leaves out the ambient
+features (:attr:`~cpmp.sequencer.switching.Coupling.ambient`, moving alike under every MP and
+unbent by its switches: the world's drift, not the task's state;
+:func:`~cpmp.sequencer.motion.without_ambient`): its examples come from different
+demonstrations and moments, so a drift that differs between them (a light level, a
+table-height estimate) separates them by chance."""
 MIN_ENTRY = 0.05
 """The least demonstrated entry :func:`entry_scales` divides by (a factor of at most 20)."""
-
-
-def without_ambient(feature_range: np.ndarray, ambient: np.ndarray | None) -> np.ndarray:
-    """``feature_range (d,)`` with the ``ambient (d,)`` features' ranges set to 0 (left out).
-
-    A choice on those ranges (:func:`learn_choice`) does not read the ambient features. ``None``
-    (no mask learned): the ranges as they are.
-    """
-    r = np.asarray(feature_range, dtype=np.float64)
-    if ambient is None:
-        return r
-    return np.where(np.asarray(ambient, dtype=bool), 0.0, r)
 
 
 class LinearChoice(NamedTuple):
@@ -377,7 +368,7 @@ class BranchChoices:
 
         Args:
             coupling: the learned coupling, whose switch instances are the examples (and
-                whose ambient features the stay choices leave out).
+                whose ambient features every choice leaves out).
             feature_range: ``(d,)`` each feature's range in the training data (features of
                 range 0 are left out).
             stays: ``(variable, MP)`` -> states ``(d,)`` at which the demonstrator kept the MP
@@ -391,7 +382,7 @@ class BranchChoices:
         """
         stays = stays or {}
         choices = {}
-        stay_range = without_ambient(feature_range, coupling.ambient)
+        ranges = without_ambient(feature_range, coupling.ambient)
         for (v, source), instances in sorted(coupling.instances.items()):
             kept = [np.asarray(x, dtype=np.float64) for x in stays.get((v, source), [])]
             states = [inst.state for inst in instances] + kept
@@ -400,7 +391,7 @@ class BranchChoices:
             if len(targets) < 2:
                 continue
             y = np.array([targets.index(t) for t in labels])
-            power, ranges = (SOFT_POWER, stay_range) if kept else (1.0, feature_range)
+            power = SOFT_POWER if kept else 1.0
             model = learn_choice(np.stack(states), y, len(targets), ranges, power)
             counts = [int(np.sum(y == i)) for i in range(len(targets))]
             choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
@@ -541,5 +532,4 @@ __all__ = [
     "fit_softmax",
     "learn_choice",
     "stay_examples",
-    "without_ambient",
 ]

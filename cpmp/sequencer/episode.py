@@ -32,7 +32,7 @@ from cpmp.records import (
 from cpmp.sequencer.branches import STAY
 from cpmp.sequencer.inputs import checked_stamp, checked_time
 from cpmp.sequencer.model import TransitionModel
-from cpmp.sequencer.motion import SpeedLimit, SpeedMeter
+from cpmp.sequencer.motion import SpeedLimit, SpeedMeter, without_ambient
 from cpmp.sequencer.switching import (
     Candidate,
     JointPartner,
@@ -191,7 +191,9 @@ class SequencerEpisode:
         }
         self._coupled = c.coupling == "context"
         self._stall = StallDetector(
-            model.feature_range, c.stall_time, c.rest_speed, model.coupling.ambient
+            without_ambient(model.feature_range, model.coupling.ambient),
+            c.stall_time,
+            c.rest_speed,
         )
         self._speed = SpeedMeter(model.feature_range)
         self._since: dict[str, float] = {}

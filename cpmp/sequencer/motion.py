@@ -280,6 +280,20 @@ def ambient_features(
     return alike
 
 
+def without_ambient(feature_range: np.ndarray, ambient: np.ndarray | None) -> np.ndarray:
+    """``feature_range (d,)`` with the ``ambient (d,)`` features' ranges set to 0 (left out).
+
+    What reads features on those ranges does not read the ambient features: a learned choice
+    (:func:`cpmp.sequencer.branches.learn_choice`), the stall detector
+    (:class:`~cpmp.sequencer.switching.StallDetector`). ``None`` (no mask learned): the ranges
+    as they are.
+    """
+    r = np.asarray(feature_range, dtype=np.float64)
+    if ambient is None:
+        return r
+    return np.where(np.asarray(ambient, dtype=bool), 0.0, r)
+
+
 def _bent_at_switches(
     demos: Sequence[MotionData], variables: Sequence[str], n_features: int
 ) -> np.ndarray:

@@ -615,7 +615,6 @@ class ConcurrentSequencer:
             names = ", ".join(self.feature_names[j] for j in np.flatnonzero(ambient))
             parts.append(
                 "ambient features (move alike under every MP, unbent by its switches; left out"
-                " of progress, the learned start and stay choices, not a stall's motion): "
-                f"{names}"
+                f" of progress and every learned choice, not a stall's motion): {names}"
             )
         return "\n".join(parts)

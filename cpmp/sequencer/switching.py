@@ -740,21 +740,14 @@ class StallDetector:
     ``feature_range (d,)``: each feature's range in the training data; motion is measured
     relative to it, so the detector does not depend on the features' units. Features with a
     range of 0 are ignored (:meth:`ConcurrentSequencer.fit` gives indicator features range 0:
-    a touch signal that flickers is not motion), and so are those in ``ignore (d,)`` (the
-    ambient features, :attr:`Coupling.ambient`: a distractor's wobble is not progress).
+    a touch signal that flickers is not motion; an episode gives the ambient features range 0
+    too, :func:`~cpmp.sequencer.motion.without_ambient`: a distractor's wobble is not
+    progress).
     """
 
-    def __init__(
-        self,
-        feature_range: np.ndarray,
-        stall_time: float,
-        rest_speed: float,
-        ignore: np.ndarray | None = None,
-    ) -> None:
+    def __init__(self, feature_range: np.ndarray, stall_time: float, rest_speed: float) -> None:
         r = np.asarray(feature_range, dtype=np.float64)
         varies = r > 1e-12 * max(float(np.max(r, initial=0.0)), 1e-300)
-        if ignore is not None:
-            varies &= ~np.asarray(ignore, dtype=bool)
         self.inv_range = np.divide(1.0, r, out=np.zeros_like(r), where=varies)
         self.stall_time = stall_time
         self.rest_speed = rest_speed

@@ -19,6 +19,7 @@ from cpmp.sequencer.motion import (
     learn_speed_limits,
     motion_data,
     window_speed,
+    without_ambient,
 )
 from cpmp.sequencer.switching import Coupling
 
@@ -128,6 +129,14 @@ def test_a_coordinate_whose_variable_never_rests_is_not_ambient(monkeypatch):
     np.testing.assert_array_equal(ambient_features(data, ["ladle"], 3), [False, True, True])
     monkeypatch.setattr(motion, "KINK_RATIO", float("inf"))  # the rates alone misread the ladle
     np.testing.assert_array_equal(ambient_features(data, ["ladle"], 3), [True, True, True])
+
+
+def test_without_ambient_zeroes_the_ambient_ranges():
+    feature_range = np.array([1.0, 1.0, 1.5])
+    np.testing.assert_array_equal(
+        without_ambient(feature_range, np.array([False, False, True])), [1.0, 1.0, 0.0]
+    )
+    np.testing.assert_array_equal(without_ambient(feature_range, None), feature_range)
 
 
 def test_coupling_keeps_the_motion_facts_through_its_checkpoint_form():

@@ -14,6 +14,7 @@ from cpmp.data.demonstration import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
 from cpmp.predictors import PredictorConfig, ProgressPredictor
+from cpmp.sequencer.motion import without_ambient
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sequencer.switching import (
     Candidate,
@@ -340,8 +341,10 @@ def test_indicator_features_and_jitter_are_not_motion():
     for k in range(1, 301):  # a slow drift of 0.02 range/s is motion
         drift.observe(k * DT, np.array([0.0002 * k, 0.0]))
     assert drift.last_motion > 2.4 and not drift.stalled(3.0)
-    ambient = StallDetector(
-        np.array([1.0, 1.0]), stall_time=1.0, rest_speed=0.01, ignore=np.array([True, False])
+    ambient = StallDetector(  # an episode's detector: the ambient features' ranges at 0
+        without_ambient(np.array([1.0, 1.0]), np.array([True, False])),
+        stall_time=1.0,
+        rest_speed=0.01,
     )
     ambient.reset(0.0, np.zeros(2))
     for k in range(1, 301):  # the same drift on an ambient feature is not motion
