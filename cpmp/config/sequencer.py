@@ -55,7 +55,8 @@ class SequencerConfig:
             a demonstrated switch (``None``: compare MPs only).
         recovery: resolve stalls (no switch and no motion for ``stall_time``) with a switch
             the demonstrator made in that context and nearest state, the most consistent with
-            the coupling then the most probable, if its ``p`` reaches ``recovery_threshold``;
+            the coupling then the most probable (however low its ``p``, unless
+            ``recovery_threshold`` asks more: nothing changes a stall, so waiting is no option);
             with none, give up (a ``give_up`` note) unless the task is at its demonstrated end
             (see :mod:`cpmp.sequencer.switching`).
         stall_time: seconds without any switch and without motion that count as a stall
@@ -63,7 +64,8 @@ class SequencerConfig:
             switches unbent, such as a distractor's wobble, are not motion:
             :func:`cpmp.sequencer.motion.ambient_features`).
         rest_speed: features count as at rest below this speed, in training ranges per second.
-        recovery_threshold: the relaxed threshold of a recovery transition.
+        recovery_threshold: the least ``p`` a recovery transition needs (default 0: any
+            switch the demonstrator made there; above 0, a stall below it gives up instead).
         min_exit: a transition also needs the current node's exit probability ``φ`` above this
             (0 = off, the paper's rule).
         start_kernel: the φ the ``independent`` and ``joint`` start rules read (the ``learned``
@@ -118,7 +120,7 @@ class SequencerConfig:
     recovery: bool = True
     stall_time: float = 1.0
     rest_speed: float = 0.01
-    recovery_threshold: float = 0.2
+    recovery_threshold: float = 0.0
     min_exit: float = 0.0
     start_kernel: str = "shared"
     start_rule: str = "learned"

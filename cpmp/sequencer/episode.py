@@ -649,14 +649,15 @@ class SequencerEpisode:
             + ", ".join(s for s, n in zip(row.successors, row.unseen, strict=True) if n == 0)
             for row in open_rows
         )
+        floor = f", p >= {c.recovery_threshold:g}" if c.recovery_threshold > 0 else ""
         self.notes.append(
             SequencerNote(
                 t,
                 "give_up",
                 "",
                 f"stall of {c.stall_time:g} s that no demonstrated switch resolves (made by the "
-                f"demonstrator here, p >= {c.recovery_threshold:g}); demonstrated in this "
-                f"context: {waiting}; every MP kept from now on",
+                f"demonstrator here{floor}); demonstrated in this context: {waiting}; every MP "
+                "kept from now on",
             )
         )
 

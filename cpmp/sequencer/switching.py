@@ -63,10 +63,12 @@ measurement time while the features are at rest (every feature moves slower than
 ``rest_speed`` times its training range per second). Only a switch the demonstrator made here
 may resolve it: every other variable runs an MP seen at that switch, and of the demonstrated
 switches out of the same MP in this context, the one in the state nearest the current one
-(:meth:`Coupling.nearest_target`) goes there. Among those whose ``p`` reaches
-``recovery_threshold``, the one with the fewest other variables less far than at any
-demonstrated switch (a stall is often an MP that cannot go further: fingers closed on an
-object), then the most probable, fires. When none may, the
+(:meth:`Coupling.nearest_target`) goes there. Among those (whose ``p`` reaches
+``recovery_threshold``, 0 by default: a stall is a state nothing will change, so a low ``p``
+will not rise — a re-align that starts where an align ends reads "done"), the one with the
+fewest other variables less far than at any demonstrated switch (a stall is often an MP that
+cannot go further: fingers closed on an object), then the most probable, fires. When none
+may, the
 sequencer gives up (a ``give_up`` note; it switches no more) — unless every variable's node is
 *final* in the current context (no successor demonstrated with the other variables' current
 MPs): that is the task's demonstrated end, and nothing happens.

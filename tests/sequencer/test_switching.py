@@ -408,6 +408,18 @@ def test_a_final_node_never_recovers():
     ]
 
 
+def test_by_default_a_stall_takes_the_demonstrated_switch_however_low_its_p():
+    """A stall is a state nothing will change: with the default recovery_threshold (0) the
+    demonstrated A -> B fires at p = 0.1 (a re-align whose φ reads "done" at its start)."""
+    assert SequencerConfig().recovery_threshold == 0.0
+    seq = _stalled_chain(stall_time=0.5)
+    seq.reset(0.0, [0.1, 0.0])
+    _run_to(seq, [0.1, 0.0], 1.0)
+    (event,) = seq.events
+    assert (event.kind, event.target, event.t) == ("recovery", "B", pytest.approx(0.5))
+    assert event.probability == pytest.approx(0.1) and seq._episode.gave_up is None
+
+
 def test_a_stall_no_demonstrated_transition_resolves_is_a_noted_give_up():
     """A -> B is demonstrated, but its p = 0.1 stays below the recovery threshold: the
     sequencer does not guess; it gives up once, with a note, and switches no more."""

@@ -179,8 +179,8 @@ def test_explain_held_by_the_coupling_or_a_joint_switch(fitted_klr):
 
 
 def test_explain_given_up(fitted_klr):
-    episode = started(fitted_klr, stall_time=0.2)
-    # no motion and no p anywhere: a stall nothing resolves, the sequencer gives up ...
+    episode = started(fitted_klr, stall_time=0.2, recovery_threshold=0.2)
+    # no motion and p below the recovery threshold: a stall nothing resolves, it gives up ...
     end = run(episode, [phi_of(episode, a_back=1.0, a_wait=1.0, b_back=1.0)] * 40, moving=False)
     assert episode.gave_up is not None
     assert any(n.kind == "give_up" for n in episode.notes)
