@@ -39,6 +39,7 @@ from cpmp.sequencer.switching import (
     StallDetector,
     make_rule,
     recovery_choice,
+    transition_p,
 )
 from cpmp.sequencer.timing import MeasurementClock
 from cpmp.sequencer.watch import ActivationWatch
@@ -424,7 +425,7 @@ class SequencerEpisode:
         above: set[str] = set()
         for v, current, names, columns, exit_column, unseen, checks, _, scale, limits in plan:
             exit_p = phi[exit_column]
-            p = [exit_p * min(1.0, (1.0 - phi[i]) * g) for i, g in zip(columns, scale, strict=True)]
+            p = [transition_p(exit_p, phi[i], g) for i, g in zip(columns, scale, strict=True)]
             bad = unseen
             if checks:
                 bad = list(unseen)
@@ -820,10 +821,17 @@ class SequencerEpisode:
         """
         nodes = self.model.nodes
         current = self.active[v]
-        _, columns = nodes.successors[(v, current)]
+        names, columns = nodes.successors[(v, current)]
         if columns:
             exit_p = float(phi[nodes.index[(v, current)]])
-            self._rules[v].observe(m, [exit_p * (1.0 - float(phi[i])) for i in columns])
+            scale = self.model.branches.entry_scale
+            self._rules[v].observe(
+                m,
+                [
+                    transition_p(exit_p, float(phi[i]), scale.get((v, current, s), 1.0))
+                    for s, i in zip(names, columns, strict=True)
+                ],
+            )
 
     def _switch(
         self,

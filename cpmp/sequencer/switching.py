@@ -235,6 +235,26 @@ class PlateauRule:
         return None
 
 
+def transition_p(exit_phi: float, target_phi: float, entry_scale: float = 1.0) -> float:
+    """A switch's transition probability ``p = φ_current · min(1, (1 - φ_target) · scale)``.
+
+    The one formula every part of the sequencer reads ``p`` by: the tick's rule, the first
+    measurement of a new node, the joint partners' test at fit time.
+
+    Args:
+        exit_phi: φ of the current node (its exit probability) in [0, 1].
+        target_phi: φ of the successor; ``1 - target_phi`` is its entry probability.
+        entry_scale: the factor on the entry probability of a switch whose demonstrated
+            entries the progress predictor reads as "done" (a node re-entered in a loop;
+            :func:`cpmp.sequencer.branches.entry_scales`); 1 for every other switch. The
+            scaled entry is capped at 1.
+
+    Returns:
+        ``p`` in [0, 1].
+    """
+    return exit_phi * min(1.0, (1.0 - target_phi) * entry_scale)
+
+
 def make_rule(name: str, threshold: float, patience: float, min_improvement: float) -> SwitchRule:
     """A fresh switching rule ``name`` (one of :data:`SWITCH_RULES`)."""
     cls = {"paper": PaperRule, "peak": PeakRule, "plateau": PlateauRule}[name]
@@ -489,8 +509,9 @@ class Coupling:
         scale = entry_scale or {}
 
         def p(phi: np.ndarray, v: str, source: str, target: str) -> np.ndarray:
-            entry = (1.0 - phi[:, index[(v, target)]]) * scale.get((v, source, target), 1.0)
-            return phi[:, index[(v, source)]] * np.minimum(1.0, entry)
+            g = scale.get((v, source, target), 1.0)
+            s_, t_ = index[(v, source)], index[(v, target)]
+            return np.array([transition_p(float(r[s_]), float(r[t_]), g) for r in phi])
 
         joint: dict[Edge, dict[str, JointPartner]] = {}
         for (v, s, t), partners in sorted(self.joint.items()):
@@ -850,4 +871,5 @@ __all__ = [
     "indicator_features",
     "make_rule",
     "recovery_choice",
+    "transition_p",
 ]

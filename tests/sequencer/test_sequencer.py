@@ -389,3 +389,28 @@ def test_with_config_shares_the_fit_and_changes_only_the_rule(fitted_klr, test_d
     np.testing.assert_array_equal(paper.progress(x), fitted_klr.progress(x))
     with pytest.raises(ConfigError, match="threshold must be in"):
         fitted_klr.with_config(threshold=1.5)
+
+
+@pytest.mark.parametrize("rule", ["paper", "peak"])
+def test_a_scaled_entry_is_read_the_same_from_the_node_s_first_measurement(rule):
+    """A switch whose entry the fit scaled times like an unscaled switch of the same ``p``:
+    the rule's history starts at the node's first measurement with the scaled ``p`` too, so a
+    ``p`` that is constant from there fires ``patience`` after it, not a tick later."""
+    from cpmp.sequencer.branches import BranchChoices
+
+    graphs = chain_graphs({"v": ("B", "C")})
+    model = FirstColumnsAreProgress([("v", "B"), ("v", "C")], 3, PredictorConfig())
+    config = SequencerConfig(switch_rule=rule)
+    plain = ConcurrentSequencer(graphs, model, ["b", "c", "clock"], config)
+    scaled = plain._with_branches(BranchChoices({}, None, {("v", "B", "C"): 4.0}))
+    fired = []
+    # p = 1 * (1 - 0.2) = 0.8 unscaled; 1 * min(1, (1 - 0.8) * 4) = 0.8 scaled
+    for seq, phi_c in ((plain, 0.2), (scaled, 0.8)):
+        assert seq.reset(0.0, np.array([1.0, phi_c, 0.0])) == {"v": "B"}
+        for i in range(1, 11):  # a clock feature: each tick a new measurement
+            seq.step(i * 0.01, np.array([1.0, phi_c, i * 0.01]))
+        assert [(e.source, e.target) for e in seq.events] == [("B", "C")]
+        assert seq.events[0].probability == pytest.approx(0.8)
+        fired.append(seq.events[0].t)
+    assert fired[0] == pytest.approx(config.patience)
+    assert fired[1] == pytest.approx(fired[0])
