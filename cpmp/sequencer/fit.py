@@ -199,7 +199,12 @@ def fit_parts(
         glitches=glitches,
         initial_combinations=initial_combinations(demos, sorted(graphs)),
         coupling=Coupling.learn(
-            demos, sorted(graphs), progress=progress, feature_range=feature_range, motion=motion
+            demos,
+            sorted(graphs),
+            progress=progress,
+            feature_range=feature_range,
+            motion=motion,
+            ambient=ambient,
         ),
         feature_range=feature_range,
         demos=demos,

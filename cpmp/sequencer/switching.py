@@ -399,6 +399,7 @@ class Coupling:
         progress: Sequence[Mapping[str, np.ndarray]] | None = None,
         feature_range: np.ndarray | None = None,
         motion: Sequence[MotionData] | None = None,
+        ambient: np.ndarray | None = None,
     ) -> Coupling:
         """Collect the contexts of every switch of ``variables`` in ``demos``.
 
@@ -420,6 +421,10 @@ class Coupling:
                 (:mod:`cpmp.sequencer.motion`), without it neither.
             motion: ``demos`` as :func:`~cpmp.sequencer.motion.motion_data` gives them, when
                 the caller has them already (a fit); ``None``: made here.
+            ambient: ``(d,)`` bool, the ambient features
+                (:func:`~cpmp.sequencer.motion.ambient_features` of ``motion``), when the
+                caller has them already (a fit: its eq. 1 left them out); ``None``: found
+                here. Only with ``feature_range``.
 
         Returns:
             The coupling.
@@ -465,11 +470,14 @@ class Coupling:
             }
             if always:
                 joint[edge] = always
-        speed, ambient = {}, None
-        if feature_range is not None:
+        speed: dict[Edge, SpeedLimit] = {}
+        if feature_range is None:
+            ambient = None
+        else:
             data = motion_data(demos) if motion is None else motion
             speed = learn_speed_limits(data, variables, feature_range)
-            ambient = ambient_features(data, variables, len(feature_range))
+            if ambient is None:
+                ambient = ambient_features(data, variables, len(feature_range))
         return cls(
             {e: {u: frozenset(s) for u, s in c.items()} for e, c in contexts.items()},
             {e: c for e, c in progress_seen.items() if c},
