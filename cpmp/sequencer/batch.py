@@ -298,10 +298,11 @@ class BatchedSequencer(EpisodeBatch):
             phi = seq.progress(xn[usable]) if usable else np.zeros((0, 0))
         rows_phi: dict[int, list[float]] = dict(zip(usable, phi.tolist(), strict=True))
         ok = dict(zip(usable, np.isfinite(phi).all(axis=1).tolist(), strict=True))
+        between = None if stateful else seq.progress
         for i in rows:
             row = rows_phi[i] if finite[i] else None
             try:
-                self.episodes[i].advance(ts[i], xn[i], row, ok.get(i, False), stamps[i])
+                self.episodes[i].advance(ts[i], xn[i], row, ok.get(i, False), stamps[i], between)
             except CpmpError as err:
                 raise type(err)(f"episode {i}: {err}") from err
         return self.active

@@ -12,7 +12,7 @@ drives one episode, :class:`~cpmp.sequencer.batch.BatchedSequencer` many.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -41,7 +41,7 @@ from cpmp.sequencer.switching import (
     recovery_choice,
     transition_p,
 )
-from cpmp.sequencer.timing import MeasurementClock
+from cpmp.sequencer.timing import EPS_T, MEASUREMENT_STEP, MeasurementClock
 from cpmp.sequencer.watch import ActivationWatch
 
 
@@ -203,6 +203,10 @@ class SequencerEpisode:
         self._holding: dict[str, str | None] = {}
         self._armed: dict[str, str] = {}
         self._last_t: float | None = None
+        self._measured: tuple[float, np.ndarray] | None = None
+        """The last finite new measurement: its time [s] and features ``(d,)``."""
+        self._repeats = False
+        """Whether a tick repeated the last measurement since it was made."""
         self._nonfinite = False
         self.gave_up: float | None = None
         """The time [s] the episode gave up (a stall no demonstrated transition resolves;
@@ -298,6 +302,7 @@ class SequencerEpisode:
         self._armed = {}
         state = np.asarray(x, dtype=np.float64).reshape(-1)
         m = self._clock.reset(t, state)
+        self._measured, self._repeats = (m, state), False
         self._stall.reset(m, state)
         self._speed.reset(m, state)
         self._since = dict.fromkeys(model.graphs, m)
@@ -341,8 +346,20 @@ class SequencerEpisode:
         phi: list[float] | None,
         finite: bool,
         stamp: float | None = None,
+        progress: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> dict[str, str]:
         """One tick of the transition rule: switches, holds and stall recovery.
+
+        A new measurement more than two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` after
+        the last one (a slow loop, dropped ticks; a slow sensor whose ticks carry stamps) is
+        decided on along the way from the last one: the states linearly between the two, at most
+        ``MEASUREMENT_STEP`` apart, each at its own measurement time, come first
+        (:meth:`_decide` on each, as a measurement would). A ``p`` that peaks between two
+        samples of a slow sensor — an event seen only as a jump, the state carried past the
+        demonstrated switch by the next sample — is then not skipped: the rule sees it rise
+        and fall back as a fast loop would, and the switch fires at this tick. Without a
+        stamp, a new measurement after ticks that repeated the last one has none in between
+        (when the state changed is not known).
 
         Args:
             t: the time [s] (checked by :meth:`check_time`).
@@ -352,6 +369,9 @@ class SequencerEpisode:
             finite: whether all of ``phi`` is finite.
             stamp: when ``state`` was measured [s] (checked by :meth:`check_time`; ``None``:
                 unknown, see :mod:`cpmp.sequencer.timing`).
+            progress: the nodes' φ of states ``(n, d)``: ``(n, K)``, for the states between
+                two measurements; ``None``: none (a stateful predictor, whose φ depends on
+                the stream of states it was given).
 
         Returns:
             Variable -> active MP after the tick.
@@ -365,10 +385,53 @@ class SequencerEpisode:
         if reading.clock_step > 0.0:
             self._note_clock_step(t, reading.clock_step)
         if phi is None or not finite:
+            self._measured = None
             return self._hold_nonfinite(t, state, phi)
         self._nonfinite = False
         m = reading.m
-        if reading.fresh:
+        if not reading.fresh:
+            self._repeats = True
+        else:
+            # without a stamp, after repeats of the last measurement, when the state changed
+            # between the two is not known: no states in between then
+            last = self._measured if stamp is not None or not self._repeats else None
+            self._measured, self._repeats = (m, np.array(state, dtype=np.float64)), False
+            if last is not None and progress is not None:
+                for m_k, x_k, phi_k in self._between(last, m, state, progress):
+                    self._decide(t, m_k, x_k, phi_k, True)
+        return self._decide(t, m, state, phi, reading.fresh)
+
+    def _between(
+        self,
+        last: tuple[float, np.ndarray],
+        m: float,
+        state: np.ndarray,
+        progress: Callable[[np.ndarray], np.ndarray],
+    ) -> list[tuple[float, np.ndarray, list[float]]]:
+        """The states between the measurement ``last`` and ``state`` measured at ``m`` [s].
+
+        Returns:
+            ``(measurement time, features (d,), φ (K,))`` of each, in time order; none when
+            the two are at most two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` apart or
+            a φ between them is not finite.
+        """
+        m0, x0 = last
+        n = math.floor((m - m0) / MEASUREMENT_STEP + EPS_T)
+        if n < 2:
+            return []
+        w = np.arange(1, n)[:, None] / n
+        xs = x0 + w * (state - x0)
+        phis = np.asarray(progress(xs), dtype=np.float64)
+        if not np.isfinite(phis).all():
+            return []
+        times = m0 + w[:, 0] * (m - m0)
+        return [(float(mk), xk, row) for mk, xk, row in zip(times, xs, phis.tolist(), strict=True)]
+
+    def _decide(
+        self, t: float, m: float, state: np.ndarray, phi: list[float], fresh: bool
+    ) -> dict[str, str]:
+        """The rule on the features ``state (d,)`` measured at ``m`` [s], at the tick ``t``."""
+        if fresh:
             self._stall.observe(m, state)
             self._speed.observe(m, state)
         if self._plan is None:
@@ -387,7 +450,7 @@ class SequencerEpisode:
         fired = self._fire(t, m, state, phi, plan, probs.rows, ready, context, held)
         # 4. no switch and the features at rest: recover, or give up
         c = self.model.config
-        if not (fired or stopped) and c.recovery and reading.fresh and self._stall.stalled(m):
+        if not (fired or stopped) and c.recovery and fresh and self._stall.stalled(m):
             self._resolve_stall(t, m, state, phi, probs.rows, plan)
         active = dict(self.active)
         self._pending = _PendingTick(t, phi, probs.rows, active, held)

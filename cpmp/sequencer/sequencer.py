@@ -421,7 +421,10 @@ class ConcurrentSequencer:
             return self._episode.advance(t, state, None, False, stamp)
         self._held = state
         phi = self.progress(state)
-        return self._episode.advance(t, state, phi.tolist(), bool(np.isfinite(phi).all()), stamp)
+        between = None if getattr(self.predictor, "stateful", False) else self.progress
+        return self._episode.advance(
+            t, state, phi.tolist(), bool(np.isfinite(phi).all()), stamp, between
+        )
 
     def batched(self, n: int) -> BatchedSequencer:
         """``n`` independent episodes of this sequencer, stepped together.

@@ -32,6 +32,10 @@ TICK_HISTORY = 8
 """How many recent tick intervals the median tick interval is taken over."""
 EPS_T = 1e-9
 """Slack [s] when comparing times (ticks are sums of floating-point periods)."""
+MEASUREMENT_STEP = 0.01
+"""The sequencer reads the way between two measurements more than twice this far apart [s]
+as states this far apart or less (the usual 100 Hz of demonstrations; ``advance`` of
+:class:`~cpmp.sequencer.episode.SequencerEpisode`)."""
 
 
 class Reading(NamedTuple):
@@ -121,4 +125,11 @@ class MeasurementClock:
         return Reading(m, True, step)
 
 
-__all__ = ["CLOCK_STEP_FACTOR", "EPS_T", "TICK_HISTORY", "MeasurementClock", "Reading"]
+__all__ = [
+    "CLOCK_STEP_FACTOR",
+    "EPS_T",
+    "MEASUREMENT_STEP",
+    "TICK_HISTORY",
+    "MeasurementClock",
+    "Reading",
+]

@@ -2,6 +2,7 @@
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError, CpmpFileError, DataError, NotFittedError
 from cpmp.evaluation.offline import replay_demonstrations
 from cpmp.graph import SequenceGraph
-from cpmp.predictors import PredictorConfig
+from cpmp.predictors import PredictorConfig, ProgressPredictor
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sequencer.switching import Coupling, JointPartner
 from cpmp.worlds.two_point import SyntheticTask, make_demonstrations
@@ -414,3 +415,39 @@ def test_a_scaled_entry_is_read_the_same_from_the_node_s_first_measurement(rule)
         fired.append(seq.events[0].t)
     assert fired[0] == pytest.approx(config.patience)
     assert fired[1] == pytest.approx(fired[0])
+
+
+class _BumpProgress(ProgressPredictor):
+    """Test double: node B's φ is a bump around feature 0 = 0.5 (width 0.2), node C's φ 0: the
+    transition ``B -> C`` peaks (p = 1) halfway from 0 to 1 and is about 0 at both ends."""
+
+    kind: ClassVar[str] = "bump"
+
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        bump = torch.exp(-(((z[:, 0] - 0.5) / 0.2) ** 2))
+        phi = torch.stack([bump, torch.zeros_like(bump)], dim=1)
+        return torch.logit(phi.clamp(1e-9, 1 - 1e-9))
+
+
+@pytest.mark.parametrize("stamped", [True, False])
+def test_a_peak_between_two_samples_of_a_slow_sensor_fires(stamped):
+    """A 10 Hz sensor read by a 100 Hz loop sees feature 0 at 0, then at 1: ``p`` is about 0
+    at both samples and peaks in between. With stamps, the sequencer reads the way between the
+    two samples (states 10 ms apart) and fires at the tick of the second sample; without them
+    the ticks between repeat the first sample, when the state changed is not known, and
+    nothing fires."""
+    graphs = chain_graphs({"v": ("B", "C")})
+    model = _BumpProgress([("v", "B"), ("v", "C")], 2, PredictorConfig())
+    seq = ConcurrentSequencer(graphs, model, ["u", "clock"], SequencerConfig())
+    assert seq.reset(0.0, np.array([0.0, 0.0])) == {"v": "B"}
+    for i in range(1, 31):
+        t = i * 0.01
+        sample = 10 * (i // 10) * 0.01  # the last 10 Hz sample: 0, 0.1, 0.2, 0.3 s
+        x = np.array([min(sample / 0.1, 1.0), sample])
+        seq.step(t, x, stamp=sample if stamped else None)
+    if stamped:
+        assert [(e.source, e.target) for e in seq.events] == [("B", "C")]
+        assert seq.events[0].t == pytest.approx(0.1)
+        assert 0.65 < seq.events[0].probability < 1.0  # fallen back from the peak
+    else:
+        assert seq.events == []
