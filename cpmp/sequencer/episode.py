@@ -59,6 +59,11 @@ class PhiCheck(NamedTuple):
     bound: float
 
 
+MAX_BETWEEN = 50
+"""The most states :meth:`SequencerEpisode.advance` decides on between two measurements (a
+gap of up to 0.51 s at 10 ms; a longer one, a sensor that came back, more coarsely)."""
+
+
 class PlanRow(NamedTuple):
     """One variable's part of the transition plan, fixed while the active MPs do not change.
 
@@ -411,12 +416,13 @@ class SequencerEpisode:
         """The states between the measurement ``last`` and ``state`` measured at ``m`` [s].
 
         Returns:
-            ``(measurement time, features (d,), φ (K,))`` of each, in time order; none when
-            the two are at most two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` apart or
-            a φ between them is not finite.
+            ``(measurement time, features (d,), φ (K,))`` of each, in time order (at most
+            :data:`MAX_BETWEEN`, evenly spaced: a long gap is read more coarsely); none when
+            the two are less than two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` apart
+            or a φ between them is not finite.
         """
         m0, x0 = last
-        n = math.floor((m - m0) / MEASUREMENT_STEP + EPS_T)
+        n = min(math.floor((m - m0) / MEASUREMENT_STEP + EPS_T), MAX_BETWEEN + 1)
         if n < 2:
             return []
         w = np.arange(1, n)[:, None] / n

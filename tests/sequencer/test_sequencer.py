@@ -451,3 +451,28 @@ def test_a_peak_between_two_samples_of_a_slow_sensor_fires(stamped):
         assert 0.65 < seq.events[0].probability < 1.0  # fallen back from the peak
     else:
         assert seq.events == []
+
+
+def test_a_long_gap_between_measurements_is_read_at_most_max_between_times():
+    from cpmp.sequencer.episode import MAX_BETWEEN
+
+    graphs = chain_graphs({"v": ("B", "C")})
+    model = _BumpProgress([("v", "B"), ("v", "C")], 2, PredictorConfig())
+    seq = ConcurrentSequencer(graphs, model, ["u", "clock"], SequencerConfig())
+    rows = []
+    progress = seq.progress
+
+    def counted(x):
+        rows.append(len(np.atleast_2d(x)))
+        return progress(x)
+
+    seq.progress = counted
+    seq.reset(0.0, np.array([0.0, 0.0]))
+    seq.step(0.01, np.array([0.0, 0.01]), stamp=0.01)
+    assert rows == [1]  # 10 ms after the last: nothing in between
+    seq.step(0.04, np.array([0.1, 0.04]), stamp=0.04)
+    assert rows[1:] == [1, 2]  # 30 ms after the last: the two states 10 and 20 ms after it
+    for i in range(5, 205):  # a sensor gone for 2 s: its last sample again, 100 Hz ticks
+        seq.step(i * 0.01, np.array([0.1, 0.04]), stamp=0.04)
+    seq.step(2.05, np.array([0.2, 2.05]), stamp=2.05)
+    assert rows[-2:] == [1, MAX_BETWEEN]
