@@ -362,7 +362,8 @@ class SequencerEpisode:
         (:meth:`_decide` on each, as a measurement would). A ``p`` that peaks between two
         samples of a slow sensor — an event seen only as a jump, the state carried past the
         demonstrated switch by the next sample — is then not skipped: the rule sees it rise
-        and fall back as a fast loop would, and the switch fires at this tick. Without a
+        and fall back as a fast loop would, and the switch fires at this tick (the new MP's
+        activation starting at this measurement; the states after it are not read). Without a
         stamp, a new measurement after ticks that repeated the last one has none in between
         (when the state changed is not known).
 
@@ -403,8 +404,28 @@ class SequencerEpisode:
             self._measured, self._repeats = (m, np.array(state, dtype=np.float64)), False
             if last is not None and progress is not None:
                 for m_k, x_k, phi_k in self._between(last, m, state, progress):
+                    before = dict(self.active)
                     self._decide(t, m_k, x_k, phi_k, True)
+                    switched = [v for v, mp in before.items() if self.active[v] != mp]
+                    if switched:
+                        # the robot runs the new MPs from this tick on: their activations
+                        # start at this measurement, not at the state in between
+                        for v in switched:
+                            self._reanchor(v, m, phi)
+                        break
         return self._decide(t, m, state, phi, reading.fresh)
+
+    def _reanchor(self, v: str, m: float, phi: list[float]) -> None:
+        """Start ``v``'s activation at the measurement ``m`` [s] with φ ``phi`` (K,) instead.
+
+        A switch decided on a state between two measurements takes effect at the tick of
+        the later one: what the new MP's rule, speed envelope and stall time read starts
+        there, as after a switch decided on that measurement itself.
+        """
+        self._rules[v].reset()
+        self._observe_entry(v, m, phi)
+        self._stall.switched(m)
+        self._since[v] = m
 
     def _between(
         self,

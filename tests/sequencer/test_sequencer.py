@@ -449,6 +449,8 @@ def test_a_peak_between_two_samples_of_a_slow_sensor_fires(stamped):
         assert [(e.source, e.target) for e in seq.events] == [("B", "C")]
         assert seq.events[0].t == pytest.approx(0.1)
         assert 0.65 < seq.events[0].probability < 1.0  # fallen back from the peak
+        # C runs from this tick on: its activation starts at the second sample, not between
+        assert seq._episode._since["v"] == pytest.approx(0.1)
     else:
         assert seq.events == []
 
