@@ -355,7 +355,7 @@ class SequencerEpisode:
     ) -> dict[str, str]:
         """One tick of the transition rule: switches, holds and stall recovery.
 
-        A new measurement more than two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` after
+        A new measurement two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` or more after
         the last one (a slow loop, dropped ticks; a slow sensor whose ticks carry stamps) is
         decided on along the way from the last one: the states linearly between the two, at most
         ``MEASUREMENT_STEP`` apart, each at its own measurement time, come first
@@ -416,11 +416,11 @@ class SequencerEpisode:
         return self._decide(t, m, state, phi, reading.fresh)
 
     def _reanchor(self, v: str, m: float, phi: list[float]) -> None:
-        """Start ``v``'s activation at the measurement ``m`` [s] with φ ``phi`` (K,) instead.
+        """Start ``v``'s activation at the measurement ``m`` [s] with φ ``phi`` (K,).
 
-        A switch decided on a state between two measurements takes effect at the tick of
-        the later one: what the new MP's rule, speed envelope and stall time read starts
-        there, as after a switch decided on that measurement itself.
+        What the active MP's rule, speed envelope and stall time read starts there: at a
+        switch (:meth:`_switch`), and again at the tick's own measurement for a switch decided
+        on a state between two measurements, which takes effect at that tick.
         """
         self._rules[v].reset()
         self._observe_entry(v, m, phi)
@@ -943,9 +943,6 @@ class SequencerEpisode:
         self.active[v] = target
         self._watch[v].append(self._new_watch(v, t))
         self._armed.pop(v, None)
-        self._rules[v].reset()
-        self._observe_entry(v, m, phi)
         self._holding[v] = None
-        self._stall.switched(m)
-        self._since[v] = m
+        self._reanchor(v, m, phi)
         self._plan = None

@@ -36,7 +36,7 @@ is therefore supported at any rate with stamps, and without them up to ``stale_t
 refreshes (default 0.25 s: 4 Hz); a switch then waits for the next refresh (up to one sensor
 period late), and with a sensor period longer than ``patience`` the improvement over
 ``patience`` is read off the line between the last two measurements. A new measurement
-more than two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` (10 ms) after the last one (a
+two :data:`~cpmp.sequencer.timing.MEASUREMENT_STEP` (10 ms) or more after the last one (a
 slow loop, dropped ticks, a stamped slow sensor) is decided on along the line from the last
 one, states ``MEASUREMENT_STEP`` apart first, so a ``p`` that peaks between two samples is not
 skipped (:meth:`cpmp.sequencer.episode.SequencerEpisode.advance`). A step of the caller's

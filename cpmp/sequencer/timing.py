@@ -33,7 +33,7 @@ TICK_HISTORY = 8
 EPS_T = 1e-9
 """Slack [s] when comparing times (ticks are sums of floating-point periods)."""
 MEASUREMENT_STEP = 0.01
-"""The sequencer reads the way between two measurements more than twice this far apart [s]
+"""The sequencer reads the way between two measurements twice this far apart or more [s]
 as states this far apart or less (the usual 100 Hz of demonstrations; ``advance`` of
 :class:`~cpmp.sequencer.episode.SequencerEpisode`)."""
 
