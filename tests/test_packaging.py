@@ -205,6 +205,7 @@ print(json.dumps({
 """
 
 
+@pytest.mark.slow
 def test_the_core_runs_without_the_extras(tmp_path: Path) -> None:
     """Fit, step, save and load with only the core's dependencies importable; an optional
     layer then names its extra."""

@@ -44,9 +44,6 @@ from cpmp.records import JsonValue
 NO_PREDICTOR = "none"
 """The ``predictor`` of a baseline row that uses no progress predictor."""
 
-CONFIG_NAME = "compare"
-"""The comparison's top config, ``conf/compare.yaml``."""
-
 
 RowGroup = Literal["predictors", "baselines", "support_sweep"]
 """The kind of a compared row (``group`` in ``compare.json``): a ``predictor`` option with the
@@ -131,14 +128,15 @@ def group_options(group: str) -> dict[str, dict[str, JsonValue]]:
     """Every option of config group ``group`` (``predictor``, ``sequencer``), composed, by name.
 
     The options come from the running Hydra app's search path (or ``conf/`` outside one),
-    each composed with its defaults.
+    each composed with its defaults on its own (no primary config: a full job config per
+    option would compose every other group too).
     """
 
     def compose_all() -> dict[str, dict[str, JsonValue]]:
         loader = GlobalHydra.instance().config_loader()
         names = loader.get_group_options(group)
         return {
-            name: to_dict(compose(config_name=CONFIG_NAME, overrides=[f"{group}={name}"])[group])
+            name: to_dict(compose(config_name=None, overrides=[f"+{group}={name}"])[group])
             for name in names
         }
 

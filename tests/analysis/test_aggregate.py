@@ -199,6 +199,7 @@ def test_broken_report_is_named(sweep):
         collect_sweep(sweep)
 
 
+@pytest.mark.slow
 def test_script_writes_into_sweep_dir_and_prints_json_path_last(sweep, tmp_path, run_script):
     proc = run_script("aggregate.py", f"sweep_dir={sweep}", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode == 0, proc.stderr

@@ -183,6 +183,7 @@ def test_bad_options_inputs_and_files(two_point_demos, tmp_path):
         BCSequencer.load(tmp_path / "evil.pt")
 
 
+@pytest.mark.slow
 def test_main_job_runs_with_sequencer_bc(tmp_path):
     """``experiment=tiny sequencer=bc``: collection, fit, offline evaluation, reproduction and
     report, as with ``sequencer=goal_nearest`` (about 20 s on 2 cores)."""

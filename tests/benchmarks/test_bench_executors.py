@@ -12,6 +12,7 @@ from cpmp.benchmarks.executors import ExecutorBenchSettings, main, markdown
 from cpmp.errors import ConfigError
 
 
+@pytest.mark.slow
 def test_quick_run_compares_every_backend_with_inline(tmp_path, capsys):
     """``--quick`` on inline and local: both run the same small jobs with one torch thread,
     local's results are inline's, every timing is written, and the table has a row each."""

@@ -161,6 +161,7 @@ def test_every_registered_world_is_a_default_world():
     assert ClockSettings.quick().worlds == world_names()
 
 
+@pytest.mark.slow
 def test_quick_run_writes_reproducible_json(run_script, tmp_path):
     out = tmp_path / "clock.json"
     # two worlds keep it short: a single one and a family (its member pooled like a seed)

@@ -32,6 +32,7 @@ from cpmp.worlds.registry import make_world
 MEASURED = ("fit_s", "predictor_s", "peak_rss_gb", "base_rss_gb", "threads")
 
 
+@pytest.mark.slow
 def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     out = tmp_path / "scale.json"
     assert main(["--quick", "--out", str(out)]) == 0
@@ -172,6 +173,7 @@ def test_the_lerobot_row_is_kept_out_of_the_rows_and_skipped_at_zero(monkeypatch
     assert "| two_point via LeRobot v3 | 7 | - | not run |" in scale.markdown(result)
 
 
+@pytest.mark.slow
 def test_a_failed_import_is_the_rows_error(tmp_path):
     demos = make_world(LEROBOT_WORLD, {}).demonstrations(2, 0)
     dataset = write_demonstrations(tmp_path / "ds", demos)

@@ -44,6 +44,7 @@ def test_learned_policy_benchmark_reports_the_full_loop(cfg, boxes):
     assert learned["ms_per_tick"]["policy"] > 0
 
 
+@pytest.mark.slow
 def test_batched_rollouts_time_the_same_episodes(cfg, demos):
     """Replaying each box's demonstration, one at a time and batched: the same outcomes and
     simulated time, and each report's shares and real-time factor add up."""

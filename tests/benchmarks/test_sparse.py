@@ -25,6 +25,7 @@ def _untimed(result):
     ]
 
 
+@pytest.mark.slow
 def test_quick_run_writes_the_documented_json(tmp_path, capsys):
     out = tmp_path / "sparse.json"
     assert main(["--quick", "--out", str(out)]) == 0

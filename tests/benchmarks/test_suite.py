@@ -49,6 +49,7 @@ def test_bench_sequencer_unknown_predictor(bad, capsys):
     assert "unknown predictor" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_bench_sim_prints_json(capsys):
     assert bench_sim_main(["--width", "0.15", "--depth", "0.12", "--demos", "0"]) == 0
     report = json.loads(capsys.readouterr().out)

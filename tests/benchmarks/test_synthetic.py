@@ -45,6 +45,7 @@ def test_rows_count_each_worlds_own_closed_loop():
     assert cell["complete_frac"] == pytest.approx(counts["complete"] / 4)
 
 
+@pytest.mark.slow
 def test_the_table_runs_the_registered_worlds_and_every_policy(run_script, tmp_path):
     assert SyntheticSettings().worlds == world_names()  # no list of worlds in the bench
     out = tmp_path / "synthetic.json"

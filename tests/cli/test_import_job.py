@@ -97,6 +97,7 @@ def batched(tmp_path_factory, run_scripts: Callable[..., list[Any]]) -> dict[str
     return dict(zip(cases, zip(dirs.values(), run_scripts(runs, root), strict=True), strict=True))
 
 
+@pytest.mark.slow
 def test_one_command_imports_prints_the_summary_and_the_path_last(inputs, tmp_path):
     mapping, recording = inputs
     out = tmp_path / "demos.hdf5"

@@ -416,6 +416,7 @@ def test_a_console_script_exits_2_with_one_error_line(case, tmp_path, some_file)
     assert not (tmp_path / "logs").exists()
 
 
+@pytest.mark.slow
 def test_user_error_inside_the_job_exits_2(tmp_path, some_file):
     """A damaged checkpoint is found by the job: the same one-line error and status 2."""
     proc = run(
@@ -456,6 +457,7 @@ def test_help_lists_the_config_groups(tmp_path, monkeypatch, capfd):
     assert f"predictor: {predictors}" in out
 
 
+@pytest.mark.slow
 def test_command_runs_from_anywhere_into_logs_of_its_job(tmp_path):
     """The installed command finds the repository's conf/ from another directory and names
     its run directory after the job."""

@@ -22,6 +22,8 @@ from cpmp.experiment.settings import to_dict
 from cpmp.experiment.strategies import balanced_subset
 from cpmp.sim import OUTCOMES
 
+pytestmark = pytest.mark.slow  # one compare_tiny run (two worker processes) for the module
+
 torch.set_num_threads(1)
 
 ROOT = Path(__file__).resolve().parents[2]

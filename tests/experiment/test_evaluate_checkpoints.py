@@ -169,6 +169,7 @@ def test_a_failed_job_leaves_no_empty_run_directory(tmp_path, capsys, write):
     assert tmp_path.exists()
 
 
+@pytest.mark.slow
 def test_a_failed_command_prints_one_line_and_no_run_directory(tmp_path, demo_file, run_script):
     path = tmp_path / "empty.h5"
     save_demonstrations(path, load_demonstrations(demo_file), splits={"train": []})

@@ -85,6 +85,7 @@ def squares_with_followers(executor: Any) -> tuple[dict[Any, int], set[int]]:
     return results, pids
 
 
+@pytest.mark.slow
 def test_every_backend_runs_the_same_jobs_where_it_says(tmp_path, caplog):
     """Each backend gives every job's result; ``inline`` runs them in this process, ``local``
     and ``submitit`` in other processes; ``local`` forwards the workers' log lines with the
@@ -214,6 +215,7 @@ def compare_numbers(run_dir: Path) -> list[dict[str, Any]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_comparison_gives_the_same_numbers_on_every_executor(tmp_path):
     """The two-point world of ``experiment=compare_tiny`` (2 seeds, the paper's kernel at
     D = 4: 2 jobs) on ``inline``, ``local`` (two processes), ``submitit`` (``cluster=local``,

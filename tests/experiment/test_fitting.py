@@ -64,6 +64,7 @@ def test_no_logger_writes_no_logs(demo_file, tmp_path):
     assert (tmp_path / "model.pt").is_file() and not (tmp_path / "lightning").exists()
 
 
+@pytest.mark.slow
 def test_cpmp_train_logs_held_out_progress_mae_per_epoch(demo_file, tmp_path, run_script):
     # demo_file: demo_0..3 train, demo_4..5 test; the test split validates the fit
     run_dir = tmp_path / "run"

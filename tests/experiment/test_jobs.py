@@ -87,6 +87,7 @@ def tiny(tmp_path_factory, script_in_background):
     }
 
 
+@pytest.mark.slow
 def test_report_fields(tiny):
     assert tiny["report_path"] == tiny["direct"] / "report.json"
     report = json.loads(tiny["report_path"].read_text())
@@ -99,6 +100,7 @@ def test_report_fields(tiny):
     assert report["seconds"] > 0
 
 
+@pytest.mark.slow
 def test_report_counts_and_distances_are_those_of_the_episodes(tiny):
     """One seed: Table I's counts are the outcomes in ``episodes.json`` (std 0), the distance
     the mean over the complete episodes' switch distances."""
@@ -123,6 +125,7 @@ def test_report_counts_and_distances_are_those_of_the_episodes(tiny):
         assert rep["distance_mean"] is None
 
 
+@pytest.mark.slow
 def test_report_progress_and_strategy_map_are_those_of_the_checkpoint(tiny):
     """The saved model, evaluated again on the saved test split and over the strategy grid,
     gives the report's progress errors and strategy-map accuracy."""
@@ -142,6 +145,7 @@ def test_report_progress_and_strategy_map_are_those_of_the_checkpoint(tiny):
     assert report["strategy_map"]["accuracy"] == again.accuracy
 
 
+@pytest.mark.slow
 def test_report_markdown_has_papers_column(tiny):
     text = (tiny["direct"] / "report.md").read_text()
     assert "W / I / C (paper)" in text
@@ -149,6 +153,7 @@ def test_report_markdown_has_papers_column(tiny):
     assert "0.13 ± 0.08" in text
 
 
+@pytest.mark.slow
 def test_files_written(tiny):
     run = tiny["direct"]
     for name in ("fig6_progress.png", "fig7_strategy_map.png"):
@@ -163,6 +168,7 @@ def test_files_written(tiny):
     assert len(list((run / "seed_0" / "recordings").glob("*.rrd"))) == 2
 
 
+@pytest.mark.slow
 def test_recordings_agree_with_episodes_json(tiny):
     episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
     assert len(episodes) == 2  # 1 seed x 1 training size x 2 boxes
@@ -177,6 +183,7 @@ def test_recordings_agree_with_episodes_json(tiny):
             assert summary.duration == pytest.approx(episode["duration"], abs=0.011)
 
 
+@pytest.mark.slow
 def test_every_incomplete_episode_names_its_cause(tiny):
     """Issue #36: every incomplete episode of the run carries a named cause (variable,
     expected MP, best p, reason) in ``episodes.json``, in its recording and its reason."""
@@ -200,6 +207,7 @@ def test_every_incomplete_episode_names_its_cause(tiny):
     assert sum(report["reproduction"]["3"]["causes"].values()) == len(incomplete)
 
 
+@pytest.mark.slow
 def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
     episodes = json.loads((tiny["direct"] / "episodes.json").read_text())
     paths = [e["rrd"] for e in episodes] + [str(demo_rrd)]
@@ -224,6 +232,7 @@ def test_inspect_rrd_prints_transitions(tiny, demo_rrd, capsys):
         assert f"outcome: {summary.outcome}" in block
 
 
+@pytest.mark.slow
 def test_record_failures_keeps_the_first_episode_and_every_failure(tiny):
     """The script ran with ``experiment.record=failures``, the in-process run with ``all``."""
     every = json.loads((tiny["direct"] / "episodes.json").read_text())
@@ -238,6 +247,7 @@ def test_record_failures_keeps_the_first_episode_and_every_failure(tiny):
     assert names == {Path(e["rrd"]).name for e in kept if e["rrd"]}
 
 
+@pytest.mark.slow
 def test_script_prints_report_path_last_and_same_numbers(tiny):
     script_report = tiny["script"] / "report.json"
     assert tiny["stdout"].strip().splitlines()[-1] == str(script_report)
@@ -264,6 +274,7 @@ def demo_rrd(tiny) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_demo_replayed_into_rrd(tiny, demo_rrd):
 
     demo = load_demonstrations(tiny["direct"] / "seed_0" / "demos.h5")[0]
@@ -289,6 +300,7 @@ def test_demo_replayed_into_rrd(tiny, demo_rrd):
     assert switch_times[-1] <= summary.duration <= demo.duration + 1e-9
 
 
+@pytest.mark.slow
 def test_demo_rrd_rejects_non_simulator_demos(tiny, tmp_path):
 
     synthetic = make_demonstrations(1, seed=0)[0]
@@ -425,6 +437,7 @@ def test_two_workers_give_the_serial_report(tmp_path, caplog):
     assert len(list((tmp_path / "submitit").glob("*_result.pkl"))) == 4  # 2 seeds x (1 + 1 D)
 
 
+@pytest.mark.slow
 def test_a_wrong_start_recording_shows_its_scene_and_its_start_decision(tiny):
     """A wrong start ends at t = 0, before any control tick: its recording still has every
     body's pose, every feature, the active MPs and the status at t = 0, and the start decision

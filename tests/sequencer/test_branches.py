@@ -368,6 +368,7 @@ def test_entry_scales_only_where_the_demonstrated_entry_reads_done():
     assert back.entry_scale == scales
 
 
+@pytest.mark.slow
 def test_a_re_entered_node_fires_with_its_entry_scaled():
     """The peg world's re-align starts where the first align ended (align's φ near 1 there):
     the fit scales the entry of ``retract -> align``, and in closed loop a jam re-aligns by

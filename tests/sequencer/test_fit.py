@@ -39,6 +39,7 @@ print(json.dumps({"stepped": stepped, "fit_module": "lightning" in sys.modules})
 Lightning was loaded after each."""
 
 
+@pytest.mark.slow
 def test_loading_and_stepping_a_checkpoint_never_imports_lightning(
     fitted_klr: ConcurrentSequencer, train_demos: list[Demonstration], tmp_path: Path
 ) -> None:

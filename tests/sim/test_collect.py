@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from cpmp.data.datafile import load_demonstrations, save_demonstrations
 from cpmp.data.demonstration import Demonstration
@@ -107,6 +108,7 @@ def _matches_reference(demo: Demonstration, box: Box, cfg: TaskConfig) -> None:
     assert demo.metadata["diverged"] is diverged
 
 
+@pytest.mark.slow
 def test_batched_demonstrations_equal_one_at_a_time(demos, boxes, cfg):
     extra = Box(0.28, 0.11, 0.1)  # a fourth box, bimanual like the first
     run = [boxes["both"], boxes["right"], boxes["left"], extra]

@@ -85,6 +85,7 @@ def test_a_speed_factor_shortens_the_free_motions_by_it():
     assert "holds" not in plain.metadata and fast.metadata["holds"] == 0
 
 
+@pytest.mark.slow
 def test_same_seed_same_demonstrations_and_unit_speeds_change_nothing(cfg):
     paced = TaskConfig(demo_speed=(0.5, 2.0), demo_pause=(0.3, 1.0), demo_pause_probability=0.5)
     a0, a1 = record_demonstrations([RIGHT_BOX, RIGHT_BOX], paced, pacing_seed=0)
@@ -115,6 +116,7 @@ def test_robot_pacing_moves_the_closed_loop_robot_slower():
     assert moved[1] < 0.6 * moved[0]  # x0.5: half the way in 0.2 s, up to the actuators' lag
 
 
+@pytest.mark.slow
 def test_paced_sim_face():
     cfg = TaskConfig(max_time=40.0, demo_speed=(0.5, 2.0), robot_speed=(0.5, 2.0))
     world = paced_sim(0, 3, cfg)

@@ -122,6 +122,7 @@ def learned(demos):
     return ConcurrentSequencer.fit(list(demos.values()), "klr", seed=0, logger=None)
 
 
+@pytest.mark.slow
 def test_batched_rollout_of_learned_policy_equals_one_at_a_time(learned, boxes, demos, cfg):
     extra = Box(0.28, 0.11, 0.1)  # an unseen box, as the reproduction draws them
     run_boxes = [boxes["both"], boxes["right"], boxes["left"], extra]

@@ -19,6 +19,7 @@ def relay_seq() -> ConcurrentSequencer:
     return ConcurrentSequencer.fit(relay.make_demonstrations(2, seed=0), seed=0, logger=None)
 
 
+@pytest.mark.slow
 def test_a_batch_runs_each_episode_as_run_policy_does(relay_seq):
     # short: some episodes stop at the limit (half of these 10), others before at different ticks
     task = RelayTask(max_time=4.6)

@@ -38,6 +38,7 @@ def test_a_seed_gives_one_task_and_its_demonstrations():
     )
 
 
+@pytest.mark.slow
 def test_the_scripted_policy_completes_every_episode_of_100_tasks_of_every_kind():
     kinds: Counter[str] = Counter()
     for i in range(N_TASKS):

@@ -129,7 +129,11 @@ def test_the_registry_names_its_worlds_and_refuses_unknown_ones() -> None:
     [
         ("two_point", lambda s: two_point.evaluate(s, None, 12, 1000)),
         ("relay", lambda s: relay.evaluate(s, None, 12, 1000)),
-        ("repetition", lambda s: repetition.evaluate(s, None, 12, 1000)),
+        pytest.param(
+            "repetition",
+            lambda s: repetition.evaluate(s, None, 12, 1000),
+            marks=pytest.mark.slow,
+        ),
     ],
 )
 def test_protocol_loop_gives_each_worlds_own_numbers(name: str, legacy) -> None:
@@ -208,7 +212,7 @@ def check_causes(world: World, contexts, episodes) -> int:
     return n
 
 
-SLOW_CAUSES = ("two_point", "slip")
+SLOW_CAUSES = ("two_point", "slip", "paced_relay")
 """Worlds whose cause test takes longest (a second fit, or long episodes): marked slow."""
 
 
