@@ -90,7 +90,7 @@ def synthetic_run(policies: dict[str, int], world: str = "two_point") -> dict[st
 
 
 def small_results(folder: Path, c_sim: float = 3.0) -> Path:
-    """Five small results files, as the runs would write them, under ``folder``."""
+    """Small results files (one per section), as the runs would write them, under ``folder``."""
     report = {
         "experiment": {
             "name": "tiny",
@@ -170,6 +170,15 @@ def small_results(folder: Path, c_sim: float = 3.0) -> Path:
         ),
         "procedural.json": synthetic_run({"scripted": 10, "defaults": 4}, "procedural"),
         "clock.json": clock,
+        "clock_procedural.json": {
+            **clock,
+            "settings": {"seeds": [0], "demos": 6, "episodes": 5, "tasks": 2},
+            "scoring": "world",
+            "worlds": {
+                "procedural": clock["worlds"]["two_point"]
+                | {"conditions": {n: condition | {"n_episodes": 10} for n in clock["conditions"]}}
+            },
+        },
         "clock_sim.json": {
             "settings": {"sim_seeds": [0, 1], "sim_demos": 6, "sim_boxes": 5},
             "conditions": clock["conditions"],
@@ -251,6 +260,9 @@ def test_every_section_renders_its_numbers_and_settings(tmp_path: Path) -> None:
     assert "| two_point | 5/5 (12 ms) | 4/5 (50 ms) |" in page
     assert "| two_point (scripted) | 5/5 | 5/5 |" in page
     assert "per world and seed (0) a fit on 6 demonstrations and 5 held-out episodes" in page
+    # the procedural family's clock section: its tasks pooled, the scripted policy below
+    assert "| procedural | 4/10 (50 ms) | 4/10 (50 ms) |" in page
+    assert "its first 2 tasks, per task and seed (0) a fit on 6 demonstrations" in page
     # the simulator's clock section: its own file, seeds and boxes
     assert "| sim | 9/10 (50 ms) | 8/10 (50 ms) |" in page
     assert "per seed (0, 1) a fit on 6 simulated demonstrations and 5 held-out boxes" in page
