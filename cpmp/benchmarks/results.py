@@ -173,9 +173,19 @@ def _about_clock(r: Mapping[str, JsonValue]) -> str:
         "25 Hz), a 1 s clock step, NaN bursts — against the worlds' own 100 Hz loop "
         f"(`{r['reference']}`). Each cell: complete / episodes (all seeds) and the mean "
         "absolute switch-time error; the row below a world is its feature-only scripted "
-        "policy on the same episodes. " + _clock_scoring(r) + " Issue #32's target: every "
-        "condition within 1 episode per 20 of the 100 Hz run."
-        + (f" {r['note']}" if r.get("note") else "")
+        "policy on the same episodes. " + _clock_scoring(r) + _clock_target(r, named=False)
+    )
+
+
+def _clock_target(r: Mapping[str, JsonValue], named: bool = True) -> str:
+    """Issue #32's target for a clock section, then the run's note.
+
+    ``named``: the target names the reference condition.
+    """
+    reference = f" (`{r['reference']}`)" if named else ""
+    return (
+        " Issue #32's target: every condition within 1 episode per 20 of the 100 Hz run"
+        f"{reference}." + (f" {r['note']}" if r.get("note") else "")
     )
 
 
@@ -208,10 +218,9 @@ def _about_clock_sim(r: Mapping[str, JsonValue]) -> str:
         f"fit on {s['sim_demos']} simulated demonstrations and {s['sim_boxes']} held-out boxes "
         "under each condition, the simulator stepped at the condition's control rate (jittered "
         "ticks: at 500 Hz, the policy woken on the jittered schedule). Each cell: complete / "
-        "episodes (all seeds) and the mean absolute switch-time error. Issue #32's target: "
-        f"every condition within 1 episode per 20 of the 100 Hz run (`{r['reference']}`)."
+        "episodes (all seeds) and the mean absolute switch-time error."
+        + _clock_target(r)
         + ("" if r.get("scoring") == "world" else " " + _EARLIER)
-        + (f" {r['note']}" if r.get("note") else "")
     )
 
 
@@ -222,9 +231,7 @@ def _about_clock_procedural(r: Mapping[str, JsonValue]) -> str:
         f"{s['tasks']} tasks, per task and seed ({', '.join(map(str, s['seeds']))}) a fit on "
         f"{s['demos']} demonstrations and {s['episodes']} held-out episodes under each "
         "condition, pooled over the tasks; the row below is the family's feature-only scripted "
-        "policy on the same episodes. " + _clock_scoring(r) + " Issue #32's target: every "
-        f"condition within 1 episode per 20 of the 100 Hz run (`{r['reference']}`)."
-        + (f" {r['note']}" if r.get("note") else "")
+        "policy on the same episodes. " + _clock_scoring(r) + _clock_target(r)
     )
 
 
