@@ -3,19 +3,33 @@ that fail before any work."""
 
 from __future__ import annotations
 
+import copy
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 from hydra import compose, initialize_config_dir
 
+from cpmp.compare import rows
 from cpmp.compare.rows import NO_PREDICTOR, fit_jobs, group_options, row_specs
 from cpmp.compare.settings import CompareJob
 from cpmp.errors import ConfigError
 from cpmp.predictors import PREDICTORS
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def composed_once() -> Iterator[None]:
+    """Every predictor and sequencer option composed once for the module (a composition per
+    option, seconds per test otherwise): ``group_options`` answers from them. Composing the
+    options is tested in tests/experiment/test_config.py."""
+    options = {group: group_options(group) for group in ("predictor", "sequencer")}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(rows, "group_options", lambda group: copy.deepcopy(options[group]))
+        yield
 
 
 def specs_of(overrides: list[str]) -> tuple[CompareJob, list[Any]]:
@@ -82,7 +96,7 @@ def test_a_series_adds_its_values_and_its_own_default():
     series = [s for s in specs if s.group == "support_sweep" and s.predictor == "klr"]
     assert [(s.option, s.value) for s in series] == [("l2", 0.01), ("l2", 0.1), ("l2", None)]
     assert series[0].predictor_cfg["l2"] == 0.01
-    assert series[2].predictor_cfg == group_options("predictor")["klr"]
+    assert series[2].predictor_cfg == rows.group_options("predictor")["klr"]
     assert series[2].point() == "l2=default"
 
 
