@@ -41,7 +41,7 @@ def specs_of(overrides: list[str]) -> tuple[CompareJob, list[Any]]:
 
 def test_all_compares_every_predictor_option_and_registered_kind():
     job, specs = specs_of(["compare.predictors=all", "compare.baselines=[goal_nearest]"])
-    options = group_options("predictor")
+    options = rows.group_options("predictor")  # the module's composed options
     sim = [s for s in specs if s.world == "sim" and s.group == "predictors"]
     assert {s.predictor for s in sim} == set(options)
     assert {s.predictor_cfg["kind"] for s in sim} >= set(PREDICTORS)
