@@ -66,7 +66,7 @@ POLICIES: dict[str, Make] = {
     "defaults": _sequencer(),
     "klr_sparse": _sequencer("klr_sparse"),
     "coupling=none": _sequencer(coupling="none"),
-    "switch_rule=plateau": _sequencer(switch_rule="plateau"),
+    "switch_rule=paper": _sequencer(switch_rule="paper"),
     "recovery=false": _sequencer(recovery=False),
 }
 """The policies by name: the world's scripted policy, the paper's method

@@ -43,6 +43,7 @@ from cpmp.config.sequencer import (
     START_RULES,
     SWITCH_RULES,
     SequencerConfig,
+    existing_sequencer_options,
 )
 from cpmp.config.task import TaskConfig
 from cpmp.config.trainer import SOLVERS, SolverOptions, TrainerConfig
@@ -78,6 +79,7 @@ __all__ = [
     "TimePhaseConfig",
     "TrainerConfig",
     "bc_options",
+    "existing_sequencer_options",
     "goal_nearest_options",
     "predictor_config",
     "predictor_config_class",

@@ -17,7 +17,11 @@ from cpmp.config.predictors import (
     predictor_config_class,
     predictor_option_names,
 )
-from cpmp.config.sequencer import SequencerConfig
+from cpmp.config.sequencer import (
+    REMOVED_SEQUENCER_OPTIONS,
+    SequencerConfig,
+    existing_sequencer_options,
+)
 from cpmp.config.trainer import TrainerConfig
 from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
@@ -102,6 +106,8 @@ class FitConfig:
             part = next((p for p, valid in names.items() if key in valid), None)
             if part is None and key in REMOVED_OPTIONS.get(predictor, {}):
                 part = "predictor"  # predictor_config names it as removed
+            if part is None and key in REMOVED_SEQUENCER_OPTIONS:
+                part = "sequencer"  # existing_sequencer_options names it as removed
             if part is None:
                 valid = sorted(set().union(*names.values()))
                 raise ConfigError(
@@ -112,7 +118,7 @@ class FitConfig:
         return cls(
             predictor,
             predictor_config(predictor, **routed["predictor"]),
-            SequencerConfig(**routed["sequencer"]),
+            SequencerConfig(**existing_sequencer_options(routed["sequencer"])),
             TrainerConfig(**routed["trainer"]),
             **routed["fit"],
         )

@@ -2,13 +2,34 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from cpmp.config.validation import finite_number
 from cpmp.errors import ConfigError
 
-SWITCH_RULES = ("paper", "peak", "plateau")
+SWITCH_RULES = ("paper", "peak")
 """Values of :attr:`SequencerConfig.switch_rule` (see :mod:`cpmp.sequencer.switching`)."""
+REMOVED_SEQUENCER_OPTIONS: dict[str, tuple[object, str]] = {
+    "min_exit": (
+        0.0,
+        "the exit gate (a transition also needing the current node's φ above min_exit) was "
+        "removed with issue #32: it was off by default and nothing set it; the threshold on "
+        "p = φ_current · (1 - φ_next) and the coupling's progress bounds decide when a node "
+        "may be left",
+    ),
+}
+"""Sequencer options that no longer exist: name -> (the value at which the option did
+nothing, why it went). :func:`existing_sequencer_options` names them as removed rather than
+unknown; a checkpoint that holds one at that value loads as before."""
+REMOVED_SEQUENCER_VALUES: dict[tuple[str, str], str] = {
+    ("switch_rule", "plateau"): (
+        "the plateau rule (p above the threshold for patience seconds without a new maximum) "
+        "was removed with issue #32: it missed switches whose p crosses the threshold near its "
+        "peak, and peak, the default, fires on a plateau as it did; use peak or paper"
+    ),
+}
+"""Option values that no longer exist: (name, value) -> why, and what to use instead."""
 COUPLINGS = ("none", "context")
 """Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.sequencer.switching`)."""
 NONFINITE_POLICIES = ("hold", "raise")
@@ -39,11 +60,10 @@ class SequencerConfig:
             asymptotically, so ``p`` keeps creeping up by tiny amounts; with a strict
             comparison (``0``) such a transition might never fire.
         switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
-            min_improvement``, the paper's sentence read literally), ``peak`` (the default:
+            min_improvement``, the paper's sentence read literally) or ``peak`` (the default:
             ``paper``, and also when ``p`` has fallen back from a peak above the threshold
-            within the last ``patience``, as it does right after an event) or ``plateau``
-            (``p`` above the threshold for ``patience`` without a new maximum, cpmp's earlier
-            rule); see :mod:`cpmp.sequencer.switching`.
+            within the last ``patience``, as it does right after an event); see
+            :mod:`cpmp.sequencer.switching`.
         coupling: ``none`` (paper: graphs coupled only through the features) or ``context``:
             hold back a transition while another variable runs an MP never seen at that
             demonstrated switch, or one that has progressed less than at every demonstrated
@@ -66,8 +86,6 @@ class SequencerConfig:
         rest_speed: features count as at rest below this speed, in training ranges per second.
         recovery_threshold: the least ``p`` a recovery transition needs (default 0: any
             switch the demonstrator made there; above 0, a stall below it gives up instead).
-        min_exit: a transition also needs the current node's exit probability ``φ`` above this
-            (0 = off, the paper's rule).
         start_kernel: the φ the ``independent`` and ``joint`` start rules read (the ``learned``
             rule reads none). ``shared`` (paper, and the default): the nodes' progress
             predictors. ``isotropic``: extra heads for the initial nodes, fitted in the same
@@ -121,7 +139,6 @@ class SequencerConfig:
     stall_time: float = 1.0
     rest_speed: float = 0.01
     recovery_threshold: float = 0.0
-    min_exit: float = 0.0
     start_kernel: str = "shared"
     start_rule: str = "learned"
     nonfinite: str = "hold"
@@ -137,7 +154,6 @@ class SequencerConfig:
             "stall_time",
             "rest_speed",
             "recovery_threshold",
-            "min_exit",
             "stale_time",
         ):
             finite_number(getattr(self, name), f"sequencer option {name}")
@@ -165,8 +181,6 @@ class SequencerConfig:
             )
         if self.stale_time <= 0.0:
             raise ConfigError(f"stale_time must be > 0 seconds, got {self.stale_time}")
-        if not 0.0 <= self.min_exit < 1.0:
-            raise ConfigError(f"min_exit must be in [0, 1), got {self.min_exit}")
         for name in ("recovery", "joint"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"{name} must be true or false, got {getattr(self, name)!r}")
@@ -178,8 +192,43 @@ class SequencerConfig:
             ("nonfinite", NONFINITE_POLICIES),
             ("branch", BRANCHES),
         ):
-            if getattr(self, name) not in allowed:
+            value = getattr(self, name)
+            if value not in allowed:
+                gone = REMOVED_SEQUENCER_VALUES.get((name, str(value)))
                 raise ConfigError(
-                    f"{name} must be one of {', '.join(map(repr, allowed))}, "
-                    f"got {getattr(self, name)!r}"
+                    f"{name} must be one of {', '.join(map(repr, allowed))}, got {value!r}"
+                    + (f" ({gone})" if gone else "")
                 )
+
+
+def existing_sequencer_options(
+    options: Mapping[str, object], *, inert: bool = False
+) -> dict[str, object]:
+    """``options`` without the sequencer options that no longer exist.
+
+    Args:
+        options: sequencer option name -> value.
+        inert: drop a removed option silently where it holds the value at which it did
+            nothing (a checkpoint written before its removal); otherwise every removed option
+            is an error.
+
+    Returns:
+        The options that exist.
+
+    Raises:
+        ConfigError: a removed option (:data:`REMOVED_SEQUENCER_OPTIONS`), named as removed,
+            with why.
+    """
+    removed = REMOVED_SEQUENCER_OPTIONS
+    gone = [
+        name
+        for name in options
+        if name in removed and not (inert and options[name] == removed[name][0])
+    ]
+    if gone:
+        reasons = "; ".join(f"{name}: {removed[name][1]}" for name in gone)
+        raise ConfigError(
+            f"removed sequencer option(s) {', '.join(gone)} ({reasons}); drop them"
+            + (", or refit the checkpoint" if inert else "")
+        )
+    return {k: v for k, v in options.items() if k not in removed}

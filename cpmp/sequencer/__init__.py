@@ -9,7 +9,7 @@ ones before it):
 * ``timing``: the measurement time of each tick's features (clock steps, stamps, repeats);
 * ``motion``: what the demonstrations say about motion: each switch's speed envelope and the
   ambient features (moving alike under every MP);
-* ``switching``: the switching rules (the paper's threshold + 50 ms rule, the plateau rule)
+* ``switching``: the switching rules (the paper's threshold + 50 ms rule, the peak rule)
   on measurement time, the learned cross-variable coupling and stall recovery;
 * ``fit_data``: each node's training data and the checks after a fit;
 * ``glitches``: label glitches (``A A X A A``) repaired before the graphs are built;
@@ -54,7 +54,6 @@ from cpmp.sequencer.switching import (
     JointPartner,
     PaperRule,
     PeakRule,
-    PlateauRule,
     StallDetector,
     SwitchRule,
     indicator_features,
@@ -80,7 +79,6 @@ __all__ = [
     "NodeIndex",
     "PaperRule",
     "PeakRule",
-    "PlateauRule",
     "SequencerEpisode",
     "SpeedLimit",
     "SpeedMeter",

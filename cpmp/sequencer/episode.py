@@ -470,7 +470,7 @@ class SequencerEpisode:
         probs = self._probabilities(t, m, state, phi, plan, stopped)
         # 2. each variable's rule decides; the coupling and the branch choice hold some back
         held: dict[str, str] = {}
-        going = {} if stopped else self._rule_decisions(t, m, phi, plan, probs, context, held)
+        going = {} if stopped else self._rule_decisions(t, m, phi, probs, context, held)
         # 3. the switches fire, those demonstrated together with another's waiting for it (or
         #    taking it along)
         ready = {**self._armed, **going}
@@ -543,17 +543,15 @@ class SequencerEpisode:
         t: float,
         m: float,
         phi: list[float],
-        plan: list[PlanRow],
         probs: _TickProbabilities,
         context: dict[str, str],
         held: dict[str, str],
     ) -> dict[str, str]:
         """Each variable's switching rule on its allowed successors: the switches it fires.
 
-        A successor is allowed when the active MP's exit is above ``min_exit``, (with the
-        coupling) its context was demonstrated, and (at a branching node) it is the chosen
-        one. A best successor above the threshold that is not allowed is held: added to
-        ``held`` (variable -> target) and noted once.
+        A successor is allowed when (with the coupling) its context was demonstrated and (at
+        a branching node) it is the chosen one. A best successor above the threshold that is
+        not allowed is held: added to ``held`` (variable -> target) and noted once.
 
         Returns:
             Variable -> the successor its rule fires.
@@ -561,10 +559,8 @@ class SequencerEpisode:
         c = self.model.config
         coupled = self._coupled
         going: dict[str, str] = {}
-        for plan_row, row in zip(plan, probs.rows, strict=True):
-            v, current, names, p, bad = row
-            gate = phi[plan_row.exit_column] > c.min_exit
-            allowed = [gate and b == 0 for b in bad] if coupled else [gate] * len(p)
+        for v, current, names, p, bad in probs.rows:
+            allowed = [b == 0 for b in bad] if coupled else [True] * len(p)
             chosen = probs.chosen_by[v]
             if chosen is not None:
                 allowed = [ok and s == chosen for ok, s in zip(allowed, names, strict=True)]
@@ -576,7 +572,7 @@ class SequencerEpisode:
                 self._armed.pop(v)
             if k is not None:
                 going[v] = names[k]
-            if gate and (coupled or chosen is not None) and not all(allowed):
+            if (coupled or chosen is not None) and not all(allowed):
                 top = 0 if len(p) == 1 else max(range(len(p)), key=p.__getitem__)
                 if chosen in names:
                     top = names.index(chosen)

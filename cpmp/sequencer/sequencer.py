@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from cpmp.config import FitConfig, SequencerConfig
+from cpmp.config import FitConfig, SequencerConfig, existing_sequencer_options
 from cpmp.config.validation import OptionValue
 from cpmp.data import Demonstration
 from cpmp.errors import ConfigError
@@ -528,7 +528,8 @@ class ConcurrentSequencer:
         missing = sorted(known - set(payload))
         if missing:
             raise KeyError(f"missing entries {missing}")
-        options = dict(payload["sequencer"])
+        # an option removed since, at the value where it did nothing, loads as before
+        options = existing_sequencer_options(payload["sequencer"], inert=True)
         unknown = sorted(set(options) - {f.name for f in dataclasses.fields(SequencerConfig)})
         if unknown:
             raise ValueError(f"unknown sequencer options {unknown}")

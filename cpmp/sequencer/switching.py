@@ -20,10 +20,6 @@ fires, given its transition probability ``p_s = φ_current(x) · (1 - φ_s(x))``
   demonstrator switched: its ``p`` peaks for less than ``patience``, and the ``paper`` rule,
   which compares with ``p(m - patience)`` from before the jump, sees it still improving until
   it has fallen below the threshold. A ``p`` that rises and settles fires as with ``paper``.
-* ``plateau`` — ``p`` must stay above the threshold for ``patience`` seconds without a new
-  maximum (cpmp's earlier rule). It misses switches whose ``p`` crosses the threshold near its
-  peak and then declines as the next MPs start to move.
-
 **Time and fresh input (the rules' contract).** Both rules compare ``p`` at *measurement
 times* (:class:`cpmp.sequencer.timing.MeasurementClock`), not at ticks, so they decide the same
 at any control rate: tested at 30 Hz to 1 kHz, with ±30 % jitter of the period and dropped
@@ -205,40 +201,6 @@ class PeakRule(PaperRule):
         return peak > self.threshold and q < peak - self.min_improvement
 
 
-class PlateauRule:
-    """``p`` above ``threshold`` for ``patience`` seconds without a new maximum."""
-
-    def __init__(self, threshold: float, patience: float, min_improvement: float) -> None:
-        self.threshold = threshold
-        self.patience = patience
-        self.min_improvement = min_improvement
-        self._target: int | None = None
-        self._best = 0.0
-        self._since = 0.0
-
-    def reset(self) -> None:
-        """Forget the history (called when the variable's node changes)."""
-        self._target = None
-
-    def observe(self, t: float, p: Sequence[float]) -> None:
-        """Nothing: the plateau starts at the first :meth:`update` above the threshold."""
-
-    def update(self, t: float, p: Sequence[float], allowed: Sequence[bool]) -> int | None:
-        """Record ``p`` measured at ``t`` [s]; the one to fire (see :class:`SwitchRule`)."""
-        best = _best(p, allowed)
-        if best is None or p[best] <= self.threshold:
-            self._target = None
-            return None
-        if self._target != best:
-            self._target, self._best, self._since = best, p[best], t
-        elif p[best] > self._best + self.min_improvement:
-            self._best, self._since = p[best], t
-        if t - self._since >= self.patience - EPS_T:
-            self._target = None
-            return best
-        return None
-
-
 def transition_p(exit_phi: float, target_phi: float, entry_scale: float = 1.0) -> float:
     """A switch's transition probability ``p = φ_current · min(1, (1 - φ_target) · scale)``.
 
@@ -261,7 +223,7 @@ def transition_p(exit_phi: float, target_phi: float, entry_scale: float = 1.0) -
 
 def make_rule(name: str, threshold: float, patience: float, min_improvement: float) -> SwitchRule:
     """A fresh switching rule ``name`` (one of :data:`SWITCH_RULES`)."""
-    cls = {"paper": PaperRule, "peak": PeakRule, "plateau": PlateauRule}[name]
+    cls = {"paper": PaperRule, "peak": PeakRule}[name]
     return cls(threshold, patience, min_improvement)
 
 
@@ -875,7 +837,6 @@ __all__ = [
     "Gates",
     "PaperRule",
     "PeakRule",
-    "PlateauRule",
     "ProgressBound",
     "StallDetector",
     "SwitchInstance",

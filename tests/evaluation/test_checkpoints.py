@@ -173,3 +173,39 @@ def test_a_damaged_fit_summary_is_a_file_error(payload, tmp_path):
     path = save_checkpoint(tmp_path / "bad.pt", {**old, "fit_summary": {"kind": "klr"}})
     with pytest.raises(CpmpFileError, match="not a fit report"):
         ConcurrentSequencer.load(path)
+
+
+def _with_options(payload, **options):
+    old = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    return {**old, "sequencer": {**old["sequencer"], **options}}
+
+
+def test_a_checkpoint_from_before_min_exit_was_removed_loads_as_before(payload, tmp_path):
+    """``min_exit`` at 0 (off, its default) did nothing: such a checkpoint loads unchanged."""
+    path = tmp_path / "old.pt"
+    save_checkpoint(path, _with_options(payload, min_exit=0.0))
+    loaded = ConcurrentSequencer.load(path)
+    assert not hasattr(loaded.config, "min_exit")
+    assert loaded.config == ConcurrentSequencer.load(_saved(payload, tmp_path)).config
+
+
+def _saved(payload, tmp_path):
+    path = tmp_path / "now.pt"
+    torch.save(payload, path)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"min_exit": 0.9}, r"removed sequencer option\(s\) min_exit .*refit the checkpoint"),
+        ({"switch_rule": "plateau"}, r"'plateau'.*plateau rule .* was removed .* use peak"),
+    ],
+)
+def test_a_checkpoint_that_used_a_removed_option_is_refused_by_name(
+    payload, tmp_path, options, message
+):
+    path = tmp_path / "used.pt"
+    save_checkpoint(path, _with_options(payload, **options))
+    with pytest.raises(CpmpFileError, match=message):
+        ConcurrentSequencer.load(path)

@@ -38,17 +38,16 @@ def test_initial_node_is_highest_entry_probability():
     assert seq.reset(0.0, [0.5, 0.6, 0.0]) == {"v": "A"}
 
 
-def test_plateau_switch_after_patience_without_improvement():
-    seq = _chain_sequencer(
-        switch_rule="plateau", threshold=0.65, patience=0.05, min_improvement=1e-3
-    )
+def test_switch_once_p_has_not_improved_for_patience():
+    seq = _chain_sequencer(threshold=0.65, patience=0.05, min_improvement=1e-3)  # peak rule
     seq.reset(0.0, [0.0, 0.0, 0.0])
     # p = φ_A (1 - φ_B) = 0.7 > threshold from t = 0.01 on, constant, each tick a new
     # measurement (its stamp; an unchanged vector without one adds no evidence)
     for k in range(1, 5):
         t = 0.01 * k
         assert seq.step(t, [0.7, 0.0, 0.0], stamp=t) == {"v": "A"}  # 0.01 .. 0.04 s: waiting
-    assert seq.step(0.05, [0.7, 0.0, 0.0], stamp=0.05) == {"v": "A"}  # 0.04 s above threshold
+    # at 0.05 s, p 50 ms earlier (at the start) was 0: still an improvement
+    assert seq.step(0.05, [0.7, 0.0, 0.0], stamp=0.05) == {"v": "A"}
     assert seq.step(0.06, [0.7, 0.0, 0.0], stamp=0.06) == {"v": "B"}  # 50 ms, no improvement
     (event,) = seq.events
     assert (event.t, event.source, event.target) == (0.06, "A", "B")
@@ -56,8 +55,9 @@ def test_plateau_switch_after_patience_without_improvement():
     np.testing.assert_allclose(event.state, [0.7, 0.0, 0.0])
 
 
-def test_plateau_improving_probability_delays_switch():
-    seq = _chain_sequencer(switch_rule="plateau", patience=0.05, min_improvement=1e-3)
+@pytest.mark.parametrize("rule", ["paper", "peak"])
+def test_an_improving_probability_delays_the_switch(rule):
+    seq = _chain_sequencer(switch_rule=rule, patience=0.05, min_improvement=1e-3)
     seq.reset(0.0, [0.0, 0.0, 0.0])
     t, p = 0.0, 0.66
     while p < 0.95:  # rises 0.01 per tick: always improving, so no switch
@@ -65,17 +65,17 @@ def test_plateau_improving_probability_delays_switch():
         assert seq.step(t, [p, 0.0, 0.0]) == {"v": "A"}
         p += 0.01
     flat = p - 0.01  # the last value stepped
-    for _ in range(4):  # then flat: no switch before 50 ms passed since the last improvement
+    for _ in range(4):  # then flat: p 50 ms earlier was still lower
         t = round(t + 0.01, 10)
         assert seq.step(t, [flat, 0.0, 0.0], stamp=t) == {"v": "A"}
     t = round(t + 0.01, 10)
     assert seq.step(t, [flat, 0.0, 0.0], stamp=t) == {"v": "B"}
 
 
-def test_plateau_creeping_improvement_below_tolerance_does_not_block():
+def test_creeping_improvement_below_tolerance_does_not_block():
     creeping = [0.7 + 1e-4 * k for k in range(20)]
-    strict = _chain_sequencer(switch_rule="plateau", min_improvement=0.0)
-    tolerant = _chain_sequencer(switch_rule="plateau", min_improvement=1e-3)
+    strict = _chain_sequencer(min_improvement=0.0)
+    tolerant = _chain_sequencer(min_improvement=1e-3)
     for seq in (strict, tolerant):
         seq.reset(0.0, [0.0, 0.0, 0.0])
         for k, p in enumerate(creeping, start=1):
@@ -84,15 +84,25 @@ def test_plateau_creeping_improvement_below_tolerance_does_not_block():
     assert tolerant.active == {"v": "B"}
 
 
-def test_plateau_below_threshold_never_switches_and_dip_resets():
-    seq = _chain_sequencer(switch_rule="plateau", threshold=0.65, patience=0.05)
+def test_below_threshold_never_switches():
+    seq = _chain_sequencer(threshold=0.65, patience=0.05)
     seq.reset(0.0, [0.0, 0.0, 0.0])
     for k in range(1, 30):
         seq.step(0.01 * k, [0.64, 0.0, 0.0])
     assert seq.active == {"v": "A"}
-    for k, p in enumerate([0.7, 0.7, 0.7, 0.5, 0.7, 0.7, 0.7], start=30):
-        seq.step(0.01 * k, [p, 0.0, 0.0])
-    assert seq.active == {"v": "A"}  # the dip below threshold restarted the 50 ms
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"switch_rule": "plateau"}, r"'plateau' \(the plateau rule .* was removed .* use peak"),
+        ({"min_exit": 0.9}, r"removed sequencer option\(s\) min_exit .*drop them"),
+        ({"min_exit": 0.0}, r"removed sequencer option\(s\) min_exit"),
+    ],
+)
+def test_a_removed_option_is_named_as_removed(train_demos, options, message):
+    with pytest.raises(ConfigError, match=message):
+        ConcurrentSequencer.fit(train_demos, "klr", logger=None, **options)
 
 
 def test_terminal_node_stays():
@@ -319,21 +329,6 @@ def test_fit_records_initial_combinations_and_checkpoint_keeps_them(fit_on_train
     assert loaded.config.start_rule == "joint"
     with pytest.raises(ConfigError, match="start_rule"):
         SequencerConfig(start_rule="vote")
-
-
-def test_min_exit_gate_keeps_unfinished_mp():
-    # p = 0.7 * (1 - 0.0) = 0.7 > 0.65, but the current MP is only 70 % done
-    gated = _chain_sequencer(min_exit=0.9, patience=0.0)
-    free = _chain_sequencer(min_exit=0.0, patience=0.0)
-    for seq in (gated, free):
-        seq.reset(0.0, [0.0, 0.0, 0.0])
-        seq.step(0.01, [0.7, 0.0, 0.0])
-    assert free.active == {"v": "B"}
-    assert gated.active == {"v": "A"}
-    gated.step(0.02, [0.95, 0.0, 0.0])
-    assert gated.active == {"v": "B"}
-    with pytest.raises(ConfigError, match="min_exit"):
-        SequencerConfig(min_exit=1.0)
 
 
 def test_isotropic_start_heads(fit_on_train, train_demos, tmp_path):

@@ -21,7 +21,6 @@ from cpmp.sequencer.switching import (
     Coupling,
     PaperRule,
     PeakRule,
-    PlateauRule,
     recovery_choice,
 )
 
@@ -62,10 +61,8 @@ def test_paper_rule_fires_after_a_peak_that_declines():
     )
     assert k == want
     assert stream[k - 1] < max(stream)  # it fired on the way down, after the peak
-    # the earlier rule never fires there: p never stays 50 ms without a new maximum above 0.65
-    # before falling below the threshold... unless the decline is slow; a fast one:
+    # a fast decline too:
     fast = rise + [0.8 - 0.03 * k for k in range(1, 10)]
-    assert _run(PlateauRule(0.65, 0.05, 1e-3), fast) is None
     assert _run(_paper(), fast) is not None
 
 
@@ -94,7 +91,6 @@ def test_peak_rule_fires_on_a_spike_shorter_than_patience():
     # an event: p jumps within one tick, then falls as the running MPs carry the state away
     spike = [0.01] * 20 + [0.81, 0.77, 0.71, 0.66, 0.6, 0.54, 0.48] + [0.4] * 20
     assert _run(_paper(), spike) is None  # still "improving" on 50 ms ago until below 0.65
-    assert _run(PlateauRule(0.65, 0.05, 1e-3), spike) is None
     assert _run(_peak(), spike) == 22  # the first tick below the peak
     # a spike that never reaches the threshold, or a p that only wobbles below it, never fires
     assert _run(_peak(), [0.01] * 20 + [0.64, 0.6, 0.5] + [0.4] * 20) is None
