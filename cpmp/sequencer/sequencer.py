@@ -77,13 +77,14 @@ CHECKPOINT = CheckpointSpec(
 )
 """The sequencer's checkpoint kind."""
 
-PAPER_OPTIONS: dict[str, str | bool] = {
+PAPER_OPTIONS: dict[str, str | bool | float] = {
     "feature_weighting": "none",
     "feature_scaling": "none",
     "path_noise": "none",
     "start_kernel": "shared",
     "start_rule": "independent",
     "switch_rule": "paper",
+    "min_improvement": 1e-3,
     "coupling": "none",
     "recovery": False,
     "branch": "none",
