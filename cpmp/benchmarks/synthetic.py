@@ -32,7 +32,7 @@ Make = Callable[[World, Sequence[Demonstration], int], Policy]
 """``make(world, demos, seed)``: a policy fitted on ``demos`` (or the world's own)."""
 
 
-def _sequencer(predictor: str = "klr", **options: str | bool | float) -> Make:
+def _sequencer(predictor: str = "klr", **options: str | bool) -> Make:
     """A :class:`ConcurrentSequencer` fitted with ``predictor`` and ``options``."""
 
     def make(world: World, demos: Sequence[Demonstration], seed: int) -> Policy:

@@ -58,10 +58,7 @@ class SequencerConfig:
         min_improvement: an increase of ``p`` smaller than this does not count as improving
             (``p(t) <= p(t - patience) + min_improvement``). Attractors converge
             asymptotically, so ``p`` keeps creeping up by tiny amounts; with a strict
-            comparison (``0``) such a transition might never fire. The default 3e-4 (the
-            paper's method keeps 1e-3, cpmp's default before issue #32): a slow attractor
-            makes ``p`` rise by less than 1e-3 per 50 ms well before the demonstrated switch
-            state, and a larger tolerance fires there early (docs/benchmarks.md).
+            comparison (``0``) such a transition might never fire.
         switch_rule: ``paper`` (fire when ``p(t) > threshold`` and ``p(t) <= p(t - patience) +
             min_improvement``, the paper's sentence read literally) or ``peak`` (the default:
             ``paper``, and also when ``p`` has fallen back from a peak above the threshold
@@ -134,7 +131,7 @@ class SequencerConfig:
 
     threshold: float = 0.65
     patience: float = 0.05
-    min_improvement: float = 3e-4
+    min_improvement: float = 1e-3
     switch_rule: str = "peak"
     coupling: str = "context"
     progress_margin: float | None = 0.2

@@ -77,14 +77,13 @@ CHECKPOINT = CheckpointSpec(
 )
 """The sequencer's checkpoint kind."""
 
-PAPER_OPTIONS: dict[str, str | bool | float] = {
+PAPER_OPTIONS: dict[str, str | bool] = {
     "feature_weighting": "none",
     "feature_scaling": "none",
     "path_noise": "none",
     "start_kernel": "shared",
     "start_rule": "independent",
     "switch_rule": "paper",
-    "min_improvement": 1e-3,
     "coupling": "none",
     "recovery": False,
     "branch": "none",
