@@ -115,8 +115,9 @@ class StartOption(NamedTuple):
         combination: variable -> initial MP (every variable for the ``learned`` and ``joint``
             rules, one for ``independent``).
         score: ``learned``: the log-probability of this demonstrated start at the first
-            state; otherwise ``Σ log(1 - φ)`` of its MPs' start heads: the log-likelihood that
-            each MP is at its beginning (higher is more likely; 0 is certain).
+            state; otherwise ``Σ log(1 - φ)`` of its MPs' nodes, φ read through their progress
+            predictors: the log-likelihood that each MP is at its beginning (higher is more
+            likely; 0 is certain).
     """
 
     combination: dict[str, str]

@@ -4,7 +4,8 @@ The initial MPs are chosen from the first feature vector alone, so the start dec
 scored on far more boxes than a rollout can afford. For each seed this records the main job's
 training demonstrations, draws ``n_boxes`` fresh boxes, and counts wrong starts of
 
-- cpmp's start rules (the defaults, the paper's, ``joint`` with the ``shared`` kernel), and
+- cpmp's start rules (the defaults, the paper's, ``joint`` on the nodes' own progress
+  predictors), and
 - classifiers fitted on the same training boxes: the nearest training box in the sequencer's
   scaled features, and classifiers handed the *true* box width x depth (an oracle of what the
   features encode): nearest neighbour, multinomial logistic regression, an RBF SVM and a decision
@@ -44,10 +45,11 @@ from cpmp.sim.simulation import Simulation
 SEQUENCER_RULES: dict[str, dict[str, str | bool]] = {
     "cpmp defaults": {},
     "paper (PAPER_OPTIONS)": dict(PAPER_OPTIONS),
-    "joint, isotropic start heads": {"start_rule": "joint", "start_kernel": "isotropic"},
-    "joint, shared kernel": {"start_rule": "joint", "start_kernel": "shared"},
+    "joint, shared kernel": {"start_rule": "joint"},
 }
-"""cpmp start rules scored, as fit options of :meth:`ConcurrentSequencer.fit`."""
+"""cpmp start rules scored, as fit options of :meth:`ConcurrentSequencer.fit`. ``joint,
+shared kernel`` reads the nodes' own progress predictors (the name of results/start.json's
+row, from when ``start_kernel`` chose between them and isotropic start heads)."""
 
 
 class StartRow(NamedTuple):

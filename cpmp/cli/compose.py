@@ -28,6 +28,7 @@ from omegaconf.errors import OmegaConfBaseException
 from cpmp.compare.settings import register_compare
 from cpmp.config.paths import CONF_PACKAGE, conf_dir
 from cpmp.config.predictors import REMOVED_OPTIONS
+from cpmp.config.sequencer import REMOVED_SEQUENCER_OPTIONS
 from cpmp.errors import ConfigError, CpmpError, CpmpFileError
 from cpmp.experiment.config import register_configs
 from cpmp.records import JsonValue
@@ -131,6 +132,9 @@ def _composition_error(
         removed = [r[leaf] for r in REMOVED_OPTIONS.values() if leaf in r]
         if group == "predictor" and removed:
             return ConfigError(f"{line}: removed option {name}: {removed[0]}; drop it")
+        if group == "sequencer" and leaf in REMOVED_SEQUENCER_OPTIONS:
+            why = REMOVED_SEQUENCER_OPTIONS[leaf][1]
+            return ConfigError(f"{line}: removed option {name}: {why}; drop it")
         others = [o.input_line for o in overrides if "." not in o.key_or_group]
         close = _close_key(name, config_name, others, config_dir, composed)
         if close is not None:  # a misspelt key: adding it with + would only fail later

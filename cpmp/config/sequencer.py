@@ -18,6 +18,13 @@ REMOVED_SEQUENCER_OPTIONS: dict[str, tuple[object, str]] = {
         "p = φ_current · (1 - φ_next) and the coupling's progress bounds decide when a node "
         "may be left",
     ),
+    "start_kernel": (
+        "shared",
+        "the isotropic start heads (extra predictor heads for the initial nodes, "
+        "start_kernel=isotropic) were removed with issue #32: the learned start rule (the "
+        "default) reads no φ, and the independent and joint start rules read the nodes' own "
+        "progress predictors, as start_kernel=shared (the default) did",
+    ),
 }
 """Sequencer options that no longer exist: name -> (the value at which the option did
 nothing, why it went). :func:`existing_sequencer_options` names them as removed rather than
@@ -34,8 +41,6 @@ COUPLINGS = ("none", "context")
 """Values of :attr:`SequencerConfig.coupling` (see :mod:`cpmp.sequencer.switching`)."""
 NONFINITE_POLICIES = ("hold", "raise")
 """Values of :attr:`SequencerConfig.nonfinite`."""
-START_KERNELS = ("shared", "isotropic")
-"""Values of :attr:`SequencerConfig.start_kernel`."""
 START_RULES = ("independent", "joint", "learned")
 """Values of :attr:`SequencerConfig.start_rule`."""
 BRANCHES = ("none", "learned")
@@ -48,7 +53,7 @@ class SequencerConfig:
 
     The defaults are cpmp's recommended configuration (``sequencer=coupled``); ``sequencer=paper``
     and :data:`cpmp.sequencer.PAPER_OPTIONS` set ``switch_rule``, ``coupling``, ``recovery``,
-    ``start_rule``, ``start_kernel``, ``branch`` and ``joint`` back to the paper's.
+    ``start_rule``, ``branch`` and ``joint`` back to the paper's.
 
     Attributes:
         threshold: a transition fires only when ``p = φ_current · (1 - φ_next) > threshold``
@@ -86,25 +91,20 @@ class SequencerConfig:
         rest_speed: features count as at rest below this speed, in training ranges per second.
         recovery_threshold: the least ``p`` a recovery transition needs (default 0: any
             switch the demonstrator made there; above 0, a stall below it gives up instead).
-        start_kernel: the φ the ``independent`` and ``joint`` start rules read (the ``learned``
-            rule reads none). ``shared`` (paper, and the default): the nodes' progress
-            predictors. ``isotropic``: extra heads for the initial nodes, fitted in the same
-            run on the same data but always with the isotropic kernel. Meant for
-            ``feature_weighting=path``, which de-weights features that stay constant along an
-            activation, such as box size; those are exactly what decides the strategy.
         start_rule: ``independent`` (paper): each graph starts at its own initial node of
-            highest entry probability. ``joint``: choose among the combinations of initial MPs
-            seen together in a demonstration the one with the highest summed log entry
-            probability, so graphs cannot start in a mixture of strategies that was never
-            demonstrated (the coupling the paper's discussion proposes). ``learned`` (cpmp's
-            default): the demonstrated combination that a multinomial logistic regression on
-            the demonstrations' first states gives the highest probability, on the features
-            weighted by how well they separate the demonstrated starts, so features that vary
-            at the start without deciding it (a home jitter, a distractor) cannot mislead it,
-            and without the ambient features (moving alike under every MP: a drift separates
-            a handful of first states by chance)
-            (:class:`cpmp.sequencer.branches.StartChoice`; the branch choice of a virtual
-            root). A sequencer built without it (not by a fit) uses ``joint``.
+            highest entry probability ``1 - φ`` (φ of the node's own progress predictor).
+            ``joint``: choose among the combinations of initial MPs seen together in a
+            demonstration the one with the highest summed log entry probability, so graphs
+            cannot start in a mixture of strategies that was never demonstrated (the coupling
+            the paper's discussion proposes). ``learned`` (cpmp's default): the demonstrated
+            combination that a multinomial logistic regression on the demonstrations' first
+            states gives the highest probability, on the features weighted by how well they
+            separate the demonstrated starts, so features that vary at the start without
+            deciding it (a home jitter, a distractor) cannot mislead it, and without the
+            ambient features (moving alike under every MP: a drift separates a handful of
+            first states by chance) (:class:`cpmp.sequencer.branches.StartChoice`; the branch
+            choice of a virtual root). A sequencer built without it (not by a fit) uses
+            ``joint``.
         nonfinite: what a tick with non-finite features or φ does: ``hold`` (keep every MP,
             note it once per run of such ticks) or ``raise`` (:class:`~cpmp.errors.DataError`).
             A non-finite φ never fires.
@@ -139,7 +139,6 @@ class SequencerConfig:
     stall_time: float = 1.0
     rest_speed: float = 0.01
     recovery_threshold: float = 0.0
-    start_kernel: str = "shared"
     start_rule: str = "learned"
     nonfinite: str = "hold"
     stale_time: float = 0.25
@@ -187,7 +186,6 @@ class SequencerConfig:
         for name, allowed in (
             ("switch_rule", SWITCH_RULES),
             ("coupling", COUPLINGS),
-            ("start_kernel", START_KERNELS),
             ("start_rule", START_RULES),
             ("nonfinite", NONFINITE_POLICIES),
             ("branch", BRANCHES),

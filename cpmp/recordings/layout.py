@@ -356,7 +356,7 @@ def start_markdown(
         score = (
             "log-probability of the learned start choice"
             if decision.rule == "learned"
-            else "Σ log(1 − φ) of the start heads (0: every MP surely at its beginning)"
+            else "Σ log(1 − φ) of the MPs' nodes (0: every MP surely at its beginning)"
         )
         lines += [
             f"Demonstrated starts; score: {score}.",
@@ -389,7 +389,7 @@ def start_markdown(
             lines += ["", f"The same in every start: {_combination_text(same)}."]
     else:
         lines += [
-            "Each variable's initial MPs, scored by log(1 − φ) of their start heads:",
+            "Each variable's initial MPs, scored by log(1 − φ) of their nodes:",
             "",
             "| | score | initial MP |",
             "|---|---|---|",

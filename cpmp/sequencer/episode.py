@@ -276,12 +276,12 @@ class SequencerEpisode:
         return cause
 
     def start(self, t: float, x: np.ndarray, phi: np.ndarray) -> dict[str, str]:
-        """Begin the episode: the start rule on every head's φ.
+        """Begin the episode: the start rule on the features and every node's φ.
 
         Args:
             t: the time [s].
             x: the features ``(d,)``.
-            phi: every predictor head's φ ``(H,)`` (the nodes', then the start heads).
+            phi: every node's φ ``(K,)``.
 
         Returns:
             Variable -> initial MP.
@@ -749,7 +749,7 @@ class SequencerEpisode:
         )
 
     def _initial_mps(self, t: float, x: np.ndarray, phi: np.ndarray) -> StartDecision:
-        """The start rule at ``t`` [s] on the features ``x (d,)`` or every head's φ ``(H,)``.
+        """The start rule at ``t`` [s] on the features ``x (d,)`` or every node's φ ``(K,)``.
 
         Returns:
             The MPs and the scores. See :meth:`~cpmp.sequencer.ConcurrentSequencer.reset`.
@@ -765,11 +765,11 @@ class SequencerEpisode:
             ]
             chosen = dict(start.combinations[int(np.argmax(prob))])
             return StartDecision(t, "learned", options, chosen)
-        start_index = model.nodes.start_index
+        index = model.nodes.index
         entry = np.clip(1.0 - phi, 1e-12, 1.0)
         if rule in ("joint", "learned") and model.initial_combinations:
             scores = [
-                sum(np.log(entry[start_index[(v, mp)]]) for v, mp in combo.items())
+                sum(np.log(entry[index[(v, mp)]]) for v, mp in combo.items())
                 for combo in model.initial_combinations
             ]
             options = [
@@ -781,10 +781,10 @@ class SequencerEpisode:
         active, options = {}, []
         for v in sorted(model.graphs):
             initial = sorted(model.graphs[v].initial_nodes)
-            entry_v = [1.0 - phi[start_index[(v, mp)]] for mp in initial]
+            entry_v = [1.0 - phi[index[(v, mp)]] for mp in initial]
             active[v] = initial[int(np.argmax(entry_v))]
             options += [
-                StartOption({v: mp}, float(np.log(entry[start_index[(v, mp)]]))) for mp in initial
+                StartOption({v: mp}, float(np.log(entry[index[(v, mp)]]))) for mp in initial
             ]
         return StartDecision(t, "independent", options, active)
 

@@ -37,7 +37,6 @@ from cpmp.sequencer.fit_data import (
     node_training_data,
     node_validation_data,
     nonfinite_parameters,
-    start_keys,
 )
 from cpmp.sequencer.glitches import LabelGlitch, repair_glitches
 from cpmp.sequencer.inputs import checked_demonstrations
@@ -161,8 +160,6 @@ def fit_parts(
     demos = split.train
     graphs = build_graphs(demos, config.variables)
     node_keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-    if config.sequencer.start_kernel == "isotropic":
-        node_keys += start_keys(graphs)
     all_x = np.concatenate([d.features for d in demos], axis=0)
     options = config.predictor_config
     dtype = resolved_dtype(options.dtype, len(all_x))

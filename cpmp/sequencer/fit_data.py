@@ -20,15 +20,8 @@ import torch
 from cpmp.data import Demonstration
 from cpmp.errors import DataError
 from cpmp.graph import SequenceGraph
-from cpmp.predictors import START_PREFIX, NodeData, ProgressPredictor
+from cpmp.predictors import NodeData, ProgressPredictor
 from cpmp.progress import expected_progress, path_length, path_trajectory, progress_labels
-
-
-def start_keys(graphs: Mapping[str, SequenceGraph]) -> list[tuple[str, str]]:
-    """Keys of the start heads: ``(variable, START_PREFIX + mp)`` per initial node."""
-    return [
-        (v, START_PREFIX + mp) for v in sorted(graphs) for mp in sorted(graphs[v].initial_nodes)
-    ]
 
 
 def initial_combinations(
@@ -64,7 +57,7 @@ def node_training_data(
     The targets are eq. 1, or normalised time for a predictor with ``labels = "time"``;
     ``subsample`` keeps every k-th sample (and the last) for the loss. Each activation is
     scaled, measured (:func:`cpmp.progress.path_trajectory`: denoised for ``path_denoised``
-    labels) and labelled once; a start head shares its node's.
+    labels) and labelled.
 
     With ``path_denoised`` labels (cpmp's eq. 1: the task's motion) the ``ambient (d,)``
     features (:func:`cpmp.sequencer.motion.ambient_features`) are held at each activation's
@@ -78,26 +71,21 @@ def node_training_data(
     ignored = None
     if denoised and ambient is not None and np.any(ambient):
         ignored = np.asarray(ambient, dtype=bool)
-    measured: dict[tuple[str, str], tuple[list[np.ndarray], ...]] = {}
     out = []
-    for v, key_mp in predictor.node_keys:
-        mp = key_mp.removeprefix(START_PREFIX)
-        if (v, mp) not in measured:
-            acts = graphs[v].activations[mp]
-            if not acts:
-                raise DataError(f"node {v}/{mp} has no activation data to train on")
-            scaled = [predictor.scaler.transform(a.features) for a in acts]
-            paths = [_held(path_trajectory(f, noise), ignored) for f in scaled]
-            targets = [progress_labels(p, a.time, kind) for p, a in zip(paths, acts, strict=True)]
-            measured[(v, mp)] = (scaled, paths, targets)
-        scaled, paths, targets = measured[(v, mp)]
+    for v, mp in predictor.node_keys:
+        acts = graphs[v].activations[mp]
+        if not acts:
+            raise DataError(f"node {v}/{mp} has no activation data to train on")
+        scaled = [predictor.scaler.transform(a.features) for a in acts]
+        paths = [_held(path_trajectory(f, noise), ignored) for f in scaled]
+        targets = [progress_labels(p, a.time, kind) for p, a in zip(paths, acts, strict=True)]
         keep = [_stride(len(f), subsample) for f in scaled]
         x = np.concatenate([f[k] for f, k in zip(scaled, keep, strict=True)])
         y = np.concatenate([y[k] for y, k in zip(targets, keep, strict=True)])
         dt = predictor.dtype_
         out.append(
             NodeData(
-                key=(v, key_mp),
+                key=(v, mp),
                 x=torch.as_tensor(x, dtype=dt),
                 target=torch.as_tensor(y, dtype=dt),
                 activations=scaled,
@@ -128,8 +116,8 @@ def node_validation_data(
     Every activation in ``demos`` of an MP the ``graphs`` have is scaled with the
     predictor's scaler and labelled by eq. 1 on its own (:func:`cpmp.progress.
     expected_progress` of the scaled features: the offline evaluation's label, whatever
-    labels the bank trains on); a start head shares its node's samples. Activations of
-    unknown MPs or variables are left out, so a node may get no rows.
+    labels the bank trains on). Activations of unknown MPs or variables are left out, so a
+    node may get no rows.
 
     Args:
         graphs: the fit's sequence graphs.
@@ -137,7 +125,7 @@ def node_validation_data(
         demos: the validation demonstrations.
 
     Returns:
-        One :class:`~cpmp.predictors.NodeData` per head (``x (P, d)``, ``target (P,)``).
+        One :class:`~cpmp.predictors.NodeData` per node (``x (P, d)``, ``target (P,)``).
     """
     samples: dict[tuple[str, str], tuple[list[np.ndarray], list[np.ndarray]]] = {}
     for demo in demos:
@@ -153,11 +141,11 @@ def node_validation_data(
                 y.append(expected_progress(x[-1], seg.time))
     out = []
     dt, d = predictor.dtype_, predictor.n_features
-    for v, key_mp in predictor.node_keys:
-        x, y = samples.get((v, key_mp.removeprefix(START_PREFIX)), ([], []))
+    for v, mp in predictor.node_keys:
+        x, y = samples.get((v, mp), ([], []))
         out.append(
             NodeData(
-                key=(v, key_mp),
+                key=(v, mp),
                 x=torch.as_tensor(np.concatenate(x) if x else np.zeros((0, d)), dtype=dt),
                 target=torch.as_tensor(np.concatenate(y) if y else np.zeros(0), dtype=dt),
             )
@@ -185,8 +173,6 @@ def demo_progress(
     out = [{v: np.zeros(n) for v in graphs} for n in n_samples]
     for node in data:
         v, mp = node.key
-        if mp.startswith(START_PREFIX):
-            continue  # a start head shares its node's labels
         for a, labels in zip(graphs[v].activations[mp], node.labels, strict=True):
             out[a.demo][v][a.start : a.stop] = labels
     return out
@@ -327,8 +313,6 @@ def fit_warnings(predictor: ProgressPredictor, data: Sequence[NodeData]) -> list
     with torch.no_grad():
         for i, node in enumerate(data):
             v, mp = node.key
-            if mp.startswith(START_PREFIX):
-                continue  # the same activations as the node itself
             name = f"node {v}/{mp}"
             length = sum(path_length(a) for a in node.activations)
             if length < DEGENERATE_PATH:

@@ -20,9 +20,7 @@ import numpy as np
 from cpmp.config import SequencerConfig
 from cpmp.errors import ConfigError
 from cpmp.graph import SequenceGraph
-from cpmp.predictors import START_PREFIX
 from cpmp.sequencer.branches import BranchChoices
-from cpmp.sequencer.fit_data import start_keys
 from cpmp.sequencer.switching import Coupling
 
 Node = tuple[str, str]
@@ -45,19 +43,17 @@ class Successors(NamedTuple):
 class NodeIndex:
     """Where each node's φ sits in the predictor's output, and the successor tables.
 
-    The transition rule reads these every tick; built once per sequencer (:meth:`build`).
+    The transition rule reads these every tick, and the start rules read the initial nodes'
+    φ at the start; built once per sequencer (:meth:`build`).
 
     Attributes:
         keys: (variable, MP) of every graph node, in the order of the φ columns.
         index: (variable, MP) -> its φ column.
-        start_index: (variable, MP) -> the column whose ``1 - φ`` is the MP's entry
-            probability at the start (its start head, or its node's column without heads).
         successors: (variable, MP) -> its :class:`Successors`.
     """
 
     keys: list[Node]
     index: dict[Node, int]
-    start_index: dict[Node, int]
     successors: dict[Node, Successors]
 
     @classmethod
@@ -66,8 +62,7 @@ class NodeIndex:
     ) -> NodeIndex:
         """The index of ``graphs``' nodes in a predictor with heads ``predictor_keys``.
 
-        The heads are the graph nodes in order, then optionally one start head per initial
-        node (:func:`~cpmp.sequencer.fit_data.start_keys`).
+        The heads are the graph nodes, in order.
 
         Args:
             graphs: variable -> its sequence graph.
@@ -80,13 +75,9 @@ class NodeIndex:
             ConfigError: the predictor's heads are not the graphs' nodes.
         """
         keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-        extra = list(predictor_keys[len(keys) :])
-        if list(predictor_keys[: len(keys)]) != keys or extra not in ([], start_keys(graphs)):
+        if [tuple(k) for k in predictor_keys] != keys:
             raise ConfigError("the predictor's nodes do not match the sequence graphs' nodes")
         index = {key: i for i, key in enumerate(keys)}
-        start_index = {
-            (v, mp[len(START_PREFIX) :]): len(keys) + i for i, (v, mp) in enumerate(extra)
-        } or index
         successors = {
             (v, mp): Successors(
                 graphs[v].successors(mp),
@@ -94,13 +85,13 @@ class NodeIndex:
             )
             for v, mp in keys
         }
-        return cls(keys, index, start_index, successors)
+        return cls(keys, index, successors)
 
     def phi_dict(self, phi: np.ndarray | list[float]) -> dict[str, dict[str, float]]:
-        """Per-node φ ``(K,)`` (start heads after them ignored) as variable -> MP -> φ."""
+        """Per-node φ ``(K,)`` as variable -> MP -> φ."""
         out: dict[str, dict[str, float]] = {v: {} for v, _ in self.keys}
         values = phi.tolist() if isinstance(phi, np.ndarray) else phi
-        for (v, mp), value in zip(self.keys, values[: len(self.keys)], strict=True):
+        for (v, mp), value in zip(self.keys, values, strict=True):
             out[v][mp] = value
         return out
 

@@ -81,7 +81,6 @@ PAPER_OPTIONS: dict[str, str | bool] = {
     "feature_weighting": "none",
     "feature_scaling": "none",
     "path_noise": "none",
-    "start_kernel": "shared",
     "start_rule": "independent",
     "switch_rule": "paper",
     "coupling": "none",

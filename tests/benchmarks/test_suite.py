@@ -32,8 +32,7 @@ def test_bench_sequencer_prints_json(capsys):
     out = json.loads(capsys.readouterr().out)
     row = out["predictors"]["klr"]
     assert out["n_features"] == 3 and row["n_nodes"] == 6
-    # 6 synthetic demos, stated support rule: 108 for the 6 nodes (the default learned start
-    # fits no start heads; start_kernel=isotropic would add 51 for the 3 initial nodes)
+    # 6 synthetic demos, stated support rule: 108 for the 6 nodes
     assert row["n_support_total"] == 108
     assert row["step_ms_mean"] > 0 and row["state_bytes"] > 0
 

@@ -124,6 +124,11 @@ LIGHT_CASES = [
         ["predictor=klr_sparse", "predictor.method=l1"],
         ["predictor.method=l1: removed option predictor.method", "(method: l1) was removed"],
     ),
+    (
+        "experiment",
+        ["sequencer.start_kernel=isotropic"],
+        ["removed option sequencer.start_kernel", "isotropic start heads", "were removed"],
+    ),
     ("train", ["data.pth=x.h5"], ["data.pth=x.h5", "'data.path'"]),
     ("evaluate", ["checkpont=m.pt"], ["checkpont=m.pt", "'checkpoint'"]),
     ("collect", ["n_demo=3"], ["n_demo=3", "'n_demos'"]),

@@ -189,6 +189,19 @@ def test_a_checkpoint_from_before_min_exit_was_removed_loads_as_before(payload, 
     assert loaded.config == ConcurrentSequencer.load(_saved(payload, tmp_path)).config
 
 
+def test_a_checkpoint_from_before_start_kernel_was_removed_loads_as_before(payload, tmp_path):
+    """``start_kernel: shared`` (its default) read the nodes' own predictors, as every
+    sequencer now does: such a checkpoint loads unchanged."""
+    path = tmp_path / "old.pt"
+    save_checkpoint(path, _with_options(payload, start_kernel="shared"))
+    loaded = ConcurrentSequencer.load(path)
+    assert not hasattr(loaded.config, "start_kernel")
+    now = ConcurrentSequencer.load(_saved(payload, tmp_path))
+    assert loaded.config == now.config
+    x = np.zeros(len(now.feature_names))
+    np.testing.assert_array_equal(loaded.progress(x), now.progress(x))
+
+
 def _saved(payload, tmp_path):
     path = tmp_path / "now.pt"
     torch.save(payload, path)
@@ -200,6 +213,11 @@ def _saved(payload, tmp_path):
     [
         ({"min_exit": 0.9}, r"removed sequencer option\(s\) min_exit .*refit the checkpoint"),
         ({"switch_rule": "plateau"}, r"'plateau'.*plateau rule .* was removed .* use peak"),
+        (
+            {"start_kernel": "isotropic"},
+            r"removed sequencer option\(s\) start_kernel .*isotropic start heads .* were "
+            r"removed .*refit the checkpoint",
+        ),
     ],
 )
 def test_a_checkpoint_that_used_a_removed_option_is_refused_by_name(

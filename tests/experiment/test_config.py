@@ -123,7 +123,7 @@ def test_sequencer_configs_mean_what_they_say():
     paper = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=paper"]).sequencer))
     assert (paper.threshold, paper.patience, paper.start_rule) == (0.65, 0.05, "independent")
     coupled = SequencerConfig(**to_dict(compose_cfg("experiment", ["sequencer=coupled"]).sequencer))
-    assert (coupled.start_rule, coupled.start_kernel) == ("learned", "shared")
+    assert coupled.start_rule == "learned"
     assert (coupled.coupling, coupled.recovery) == ("context", True)
     assert (paper.switch_rule, coupled.switch_rule) == ("paper", "peak")
     assert coupled.threshold == paper.threshold

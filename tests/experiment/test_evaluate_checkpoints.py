@@ -92,20 +92,17 @@ def test_evaluate_reads_every_checkpoint_kind(tmp_path, demo_file, name, overrid
 
 def test_paper_and_cpmp_klr_are_told_apart_in_log_and_report(tmp_path, demo_file, caplog):
     """``predictor=klr`` and ``predictor=paper`` are both kind ``klr``: the train log and
-    evaluation.md name the feature weighting, and the log counts start heads (fitted with
-    ``start_kernel=isotropic``) apart from the graphs' nodes (6 nodes in the synthetic task)."""
+    evaluation.md name the feature weighting, and the log counts the graphs' nodes (6 in the
+    synthetic task)."""
     data = f"data.path={demo_file}"
-    for preset, weighting, heads in (("klr", "path", False), ("paper", "none", True)):
+    for preset, weighting in (("klr", "path"), ("paper", "none")):
         run = tmp_path / preset
         run.mkdir()
         overrides = [data, f"predictor={preset}"]
-        overrides += ["sequencer.start_kernel=isotropic"] if heads else []
         with caplog.at_level(logging.INFO, logger="cpmp"):
             checkpoint = train_from_file(compose_cfg("train", overrides), run)
         fitted = [r.getMessage() for r in caplog.records if r.getMessage().startswith("fitted")]
-        nodes = f"fitted klr ({weighting} weighting) on 6 nodes"
-        assert fitted[-1].startswith(nodes + (" + " if heads else " in "))
-        assert ("start heads" in fitted[-1]) == heads
+        assert fitted[-1].startswith(f"fitted klr ({weighting} weighting) on 6 nodes in ")
         cfg = compose_cfg("evaluate", [data, f"checkpoint={checkpoint}"])
         evaluate_checkpoint(cfg, run)
         assert f"`klr` (feature weighting `{weighting}`" in (run / "evaluation.md").read_text()

@@ -24,7 +24,7 @@ from cpmp.predictors.klr import (
     pool_supports,
 )
 from cpmp.predictors.training import fit_predictor
-from cpmp.sequencer.fit_data import node_training_data, start_keys
+from cpmp.sequencer.fit_data import node_training_data
 
 
 def _bank(demos, kind="klr", **attributes):
@@ -35,7 +35,6 @@ def _bank(demos, kind="klr", **attributes):
     config = FitConfig.from_options(kind)
     graphs = build_graphs(demos, config.variables)
     keys = [(v, mp) for v in sorted(graphs) for mp in graphs[v].ordered_nodes()]
-    keys += start_keys(graphs)
     bank = PREDICTORS[kind](keys, len(demos[0].feature_names), config.predictor_config)
     for name, value in attributes.items():
         setattr(bank, name, value)

@@ -3,8 +3,6 @@ of a sparsity path, its level chosen on validation data, or fixed; and the L1 va
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import torch
@@ -29,13 +27,7 @@ def validated(train_demos, test_demos):
         seed=0,
         logger=None,
         validation=test_demos,
-        start_kernel="isotropic",  # start heads (for start_rule=joint), distilled
     )
-
-
-@pytest.fixture(scope="module")
-def klr_count(fit_on_train):
-    return fit_on_train("klr", start_kernel="isotropic").fit_summary.n_support_total
 
 
 def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_demos):
@@ -63,73 +55,17 @@ def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_
     assert progress_errors(activation_progress(validated, test_demos))["mae"] < MAE_BOUND
 
 
-def _split_counts(counts: dict[str, int]) -> tuple[int, dict[str, int]]:
-    """The graph nodes' supports and the start heads' counts of a ``support_counts``."""
-    start = {k: n for k, n in counts.items() if k.split("/", 1)[1].startswith("start:")}
-    return sum(counts.values()) - sum(start.values()), start
-
-
-def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, klr_count):
+def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, fitted_klr):
     summary = validated.fit_summary
-    klr = fit_on_train("klr", start_kernel="isotropic")
-    klr_graph, klr_start = _split_counts(klr.fit_summary.support_counts)
-    assert (
-        summary.predictor_facts["n_support_rule"] == klr_graph
-    )  # the candidates are the fixed rule's
-    assert summary.predictor_facts["n_support_graph"] <= 0.25 * klr_graph  # the largest level
+    klr_count = fitted_klr.fit_summary.n_support_total
+    # the candidates are the fixed rule's
+    assert summary.predictor_facts["n_support_rule"] == klr_count
+    assert summary.n_support_total == sum(summary.support_counts.values())
+    assert summary.n_support_total <= 0.25 * klr_count  # the largest level
+    assert summary.predictor_facts["n_support_graph"] == summary.n_support_total
     assert all(n >= 1 for n in summary.support_counts.values())
-    # the start heads are distilled to a quarter of the fixed rule's supports
-    graph, start = _split_counts(summary.support_counts)
-    assert start == {k: max(1, int(0.25 * n)) for k, n in klr_start.items()}
-    assert summary.predictor_facts["n_support_start"] == sum(start.values())
-    assert summary.n_support_total == graph + sum(start.values()) <= 0.25 * klr_count
     unvalidated = fit_on_train("klr_sparse")
-    assert unvalidated.fit_summary.predictor_facts["n_support_graph"] <= 0.25 * klr_graph
-
-
-def test_distilled_start_heads_start_as_the_full_ones(train_demos, test_demos, fit_on_train):
-    distilled = fit_on_train("klr_sparse", start_kernel="isotropic")
-    full = ConcurrentSequencer.fit(
-        train_demos, "klr_sparse", seed=0, logger=None, start_share=1.0, start_kernel="isotropic"
-    )
-    _, rule_start = _split_counts(full.fit_summary.support_counts)
-    _, start = _split_counts(distilled.fit_summary.support_counts)
-    assert start == {k: max(1, int(0.25 * n)) for k, n in rule_start.items()}
-    assert "start_distillation" not in full.fit_summary.predictor_facts
-    error = distilled.fit_summary.predictor_facts["start_distillation"]["max_logit_error"]
-    assert 0.0 < error < math.inf  # measured: 0.78 (logits of magnitude up to about 8)
-    last = distilled.predictor.describe_path().splitlines()[-1]
-    assert last.startswith(f"start heads distilled to {sum(start.values())} supports")
-    assert f"{error:.4f}" in last
-    one, two = distilled.predictor, full.predictor
-    heads = [i for i, (_, mp) in enumerate(one.node_keys) if mp.startswith("start:")]
-    graph = [i for i in range(one.n_nodes) if i not in heads]
-    # the graph nodes are the same model; the start heads keep a subset of their points
-    x = torch.as_tensor(np.concatenate([d.features for d in test_demos]))
-    with torch.no_grad():
-        torch.testing.assert_close(one(x)[:, graph], two(x)[:, graph], rtol=0, atol=1e-12)
-    for i in heads:
-        kept = one.support[i, one.support_mask[i]]
-        rule = two.support[i, two.support_mask[i]]
-        assert float(torch.cdist(kept, rule).min(1).values.max()) < 1e-12
-    # at the held-out demonstrations' starts: φ within 0.2 (measured 0.12), the same initial
-    # MPs (6 of 6; relay with 3 demonstrations: 5 of 6)
-    starts = torch.as_tensor(np.stack([d.features[0] for d in test_demos]))
-    with torch.no_grad():
-        phi_one, phi_two = one(starts)[:, heads], two(starts)[:, heads]
-    assert float((phi_one - phi_two).abs().max()) < 0.2
-    for d in test_demos:
-        assert distilled.reset(float(d.time[0]), d.features[0]) == full.reset(
-            float(d.time[0]), d.features[0]
-        )
-
-
-def test_without_start_heads_nothing_is_distilled(fit_on_train):
-    summary = fit_on_train("klr_sparse", start_kernel="shared").fit_summary
-    assert (
-        summary.predictor_facts["n_support_start"] == 0
-        and "start_distillation" not in summary.predictor_facts
-    )
+    assert unvalidated.fit_summary.n_support_total <= 0.25 * klr_count
 
 
 def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit_on_train):
@@ -188,9 +124,9 @@ def test_same_seed_same_model(fit_on_train, train_demos):
 def test_summary_describes_the_path(validated):
     text = validated.predictor.describe_path()
     assert "<- chosen" in text and "chosen on validation" in text
-    # a header, one line per point, the refinement, the start heads' distillation
-    assert text.count("\n") == len(validated.fit_summary.predictor_facts["sparsity_path"]) + 2
-    assert "then refined" in text and "start heads distilled" in text
+    # a header, one line per point, the refinement
+    assert text.count("\n") == len(validated.fit_summary.predictor_facts["sparsity_path"]) + 1
+    assert text.splitlines()[-1].startswith("then refined")
 
 
 @pytest.mark.parametrize(
@@ -261,18 +197,11 @@ def test_refinement_moves_the_supports_and_lowers_the_loss(fit_on_train, validat
         == moved.fit_summary.predictor_facts["sparsity_path"]
     )
     assert kept.fit_summary.support_counts == moved.fit_summary.support_counts
-    graph = [
-        i for i, (_, mp) in enumerate(moved.predictor.node_keys) if not mp.startswith("start:")
-    ]
     a, b = kept.predictor, moved.predictor
-    mask = a.support_mask[graph]
-    assert not torch.allclose(a.support[graph][mask], b.support[graph][mask])
-    assert torch.count_nonzero(b.log_feature_scale[graph]) > 0
+    mask = a.support_mask
+    assert not torch.allclose(a.support[mask], b.support[mask])
+    assert torch.count_nonzero(b.log_feature_scale) > 0
     assert torch.count_nonzero(a.log_feature_scale) == 0
-    # the start heads are neither selected nor refined
-    heads = [i for i in range(a.n_nodes) if i not in graph]
-    assert torch.equal(a.support[heads], b.support[heads])
-    assert torch.count_nonzero(b.log_feature_scale[heads]) == 0
 
 
 def test_refined_model_predicts_held_out_progress(validated, fit_on_train, test_demos):

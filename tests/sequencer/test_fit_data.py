@@ -11,7 +11,6 @@ from cpmp import progress
 from cpmp.data.augment import add_feature_noise
 from cpmp.data.demonstration import Demonstration
 from cpmp.errors import ConfigError
-from cpmp.predictors import START_PREFIX
 from cpmp.progress import demo_labels, denoise_trajectory, tv_denoise
 from cpmp.sequencer.fit_data import _stride, demo_progress, initial_combinations, node_training_data
 from cpmp.sequencer.sequencer import ConcurrentSequencer
@@ -73,13 +72,8 @@ def test_one_sample_label_glitch_is_reported(train_demos):
 def test_node_training_data_follows_the_predictor_node_order(fitted_klr, train_demos):
     data = node_training_data(fitted_klr.graphs, fitted_klr.predictor)
     assert [node.key for node in data] == fitted_klr.predictor.node_keys
-    by_key = {node.key: node for node in data}
     for node in data:
         v, mp = node.key
-        if mp.startswith(START_PREFIX):  # a start head trains on its node's own samples
-            own = by_key[(v, mp.removeprefix(START_PREFIX))]
-            assert torch.equal(node.x, own.x) and torch.equal(node.target, own.target)
-            continue
         acts = fitted_klr.graphs[v].activations[mp]
         assert len(node.activations) == len(acts)
         assert node.x.shape == (sum(a.n_samples for a in acts), len(fitted_klr.feature_names))
@@ -98,12 +92,10 @@ def noisy_demos(train_demos):
 
 
 def test_each_activation_is_denoised_once_per_fit(noisy_demos, monkeypatch):
-    """node_training_data denoises every activation once (a start head shares its node's)
-    and hands the result on as ``paths``; with path_noise none the paths are the scaled
-    activations themselves."""
-    seq = ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None, start_kernel="isotropic")
+    """node_training_data denoises every activation once and hands the result on as
+    ``paths``; with path_noise none the paths are the scaled activations themselves."""
+    seq = ConcurrentSequencer.fit(noisy_demos, "klr", seed=0, logger=None)
     graphs, predictor = seq.graphs, seq.predictor
-    assert any(mp.startswith(START_PREFIX) for _, mp in predictor.node_keys)
     denoised = []
 
     def counting_denoise(x: np.ndarray) -> np.ndarray:

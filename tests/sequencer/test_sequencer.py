@@ -98,6 +98,12 @@ def test_below_threshold_never_switches():
         ({"switch_rule": "plateau"}, r"'plateau' \(the plateau rule .* was removed .* use peak"),
         ({"min_exit": 0.9}, r"removed sequencer option\(s\) min_exit .*drop them"),
         ({"min_exit": 0.0}, r"removed sequencer option\(s\) min_exit"),
+        (
+            {"start_kernel": "isotropic"},
+            r"removed sequencer option\(s\) start_kernel \(start_kernel: the isotropic start "
+            r"heads .* were removed .*drop them$",
+        ),
+        ({"start_kernel": "shared"}, r"removed sequencer option\(s\) start_kernel .*learned start"),
     ],
 )
 def test_a_removed_option_is_named_as_removed(train_demos, options, message):
@@ -331,22 +337,14 @@ def test_fit_records_initial_combinations_and_checkpoint_keeps_them(fit_on_train
         SequencerConfig(start_rule="vote")
 
 
-def test_isotropic_start_heads(fit_on_train, train_demos, tmp_path):
-    seq = fit_on_train("klr", feature_weighting="path", start_kernel="isotropic")
-    n = len(seq.node_keys)
-    heads = seq.predictor.node_keys[n:]
-    assert heads == [("a", "start:a_go"), ("b", "start:b_go"), ("b", "start:b_wait")]
-    scale = seq.predictor.feature_scale
-    assert torch.all(scale[n:] == 1.0)  # start heads keep the isotropic kernel
-    assert not torch.all(scale[:n] == 1.0)  # the nodes' own heads are path-weighted
-    x0 = train_demos[1].features[0]
-    assert seq.progress(x0).shape == (n,)  # the nodes only; the start heads are internal
-    assert seq.predictor(torch.as_tensor(x0)).shape == (n + 3,)
-    assert set(seq.predict_progress(x0)["b"]) == {"b_go", "b_wait", "b_back"}
-    assert seq.reset(0.0, x0) == {"a": "a_go", "b": "b_go"}  # demo 1 is a parallel demo
-    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "m.pt"))
-    assert np.array_equal(loaded.progress(x0), seq.progress(x0))
-    assert loaded.reset(0.0, x0) == seq.reset(0.0, x0)
+def test_the_predictor_has_one_head_per_graph_node(fit_on_train, train_demos):
+    """Whatever the start rule, the bank's heads are the graph nodes: the ``independent`` and
+    ``joint`` rules read the nodes' own progress predictors."""
+    for rule in ("independent", "joint", "learned"):
+        seq = fit_on_train("klr", start_rule=rule)
+        assert seq.predictor.node_keys == seq.node_keys
+        x0 = train_demos[1].features[0]
+        assert seq.predictor(torch.as_tensor(x0)).shape == (len(seq.node_keys),)
 
 
 def test_synthetic_evaluate_classifies_outcomes(fitted_klr):

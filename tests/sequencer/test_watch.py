@@ -84,11 +84,11 @@ def started(seq, **options) -> SequencerEpisode:
     """An episode of ``seq`` (with ``options``) started on a and b both ``go``."""
     model = seq.with_config(start_rule="joint", **options).transition_model
     nodes = model.nodes
-    heads = np.full(len(nodes.keys) + len(nodes.start_index), 0.5)
-    for key, column in nodes.start_index.items():
-        heads[column] = 0.01 if key in (("a", "a_go"), ("b", "b_go")) else 0.99
+    phi = np.full(len(nodes.keys), 0.99)
+    for key in (("a", "a_go"), ("b", "b_go")):
+        phi[nodes.index[key]] = 0.01
     episode = SequencerEpisode(model)
-    assert episode.start(0.0, np.zeros(3), heads) == {"a": "a_go", "b": "b_go"}
+    assert episode.start(0.0, np.zeros(3), phi) == {"a": "a_go", "b": "b_go"}
     return episode
 
 
