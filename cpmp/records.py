@@ -436,15 +436,15 @@ class FitReport:
         seconds: the wall time of the predictor's fit [s].
         solver: how the parameters were fitted: ``adam``, ``newton`` or ``lbfgs``.
         kind: the predictor's kind (``klr``, ``mlp``, ...).
-        n_nodes: the bank's heads (graph nodes and start heads).
+        n_nodes: the bank's heads, one per graph node.
         n_parameters: the bank's parameter entries (trainable or not).
         support_counts: kernel banks: ``"variable/mp"`` -> its support points; ``None`` for
             the others.
         n_support_total: kernel banks: the support points of all heads; ``None`` otherwise.
         predictor_facts: the rest of the predictor's own facts
             (:meth:`~cpmp.predictors.ProgressPredictor.summary`, in its order): e.g.
-            ``hidden`` (mlp), ``window`` (dtw), ``sparsity_path``, ``sparsity_level``,
-            ``n_support_graph`` (klr_sparse).
+            ``hidden`` (mlp), ``window`` (dtw), ``sparsity_path``, ``sparsity_level``
+            (klr_sparse).
         newton: convex fits by Newton steps: how they ended; ``None`` for the others.
         n_demos: the training demonstrations (validation ones taken out).
         label_glitches: the label glitches repaired before the graphs were built, each as

@@ -9,7 +9,7 @@ time (``fit_s``, Lightning already imported: the fit imports it lazily, once per
 ``predictor_s``: the predictor's part), its peak resident memory
 (``peak_rss_gb``: the process's ``ru_maxrss`` after the fit, imports and demonstrations
 included; ``base_rss_gb`` the same before the fit), the training samples, the support points
-(``supports``, start heads included), the held-out progress MAE on ``held_out``
+(``supports``), the held-out progress MAE on ``held_out``
 demonstrations of seed ``HELD_OUT_SEED + s`` and the closed-loop completions C of ``episodes``
 episodes of that seed. A process per size keeps one fit's memory out of the next one's peak.
 

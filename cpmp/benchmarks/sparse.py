@@ -13,14 +13,12 @@ and on the simulator (``sim``: the main job's full-run demonstrations of seed ``
 Both predictors are fitted the same way, without validation demonstrations (as
 ``cpmp-compare`` fits them): ``klr_sparse`` then chooses its level on held-out activations of
 its training demonstrations, so the held-out demonstrations it is scored on played no part in
-its fit. Per world, D and seed: the fit time (the faster of ``repeats`` fits), supports
-(those a control tick evaluates, the graph nodes', and all of them with the start heads,
-which are evaluated once per episode and which ``klr_sparse`` distils to ``start_share`` of
-the fixed rule's), held-out MAE, the tick cost (the predictor's call on one feature vector for
-the graph nodes, as :meth:`ConcurrentSequencer.step` makes it, and on a batch of
-:data:`BATCH` vectors as batched rollouts make it, and a whole ``step()``, each the mean over
-one held-out demonstration replayed open loop) and C; then the ratios sparse / default (C:
-the difference). The *tick floor* is the single-vector call of the default bank stripped to
+its fit. Per world, D and seed: the fit time (the faster of ``repeats`` fits), supports,
+held-out MAE, the tick cost (the predictor's call on one feature vector, as
+:meth:`ConcurrentSequencer.step` makes it, and on a batch of :data:`BATCH` vectors as
+batched rollouts make it, and a whole ``step()``, each the mean over one held-out
+demonstration replayed open loop) and C; then the ratios sparse / default (C: the
+difference). The *tick floor* is the single-vector call of the default bank stripped to
 one support per node over its full call: the call's fixed cost (input checks, scaling, a dozen
 small tensor calls) over its whole cost, the least tick ratio that any sparsity can reach.
 Written as JSON (atomically); nothing here asserts a number.
@@ -239,8 +237,8 @@ def tick_costs(seq: ConcurrentSequencer, demo: Demonstration) -> dict[str, float
     """Mean wall time [ms] per tick over ``demo`` replayed open loop.
 
     Returns:
-        ``predictor_ms``: the predictor's call on one feature vector (the graph nodes' heads,
-        as a control tick evaluates them); ``floor_ms``: the same call after the bank is
+        ``predictor_ms``: the predictor's call on one feature vector (as a control tick
+        evaluates it); ``floor_ms``: the same call after the bank is
         stripped (on a copy) to one support per node, the call's fixed cost, below which no
         sparsity brings ``predictor_ms``; ``batch_ms``: on :data:`BATCH` vectors at once
         (the demonstration's rows, repeated as needed); ``step_ms``: a whole
@@ -289,10 +287,9 @@ def measure(
     """Fit ``kind`` on ``demos`` and measure it (see the module docstring).
 
     Returns:
-        The measures: ``fit_s`` [s], ``supports`` (the graph nodes'), ``supports_all``
-        (start heads too), held-out ``mae``, the tick costs of :func:`tick_costs` [ms] and
-        ``complete`` (C); and for ``klr_sparse`` the fit's ``level``, ``gamma_scale`` and
-        ``validation`` (empty for the others).
+        The measures: ``fit_s`` [s], ``supports``, held-out ``mae``, the tick costs of
+        :func:`tick_costs` [ms] and ``complete`` (C); and for ``klr_sparse`` the fit's
+        ``level``, ``gamma_scale`` and ``validation`` (empty for the others).
     """
     options = dict(settings.options) if kind == "klr_sparse" else {}
     times = []
@@ -303,8 +300,7 @@ def measure(
     report = seq.fit_summary
     row: dict[str, float] = {
         "fit_s": min(times),
-        "supports": sum(seq.predictor.support_counts()[f"{v}/{m}"] for v, m in seq.node_keys),
-        "supports_all": int(report.n_support_total),
+        "supports": int(report.n_support_total),
         "mae": float(progress_errors(activation_progress(seq, world.test))["mae"]),
         **tick_costs(seq, world.test[0]),
         "complete": world.complete(seq),
@@ -324,13 +320,12 @@ def ratios(
     """Sparse / default per measure (``complete``: sparse − default) and the targets met.
 
     Returns:
-        ``mae``, ``supports``, ``supports_all``, ``tick``, ``tick_floor``, ``batch``,
-        ``step``, ``fit``, ``complete``, and ``met``: each target of :data:`TARGETS` met.
+        ``mae``, ``supports``, ``tick``, ``tick_floor``, ``batch``, ``step``, ``fit``,
+        ``complete``, and ``met``: each target of :data:`TARGETS` met.
     """
     out = {
         "mae": sparse["mae"] / default["mae"],
         "supports": sparse["supports"] / default["supports"],
-        "supports_all": sparse["supports_all"] / default["supports_all"],
         "tick": sparse["predictor_ms"] / default["predictor_ms"],
         "tick_floor": default["floor_ms"] / default["predictor_ms"],
         "batch": sparse["batch_ms"] / default["batch_ms"],
@@ -392,7 +387,7 @@ def summarise(rows: Sequence[SparseRow]) -> dict[str, dict[str, dict[str, JsonVa
         and ``ratios`` (:func:`ratios` of the means).
     """
     out: dict[str, dict[str, dict[str, JsonValue]]] = {}
-    keys = ("fit_s", "supports", "supports_all", "mae", "predictor_ms", "floor_ms", "batch_ms")
+    keys = ("fit_s", "supports", "mae", "predictor_ms", "floor_ms", "batch_ms")
     keys += ("step_ms", "complete")
     for name in dict.fromkeys(r.world for r in rows):
         for d in dict.fromkeys(r.D for r in rows if r.world == name):
@@ -414,7 +409,7 @@ def _line(row: SparseRow) -> str:
     r = row.ratios
     return (
         f"{row.world} D{row.D} seed {row.seed}: mae x{r['mae']:.2f}, supports "
-        f"x{r['supports']:.2f} (all x{r['supports_all']:.2f}), tick x{r['tick']:.2f} (floor "
+        f"x{r['supports']:.2f}, tick x{r['tick']:.2f} (floor "
         f"x{r['tick_floor']:.2f}, batch "
         f"x{r['batch']:.2f}, step x{r['step']:.2f}), fit "
         f"x{r['fit']:.2f}, C {row.sparse['complete']} vs {row.default['complete']}"
@@ -425,13 +420,15 @@ def markdown(result: Mapping[str, JsonValue]) -> str:
     """The pooled ratios as a Markdown table (a target missed is marked ``!``).
 
     ``tick floor x``: the default bank's call stripped to one support per node over its
-    call: with this call path, the least tick ratio any sparsity can reach.
+    call: with this call path, the least tick ratio any sparsity can reach. A result written
+    while the sequencer could add start heads (before issue #32 removed them) also has their
+    supports counted in (``supports_all``): its table keeps that column, ``all supports x``.
     """
-    lines = [
-        "| world | D | MAE x | supports x | all supports x | tick x | tick floor x | batch tick x "
-        "| step x | fit x | C sparse - default |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-    ]
+    summaries = [s for by_d in result["summary"].values() for s in by_d.values()]
+    with_all = any("supports_all" in s["ratios"] for s in summaries)
+    columns = ["world", "D", "MAE x", "supports x", *(["all supports x"] * with_all)]
+    columns += ["tick x", "tick floor x", "batch tick x", "step x", "fit x", "C sparse - default"]
+    lines = ["| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns)]
     for name, by_d in result["summary"].items():
         for d, s in by_d.items():
             r, met = s["ratios"], s["ratios"]["met"]
@@ -439,13 +436,13 @@ def markdown(result: Mapping[str, JsonValue]) -> str:
             def cell(key: str, fmt: str, r: Mapping[str, JsonValue] = r, met: dict = met) -> str:
                 return format(r[key], fmt) + ("" if met.get(key, True) else " !")
 
-            lines.append(
-                f"| {name} | {d} | {cell('mae', '.2f')} | {cell('supports', '.2f')} | "
-                f"{r['supports_all']:.2f} | {cell('tick', '.2f')} | {r['tick_floor']:.2f} | "
-                f"{r['batch']:.2f} | "
-                f"{r['step']:.2f} | {cell('fit', '.2f')} | "
-                f"{cell('complete', '+.1f')} |"
-            )
+            cells = [name, d, cell("mae", ".2f"), cell("supports", ".2f")]
+            if with_all:
+                cells.append(format(r["supports_all"], ".2f"))
+            cells += [cell("tick", ".2f"), format(r["tick_floor"], ".2f")]
+            cells += [format(r["batch"], ".2f"), format(r["step"], ".2f"), cell("fit", ".2f")]
+            cells.append(cell("complete", "+.1f"))
+            lines.append("| " + " | ".join(map(str, cells)) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -476,18 +473,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sim-boxes", type=int, help="simulator reproduction boxes (20)")
     parser.add_argument("--repeats", type=int, help="fits per predictor, fastest counts (2)")
     parser.add_argument("--level", type=float, help="klr_sparse's level (default: chosen)")
-    parser.add_argument(
-        "--start-share", type=float, help="klr_sparse's start_share (default: 0.25; 1: all)"
-    )
     parser.add_argument("--cache", help="directory caching the simulator's demonstrations")
     parser.add_argument("--tasks", type=int, help="members of a family world (10)")
     args = parser.parse_args(argv)
     names = ("worlds", "sizes", "seeds", "sim_seeds", "episodes", "sim_boxes", "repeats", "cache")
     names += ("tasks",)
     options = given_options(args, names)
-    extra = {"level": args.level, "start_share": args.start_share}
-    if any(v is not None for v in extra.values()):
-        options["options"] = {k: v for k, v in extra.items() if v is not None}
+    if args.level is not None:
+        options["options"] = {"level": args.level}
     return run_settings_benchmark(
         "bench_sparse", args, SparseSettings, options, run_sparse_benchmark, markdown
     )

@@ -115,13 +115,10 @@ SPARSITY_KEYS = (
     "sparsity_validation",
     "n_support_rule",
     "sparsity_path",
-    "n_support_graph",
-    "n_support_start",
     "refine",
-    "start_distillation",
 )
-"""The fit-summary entries of ``klr_sparse`` a comparison keeps (its chosen level and path,
-its supports per tick and at the start, its refinement and its start heads' distillation)."""
+"""The fit-summary entries of ``klr_sparse`` a comparison keeps (its chosen level and path
+and its refinement)."""
 
 
 def table_outcome(outcome: str) -> str:

@@ -7,6 +7,7 @@ here); the options live apart so that they can be read and checked without impor
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -219,25 +220,37 @@ class KLRConfig(PredictorConfig):
 
 
 REMOVED_OPTIONS: dict[str, dict[str, str]] = {
-    "klr_sparse": dict.fromkeys(
-        (
-            "method",
-            "candidate_scale",
-            "min_candidates",
-            "l1",
-            "learn_positions",
-            "learn_lengthscales",
-            "epochs",
-            "lr",
-            "prune_tol",
-            "refit",
+    "klr_sparse": {
+        **dict.fromkeys(
+            (
+                "method",
+                "candidate_scale",
+                "min_candidates",
+                "l1",
+                "learn_positions",
+                "learn_lengthscales",
+                "epochs",
+                "lr",
+                "prune_tol",
+                "refit",
+            ),
+            "klr_sparse's L1-penalised variant (method: l1) was removed; klr_sparse always "
+            "follows the sparsity path, which these options do not tune",
         ),
-        "klr_sparse's L1-penalised variant (method: l1) was removed; klr_sparse always follows "
-        "the sparsity path, which these options do not tune",
-    ),
+        "start_share": (
+            "start_share distilled the sequencer's isotropic start heads, which were removed "
+            "with issue #32 (the sequencer option start_kernel); the bank's heads are its "
+            "graph nodes, all on the sparsity path"
+        ),
+    },
 }
 """Options a predictor kind no longer has, with why: :func:`predictor_config` names them as
 removed rather than unknown."""
+FIT_ONLY_REMOVED_OPTIONS: dict[str, frozenset[str]] = {"klr_sparse": frozenset({"start_share"})}
+"""Removed options (:data:`REMOVED_OPTIONS`) that acted only while a bank was fitted, on heads
+that only a removed sequencer option added: a saved bank holds whatever they did in its
+weights, so :func:`saved_predictor_options` drops them from a checkpoint's options, whatever
+their value."""
 
 
 @dataclass
@@ -254,19 +267,18 @@ class SparseKLRConfig(KLRConfig):
     ``validation=`` of :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any,
     ``holdout_fraction`` of each node's activations (seeded by the fit's seed) is held out to
     choose, and the chosen level and width are then selected again on every activation. The
-    start heads are not on the path: they are fitted on the fixed rule's supports and then
-    *distilled* to ``start_share`` of them. The kept supports are then *refined* (inducing
-    points, :mod:`cpmp.predictors.inducing`): positions, one kernel-weight factor per node and
-    feature, weights and bias optimised together by LBFGS on the training loss, each support
-    anchored to its path point; the convex solver then solves the weights on every sample.
+    kept supports are then *refined* (inducing points, :mod:`cpmp.predictors.inducing`):
+    positions, one kernel-weight factor per node and feature, weights and bias optimised
+    together by LBFGS on the training loss, each support anchored to its path point; the
+    convex solver then solves the weights on every sample.
     Why each piece is there, measured: docs/benchmarks.md and docs/history.md.
 
     The fit summary reports the path: ``sparsity_path`` (one record per width and level:
     ``level``, ``gamma_scale``, ``n_support``, ``train_loss``, ``val_loss``, ``val_mae``,
     ``chosen``), ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``
     (``validation``, ``held-out activations`` or ``none``), ``n_support_rule`` (the graph
-    nodes' fixed-rule count), ``refine`` (the loss before and after, the evaluations spent),
-    ``start_distillation`` (``max_logit_error``), ``n_support_graph`` and ``n_support_start``.
+    nodes' fixed-rule count) and ``refine`` (the loss before and after, the evaluations
+    spent).
 
     Attributes:
         level: ``None`` (default: choose the level on the validation data) or the share of
@@ -290,14 +302,7 @@ class SparseKLRConfig(KLRConfig):
             positions in kernel widths), which pulls each moved support back to its point on
             the demonstrated path, where the closed loop needs φ high at the activations' ends;
             default 0.01; 0: free; a large value: kept in place.
-        start_share: the share of each start head's fixed-rule supports kept after its fit
-            (``floor(start_share * n)``, at least one; default 0.25; 1: all, no distillation),
-            chosen by orthogonal matching pursuit to reproduce the fitted head's logits on its
-            variable's start region (the training samples of all its start heads with progress
-            label <= 0.25), weights and bias least squares there; the fit summary reports the
-            largest logit error (``start_distillation``).
-        l2: as in :class:`KLRConfig`, and the same default (the start heads are fitted on the
-            fixed rule's supports, and their one-class fits need ``klr``'s penalty).
+        l2: as in :class:`KLRConfig`, and the same default.
     """
 
     level: float | None = None
@@ -307,7 +312,6 @@ class SparseKLRConfig(KLRConfig):
     refine_iter: int = 60
     refine_samples: int = 128
     refine_anchor: float = 0.01
-    start_share: float = 0.25
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -317,7 +321,6 @@ class SparseKLRConfig(KLRConfig):
         if self.level is not None:
             self.level = self._share("level", self.level)
         self.path_levels = self._shares("path_levels")
-        self.start_share = self._share("start_share", self.start_share)
         self.gamma_scales = self._shares("gamma_scales", upper=None)
         fraction = self._number("holdout_fraction")
         if not 0.0 < fraction < 1.0:
@@ -478,6 +481,23 @@ def predictor_config_class(kind: str) -> type[PredictorConfig]:
 def predictor_option_names(kind: str) -> list[str]:
     """The option names accepted by predictor ``kind``."""
     return [f.name for f in dataclasses.fields(predictor_config_class(kind))]
+
+
+def saved_predictor_options(
+    kind: str, options: Mapping[str, OptionValue]
+) -> dict[str, OptionValue]:
+    """A saved bank's options without those removed since that acted only in its fit.
+
+    Args:
+        kind: the predictor kind.
+        options: the options of a checkpoint's predictor (its ``spec``'s ``config``).
+
+    Returns:
+        ``options`` without :data:`FIT_ONLY_REMOVED_OPTIONS` (every other removed option is
+        still refused by :func:`predictor_config`).
+    """
+    inert = FIT_ONLY_REMOVED_OPTIONS.get(kind, frozenset())
+    return {k: v for k, v in options.items() if k not in inert}
 
 
 def predictor_config(kind: str, **options: OptionValue) -> PredictorConfig:

@@ -16,7 +16,6 @@ from cpmp.data.datafile import (
     save_demonstrations,
 )
 from cpmp.data.demonstration import (
-    START_PREFIX,
     Activation,
     Demonstration,
     DemonstrationLog,
@@ -27,7 +26,6 @@ from cpmp.data.demonstration import (
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
-    "START_PREFIX",
     "Activation",
     "Demonstration",
     "DemonstrationLog",

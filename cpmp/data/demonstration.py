@@ -25,10 +25,6 @@ from cpmp.records import TransitionEvent
 
 MetadataValue = str | int | float | bool | None
 
-START_PREFIX = "start:"
-"""MP-name prefix reserved for the start heads a sequencer adds to decide its initial nodes
-(``start:<mp>``, :mod:`cpmp.predictors`): a demonstration's MP names may not begin with it."""
-
 
 @dataclass(frozen=True)
 class Activation:
@@ -323,13 +319,6 @@ def _check_label_array(who: str, variable: str, values: ArrayLike, n: int) -> np
         raise DataError(
             f"{who}: labels[{variable!r}] is empty at step {empty[0]} ({empty.size} step(s) in "
             "all); label every time step with the active MP's name"
-        )
-    reserved = np.flatnonzero(np.char.startswith(raw, START_PREFIX))
-    if reserved.size:
-        raise DataError(
-            f"{who}: labels[{variable!r}] names MP {str(raw[reserved[0]])!r} at step "
-            f"{reserved[0]}; MP names may not begin with {START_PREFIX!r}, which names the "
-            "sequencer's start heads: rename the MP"
         )
     return raw.copy()
 

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from cpmp.config.predictors import predictor_config
+from cpmp.config.predictors import predictor_config, saved_predictor_options
 from cpmp.config.validation import OptionValue
 from cpmp.errors import ConfigError
 from cpmp.predictors.base import (
-    START_PREFIX,
     FeatureScaler,
     NodeData,
     NodeKey,
@@ -69,16 +68,20 @@ def make_predictor(
 
 
 def predictor_from_spec(spec: Mapping[str, JsonValue]) -> ProgressPredictor:
-    """Rebuild a predictor (untrained weights, right shapes) from :meth:`ProgressPredictor.spec`."""
+    """Rebuild a predictor (untrained weights, right shapes) from :meth:`ProgressPredictor.spec`.
+
+    An option removed since that acted only in the fit (``klr_sparse``'s ``start_share``:
+    :data:`~cpmp.config.predictors.FIT_ONLY_REMOVED_OPTIONS`) is dropped; any other removed
+    option is a :class:`~cpmp.errors.ConfigError` naming it as removed.
+    """
     kind = spec["kind"]
-    config = predictor_config(kind, **spec["config"])
+    config = predictor_config(kind, **saved_predictor_options(kind, spec["config"]))
     node_keys = [tuple(k) for k in spec["node_keys"]]
     return _predictor_class(kind)(node_keys, int(spec["n_features"]), config, **spec["shapes"])
 
 
 __all__ = [
     "PREDICTORS",
-    "START_PREFIX",
     "DTWConfig",
     "DTWPredictor",
     "FeatureScaler",

@@ -19,7 +19,6 @@ from torch.nn import functional as F
 
 from cpmp.config.predictors import SCALINGS, PredictorConfig  # noqa: F401 (re-exported)
 from cpmp.config.trainer import SolverOptions
-from cpmp.data import START_PREFIX  # noqa: F401 (re-exported: the start heads' MP-name prefix)
 from cpmp.errors import ConfigError, DataError
 from cpmp.predictors.newton import NewtonInfo
 from cpmp.progress import denoise_trajectory

@@ -44,7 +44,6 @@ from cpmp.config.predictors import DTWConfig
 from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError, DataError, require
 from cpmp.predictors.base import (
-    START_PREFIX,
     NodeData,
     NodeKey,
     ProgressPredictor,
@@ -176,28 +175,21 @@ class DTWPredictor(ProgressPredictor):
         return idx
 
     def initialize(self, data: list[NodeData], generator: torch.Generator) -> None:
-        """Store every node's thinned activations (scaled features) and expected progress.
-
-        Start heads share their node's reference.
-        """
+        """Store every node's thinned activations (scaled features) and expected progress."""
         refs, progress, columns, ranges = [], [], [], []
-        seen: dict[NodeKey, tuple[int, int]] = {}
         count = column = 0
         for node in data:
-            base = (node.key[0], node.key[1].removeprefix(START_PREFIX))
-            if base not in seen:
-                start = count
-                for act in node.activations:
-                    idx = self._thin(len(act))
-                    refs.append(np.asarray(act)[idx])
-                    progress.append(expected_progress(act)[idx])
-                    columns.append(column + np.arange(len(idx)))
-                    column += len(idx) + SEPARATOR
-                    count += len(idx)
-                if count == start:
-                    raise DataError(f"node {base[0]}/{base[1]} has no activation data for dtw")
-                seen[base] = (start, count)
-            ranges.append(seen[base])
+            start = count
+            for act in node.activations:
+                idx = self._thin(len(act))
+                refs.append(np.asarray(act)[idx])
+                progress.append(expected_progress(act)[idx])
+                columns.append(column + np.arange(len(idx)))
+                column += len(idx) + SEPARATOR
+                count += len(idx)
+            if count == start:
+                raise DataError(f"node {node.key[0]}/{node.key[1]} has no activation data for dtw")
+            ranges.append((start, count))
         dt = self.dtype_
         self.reference = torch.as_tensor(np.concatenate(refs), dtype=dt)
         self.reference_progress = torch.as_tensor(np.concatenate(progress), dtype=dt)
@@ -284,7 +276,7 @@ class DTWPredictor(ProgressPredictor):
             )
         streams.push(self._distances(z))
         slots = streams.window(self.config.stride)
-        starts, segment, head_segment = self._layout()
+        starts, segment = self._layout()
         columns = self.column.numpy(force=True)
         width = int(columns[-1]) + 1
         progress = self.reference_progress.numpy(force=True)
@@ -297,21 +289,19 @@ class DTWPredictor(ProgressPredictor):
                 for b in range(streams.n)
             ]
         )
-        return torch.logit(self._tensor(phi[:, head_segment]))
+        return torch.logit(self._tensor(phi))
 
-    def _layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The heads' reference ranges as segments.
+    def _layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """The heads' reference ranges as segments, one per head, in order.
 
-        First sample of each distinct range ``(U,)``, segment of each reference sample
-        ``(R,)`` and of each head ``(K,)`` (start heads share their node's). Cached until
-        ``head_range`` changes.
+        First sample of each head's range ``(K,)`` and the head of each reference sample
+        ``(R,)``. Cached until ``head_range`` changes.
         """
         key = (id(self.head_range), self.head_range._version)
         if self._layout_cache is None or self._layout_cache[0] != key:
             ranges = self.head_range.numpy(force=True)
-            distinct, head_segment = np.unique(ranges, axis=0, return_inverse=True)
-            segment = np.repeat(np.arange(len(distinct)), distinct[:, 1] - distinct[:, 0])
-            self._layout_cache = (key, (distinct[:, 0], segment, head_segment.reshape(-1)))
+            segment = np.repeat(np.arange(len(ranges)), ranges[:, 1] - ranges[:, 0])
+            self._layout_cache = (key, (ranges[:, 0], segment))
         return self._layout_cache[1]
 
     def _steps(self) -> np.ndarray:

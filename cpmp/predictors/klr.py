@@ -34,13 +34,7 @@ from cpmp.config.predictors import (
 )
 from cpmp.config.trainer import SolverOptions
 from cpmp.errors import ConfigError, DataError
-from cpmp.predictors.base import (
-    START_PREFIX,
-    NodeData,
-    NodeKey,
-    ProgressPredictor,
-    soft_bce,
-)
+from cpmp.predictors.base import NodeData, NodeKey, ProgressPredictor, soft_bce
 from cpmp.predictors.inducing import RefineProblem, padded_samples, refine
 from cpmp.predictors.newton import NewtonInfo, block_bounds, newton_fit, newton_solve_blocks
 from cpmp.predictors.selection import (
@@ -48,7 +42,6 @@ from cpmp.predictors.selection import (
     NodeProblem,
     PathPoint,
     forward_selection_path,
-    matching_pursuit,
 )
 from cpmp.progress import feature_path_lengths, support_point_count, support_points
 from cpmp.records import JsonValue
@@ -64,11 +57,6 @@ _PackedSupports: TypeAlias = tuple[
 """Every node's real supports (:meth:`KLRPredictor._packed`, before taking the first heads):
 kernel weights ``a``, node index, ``a_n s_n``, ``a_n · s_n²``, weights, each node's end."""
 
-START_REGION = 0.25
-"""Progress label up to which a start head's training samples are its *start region*, where
-``klr_sparse`` distils it (``start_share``)."""
-START_SAMPLES = 512
-"""Start-region samples per variable, at most, on which a start head is distilled."""
 POOL_CANDIDATES = 20
 """Pooling places every point of the rule first: a fit whose rule places more than this many
 times ``max_total_support`` points stops with a :class:`~cpmp.errors.ConfigError` (1,000,000
@@ -279,13 +267,7 @@ class KLRPredictor(ProgressPredictor):
         """
         scale = None
         if self.config.feature_weighting == "path":
-            ones = torch.ones(self.n_features, dtype=self.dtype_)
-            scale = torch.stack(
-                [
-                    ones if node.key[1].startswith(START_PREFIX) else self._path_weights(node)
-                    for node in data
-                ]
-            )
+            scale = torch.stack([self._path_weights(node) for node in data])
         if self.pools_supports:
             per_node = self._pooled_supports(data, scale)
         else:
@@ -381,8 +363,8 @@ class KLRPredictor(ProgressPredictor):
 
         The bank is repacked to the most kept supports per node; the biases, the kernel
         weights and the kept supports' order are unchanged, so each node's logit loses exactly
-        the terms of the supports dropped. ``klr_sparse`` distils its start heads with it; a
-        benchmark can strip a bank to one support per node to time a tick's fixed cost.
+        the terms of the supports dropped. A benchmark strips a bank to one support per node
+        with it to time a tick's fixed cost.
 
         Raises:
             DataError: ``keep`` is not ``(K, S)``, keeps a padded slot or no slot of a node.
@@ -677,7 +659,7 @@ class SparsityLevel:
         train_loss: Σ over nodes of the mean training BCE + ``½ l2 ||w||²``.
         val_loss: Σ over nodes of the mean held-out BCE (the trainer's ``val/loss``), or
             ``None`` without held-out data.
-        val_mae: mean |φ − eq. 1| over the graph nodes' held-out samples (``val/mae``), or
+        val_mae: mean |φ − eq. 1| over every node's held-out samples (``val/mae``), or
             ``None``.
         chosen: the fitted model is this point's.
     """
@@ -734,9 +716,6 @@ class SparseKLRPredictor(KLRPredictor):
         or ``none``."""
         self.n_support_rule = 0
         """Supports the fixed rule places on the fit's data (the levels' reference)."""
-        self.start_distillation: dict[str, float] = {}
-        """The start heads' distillation: ``max_logit_error`` on their start regions (empty:
-        none)."""
         self.refine_summary: dict[str, float | int] = {}
         """The last refinement's loss before and after and its evaluations (empty: none)."""
         self._validation: list[NodeData] | None = None
@@ -775,17 +754,10 @@ class SparseKLRPredictor(KLRPredictor):
     def _select(
         self, data: list[NodeData], validation: list[NodeData] | None, generator: torch.Generator
     ) -> None:
-        """Run the path per width, choose the level and width, keep their supports.
-
-        Only the graph nodes are sparsified: a start head is evaluated once per episode, at
-        the start, where its choice among a variable's initial nodes rests on the fixed
-        rule's supports and the default kernel here; after the trainer's solve,
-        :meth:`finalize` distils it to ``start_share`` of them.
-        """
+        """Run the path per width, choose the level and width, keep their supports."""
         masks = self.support_mask
         candidates = [self.support[i, masks[i]].detach().clone() for i in range(self.n_nodes)]
-        graph = [i for i, node in enumerate(data) if not node.key[1].startswith(START_PREFIX)]
-        self.n_support_rule = sum(len(candidates[i]) for i in graph)
+        self.n_support_rule = sum(len(c) for c in candidates)
         kernels = [
             self.node_kernel(i, node.x)[:, : len(candidates[i])].T.contiguous()
             for i, node in enumerate(data)
@@ -794,67 +766,56 @@ class SparseKLRPredictor(KLRPredictor):
         levels = self._levels()
         points: list[tuple[SparsityLevel, list[NodeModel]]] = []
         for scale in self.config.gamma_scales:
-            for level, point in self._path([split.problems[i] for i in graph], levels, scale):
+            for level, point in self._path(split.problems, levels, scale):
                 record = SparsityLevel(
                     level, scale, point.n_support, point.train_loss, point.val_loss, point.val_mae
                 )
                 points.append((record, point.models))
         best = self._choose([p for p, _ in points], levels[-1])
-        chosen, graph_models = points[best]
-        kept_from = list(split.candidates)
+        chosen, models = points[best]
+        kept_from = split.candidates
         if split.source == "held-out activations":
             # choose on the split, then select again on every activation
-            problems = [_problem(kernels[i], data[i].target, None, None, True) for i in graph]
+            problems = [_problem(k, node.target) for k, node in zip(kernels, data, strict=True)]
             fitted = self._path(problems, [chosen.level], chosen.gamma_scale)
-            graph_models, kept_from = fitted[-1][1].models, list(candidates)
-        by_node = dict(zip(graph, graph_models, strict=True))
-        models = []
-        for i, c in enumerate(candidates):
-            if i in by_node:
-                models.append(by_node[i])
-                continue
-            kept_from[i] = c  # a start head: every point, until finalize distils it
-            models.append(
-                NodeModel(torch.arange(len(c)), torch.zeros(len(c), dtype=torch.float64), 0.0)
-            )
+            models, kept_from = fitted[-1][1].models, candidates
         self.sparsity_path = [
             dataclasses.replace(p, chosen=i == best) for i, (p, _) in enumerate(points)
         ]
         self.sparsity_validation = split.source
-        self._keep(kept_from, models, chosen.gamma_scale, graph)
+        self._keep(kept_from, models, chosen.gamma_scale)
         if self.config.refine_iter > 0:  # the moved supports learn from every activation
-            self._refine(data, graph)
+            self._refine(data)
         log.info("%s", self.describe_path())
 
-    def _refine(self, data: list[NodeData], nodes: list[int]) -> None:
-        """Move the kept supports of ``nodes`` and rescale their kernels on every sample.
+    def _refine(self, data: list[NodeData]) -> None:
+        """Move the kept supports and rescale every node's kernel on every sample.
 
         See :mod:`cpmp.predictors.inducing`; the trainer's convex solver then re-solves the
         weights on every sample.
         """
         cfg = self.config
-        idx = torch.tensor(nodes, dtype=torch.long)
         x, target, sample_weight = padded_samples(
-            [data[i].x for i in nodes], [data[i].target for i in nodes], cfg.refine_samples
+            [node.x for node in data], [node.target for node in data], cfg.refine_samples
         )
-        mask = self.support_mask[idx]
+        mask = self.support_mask
         s = max(int(mask.sum(1).max()), 1)
         problem = RefineProblem(
             x,
             target,
             sample_weight,
-            self.support.detach()[idx, :s].double(),
+            self.support.detach()[:, :s].double(),
             mask[:, :s],
-            self.feature_weights()[idx].double(),
-            self.weight.detach()[idx, :s].double(),
-            self.bias.detach()[idx].double(),
+            self.feature_weights().double(),
+            self.weight.detach()[:, :s].double(),
+            self.bias.detach().double(),
         )
         result = refine(problem, cfg.l2, cfg.refine_iter, cfg.bias, cfg.refine_anchor)
         with torch.no_grad():
-            self.support[idx, :s] = result.support.to(self.dtype_)
-            self.log_feature_scale[idx] += result.log_scale.to(self.dtype_)
-            self.weight[idx, :s] = result.weight.to(self.dtype_)
-            self.bias[idx] = result.bias.to(self.dtype_)
+            self.support[:, :s] = result.support.to(self.dtype_)
+            self.log_feature_scale += result.log_scale.to(self.dtype_)
+            self.weight[:, :s] = result.weight.to(self.dtype_)
+            self.bias.copy_(result.bias.to(self.dtype_))
         self._cache = None
         self.refine_summary = {
             "loss_start": result.loss_start,
@@ -873,31 +834,28 @@ class SparseKLRPredictor(KLRPredictor):
         """The path's problems: the training data against the validation data.
 
         Without validation data, ``holdout_fraction`` of each node's activations (nodes with
-        two or more; a start head shares its node's draw) are held out, and the candidates
-        are those placed along the remaining ones.
+        two or more) are held out, and the candidates are those placed along the remaining
+        ones.
         """
-        graph = [not node.key[1].startswith(START_PREFIX) for node in data]
         if validation is not None and any(v.n_samples for v in validation):
             problems = [
-                _problem(k, node.target, self.node_kernel(i, v.x)[:, : len(c)].T, v.target, g)
-                for i, (k, node, v, c, g) in enumerate(
-                    zip(kernels, data, validation, candidates, graph, strict=True)
+                _problem(k, node.target, self.node_kernel(i, v.x)[:, : len(c)].T, v.target)
+                for i, (k, node, v, c) in enumerate(
+                    zip(kernels, data, validation, candidates, strict=True)
                 )
             ]
             return _Split(problems, candidates, "validation")
         seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
         rng = np.random.default_rng(seed)
-        held: dict[str, set[int]] = {}
+        held = False
         problems, kept = [], []
         rule = (*self._support_rule(), "none")
-        for i, (node, g) in enumerate(zip(data, graph, strict=True)):
-            base = node.key[0] + "/" + node.key[1].removeprefix(START_PREFIX)
+        for i, node in enumerate(data):
             n_act = len(node.activations)
-            if base not in held:
-                n_out = round(self.config.holdout_fraction * n_act) if n_act >= 2 else 0
-                n_out = min(max(n_out, 1 if n_act >= 2 else 0), n_act - 1)
-                held[base] = set(rng.choice(n_act, size=n_out, replace=False).tolist())
-            out = held[base]
+            n_out = round(self.config.holdout_fraction * n_act) if n_act >= 2 else 0
+            n_out = min(max(n_out, 1 if n_act >= 2 else 0), n_act - 1)
+            out = set(rng.choice(n_act, size=n_out, replace=False).tolist())
+            held = held or bool(out)
             counts = [support_point_count(p, *rule) for p in node.paths]
             ends = np.cumsum([0, *counts])
             keep = [j for j in range(n_act) if j not in out]
@@ -912,8 +870,8 @@ class SparseKLRPredictor(KLRPredictor):
                 self._kernel_with(i, cand, torch.as_tensor(np.concatenate(x_va))) if x_va else None
             )
             y_va_t = torch.as_tensor(np.concatenate(y_va)) if y_va else None
-            problems.append(_problem(k_tr, y_tr, k_va, y_va_t, g))
-        source = "held-out activations" if any(held.values()) else "none"
+            problems.append(_problem(k_tr, y_tr, k_va, y_va_t))
+        source = "held-out activations" if held else "none"
         return _Split(problems, kept, source)
 
     def _kernel_with(self, i: int, support: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
@@ -961,18 +919,8 @@ class SparseKLRPredictor(KLRPredictor):
             scored, key=lambda i: (points[i].val_mae, points[i].val_loss, points[i].n_support, i)
         )
 
-    def _keep(
-        self,
-        candidates: list[torch.Tensor],
-        models: list[NodeModel],
-        scale: float,
-        scaled: list[int],
-    ) -> None:
-        """Make the chosen supports, weights and width the bank's.
-
-        The width factor ``scale`` applies to the nodes ``scaled``; the others keep the
-        default kernel (their ``log_feature_scale`` undoes it).
-        """
+    def _keep(self, candidates: list[torch.Tensor], models: list[NodeModel], scale: float) -> None:
+        """Make the chosen supports, weights and width factor ``scale`` the bank's."""
         self.gamma = self.gamma * scale
         self._set_supports(
             [c[m.support].numpy(force=True) for c, m in zip(candidates, models, strict=True)]
@@ -982,8 +930,6 @@ class SparseKLRPredictor(KLRPredictor):
             for i, m in enumerate(models):
                 self.weight[i, : m.support.numel()] = m.weight.to(self.dtype_)
                 self.bias[i] = m.bias
-                if i not in scaled:
-                    self.log_feature_scale[i] = -math.log(scale)
 
     def describe_path(self) -> str:
         """The sparsity path as text: one line per point, the chosen one marked."""
@@ -1007,77 +953,15 @@ class SparseKLRPredictor(KLRPredictor):
                 f"training loss {r['loss_start']:.5f} -> {r['loss']:.5f} in "
                 f"{r['evaluations']} evaluations"
             )
-        if self.start_distillation:
-            start = _start_supports(self.support_counts())
-            lines.append(
-                f"start heads distilled to {start} supports (start_share "
-                f"{self.config.start_share:g}), largest logit error on their start regions "
-                f"{self.start_distillation['max_logit_error']:.4f}"
-            )
         return "\n".join(lines)
-
-    # ------------------------------------------------------------------ the start heads
-    def finalize(self, data: list[NodeData], solver: SolverOptions | None = None) -> None:
-        """Distil the start heads (with ``start_share`` < 1; :meth:`_distil_start_heads`).
-
-        The graph nodes' supports were chosen before the solve.
-        """
-        if self.config.start_share < 1.0:
-            self._distil_start_heads(data)
-
-    def _distil_start_heads(self, data: list[NodeData]) -> None:
-        """Replace each fitted start head by ``start_share`` of its supports.
-
-        A start head is read once per episode, at the start, where the start rule compares
-        the entry probabilities of a variable's initial nodes. Its distilled version keeps
-        ``floor(start_share * n)`` of its ``n`` supports (at least one), chosen by orthogonal
-        matching pursuit (:func:`~cpmp.predictors.selection.matching_pursuit`) to reproduce
-        the fitted head's logits on the variable's *start region*: the training samples of
-        all its start heads with progress label at most :data:`START_REGION`
-        (:data:`START_SAMPLES` of them at most, every k-th); weights and bias are least
-        squares there.
-        """
-        heads: dict[str, list[int]] = {}
-        for i, node in enumerate(data):
-            if node.key[1].startswith(START_PREFIX):
-                heads.setdefault(node.key[0], []).append(i)
-        if not heads:  # start_kernel=shared: the graph nodes start the episode
-            return
-        keep = self.support_mask.clone()
-        weight = self.weight.detach().clone()
-        bias = self.bias.detach().clone()
-        errors = []
-        with torch.no_grad():
-            for members in heads.values():
-                region = torch.cat([data[i].x[data[i].target <= START_REGION] for i in members])
-                region = region[:: max(1, math.ceil(len(region) / START_SAMPLES))]
-                logits = self.head_logits(region.to(self.dtype_), self.n_nodes)
-                for i in members:
-                    real = torch.nonzero(self.support_mask[i]).squeeze(1)
-                    kern = self.node_kernel(i, region)[:, real]
-                    k = max(1, math.floor(self.config.start_share * len(real) + 1e-9))
-                    fit = matching_pursuit(kern, logits[:, i], k)
-                    keep[i] = False
-                    keep[i, real[fit.support]] = True
-                    weight[i] = 0.0
-                    weight[i, real[fit.support]] = fit.weight.to(self.dtype_)
-                    bias[i] = fit.bias
-                    errors.append(fit.max_error)
-            self.weight.copy_(weight)
-            self.bias.copy_(bias)
-        self.keep_supports(keep)
-        self.start_distillation = {"max_logit_error": max(errors)}
-        log.info("%s", self.describe_path().splitlines()[-1])
 
     def summary(self) -> dict[str, JsonValue]:
         """The kernel bank's facts and the sparsity path.
 
         ``sparsity_path`` (one dict per :class:`SparsityLevel`),
         ``sparsity_level``, ``sparsity_gamma_scale``, ``sparsity_validation``,
-        ``n_support_rule`` (the graph nodes') and, after a refinement, ``refine``
-        (``loss_start``, ``loss``, ``evaluations``), after a distillation of the start heads
-        ``start_distillation`` (``max_logit_error``); always ``n_support_graph`` (the supports
-        a control tick evaluates) and ``n_support_start`` (the start heads').
+        ``n_support_rule`` (the fixed rule's count) and, after a refinement, ``refine``
+        (``loss_start``, ``loss``, ``evaluations``).
         """
         out = super().summary()
         if self.sparsity_path:
@@ -1089,12 +973,6 @@ class SparseKLRPredictor(KLRPredictor):
             out["n_support_rule"] = self.n_support_rule
         if self.refine_summary:
             out["refine"] = dict(self.refine_summary)
-        if self.start_distillation:
-            out["start_distillation"] = dict(self.start_distillation)
-        counts = self.support_counts()  # as the base summary's support_counts
-        n_start = _start_supports(counts)
-        out["n_support_start"] = n_start
-        out["n_support_graph"] = sum(counts.values()) - n_start
         return out
 
 
@@ -1148,17 +1026,11 @@ def pool_supports(
     return points[np.sort(chosen)]
 
 
-def _start_supports(counts: dict[str, int]) -> int:
-    """The start heads' supports in a :meth:`KLRPredictor.support_counts`."""
-    return sum(n for key, n in counts.items() if key.split("/", 1)[1].startswith(START_PREFIX))
-
-
 def _problem(
     kernel: torch.Tensor,
     target: torch.Tensor,
-    val_kernel: torch.Tensor | None,
-    val_target: torch.Tensor | None,
-    graph_node: bool,
+    val_kernel: torch.Tensor | None = None,
+    val_target: torch.Tensor | None = None,
 ) -> NodeProblem:
     """A node's selection problem in float64 (no held-out data: zero held-out samples)."""
     f64 = torch.float64
@@ -1168,5 +1040,4 @@ def _problem(
         target.to(f64),
         torch.zeros(c, 0, dtype=f64) if val_kernel is None else val_kernel.to(f64).contiguous(),
         torch.zeros(0, dtype=f64) if val_target is None else val_target.to(f64),
-        graph_node,
     )

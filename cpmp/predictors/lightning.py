@@ -13,8 +13,8 @@
 
 Every epoch logs ``train/loss`` (the bank's training loss) and, with validation data,
 ``val/loss`` and ``val/mae``: the mean absolute difference between the predicted progress φ
-and the held-out eq. 1 label over every held-out sample of the graph nodes (start heads
-left out), the offline evaluation's progress MAE (:mod:`cpmp.evaluation.offline`).
+and the held-out eq. 1 label over every held-out sample of every node, the offline
+evaluation's progress MAE (:mod:`cpmp.evaluation.offline`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from torch.nn import functional as F
 
 from cpmp.config.trainer import TrainerConfig
 from cpmp.io import to_builtin
-from cpmp.predictors.base import START_PREFIX, NodeData, ProgressPredictor, nodes_to
+from cpmp.predictors.base import NodeData, ProgressPredictor, nodes_to
 from cpmp.predictors.datamodule import NodeRows
 from cpmp.predictors.newton import NewtonInfo
 
@@ -99,9 +99,9 @@ class HeldOutSums:
         seen = self.count > 0
         return (self.bce[seen] / self.count[seen]).sum()
 
-    def mae(self, graph_node: torch.Tensor) -> torch.Tensor:
-        """``val/mae``: mean |φ − label| over the samples of the heads ``graph_node`` (K,)."""
-        return self.abs[graph_node].sum() / self.count[graph_node].sum()
+    def mae(self) -> torch.Tensor:
+        """``val/mae``: mean |φ − label| over every node's samples."""
+        return self.abs.sum() / self.count.sum()
 
 
 class ProgressModule(L.LightningModule):
@@ -157,13 +157,6 @@ class ProgressModule(L.LightningModule):
         """Per-node outcome of the last Newton solve."""
         self._train: list[NodeData] = []
         self._val: list[NodeData] = []
-        self.graph_node: torch.Tensor
-        self.register_buffer(
-            "graph_node",
-            torch.tensor([not key[1].startswith(START_PREFIX) for key in predictor.node_keys]),
-            persistent=False,
-        )
-        """``(K,)`` which heads are graph nodes (the others: start heads, left out of val/mae)."""
         self._val_sums = HeldOutSums.zeros(0, "cpu")
 
     # ------------------------------------------------------------------------------ data
@@ -299,7 +292,7 @@ class ProgressModule(L.LightningModule):
     def on_validation_epoch_end(self) -> None:
         """Log ``val/loss`` and ``val/mae`` of the epoch and record them."""
         val_loss = self._val_sums.loss()
-        val_mae = self._val_sums.mae(self.graph_node)
+        val_mae = self._val_sums.mae()
         self.log("val/loss", val_loss, on_epoch=True, batch_size=1)
         self.log("val/mae", val_mae, prog_bar=True, on_epoch=True, batch_size=1)
         self.history.val_loss.append(float(val_loss))

@@ -51,14 +51,12 @@ class NodeProblem:
         val_kernel: ``(C, V)`` kernel of each candidate with each held-out sample (``V`` may
             be 0).
         val_target: ``(V,)`` held-out labels.
-        graph_node: the node counts in the held-out MAE (start heads do not).
     """
 
     kernel: torch.Tensor
     target: torch.Tensor
     val_kernel: torch.Tensor
     val_target: torch.Tensor
-    graph_node: bool = True
 
 
 @dataclass(frozen=True)
@@ -86,7 +84,7 @@ class PathPoint:
         train_loss: Σ over nodes of the mean training BCE + ``½ l2 ||w||²``.
         val_loss: Σ over nodes with held-out samples of their mean BCE (the trainer's
             ``val/loss``); ``None`` without held-out samples.
-        val_mae: mean |φ − label| over the held-out samples of the graph nodes (the trainer's
+        val_mae: mean |φ − label| over every node's held-out samples (the trainer's
             ``val/mae``); ``None`` without any.
     """
 
@@ -257,22 +255,20 @@ def _scores(
     problems: list[NodeProblem], models: list[NodeModel], l2: float
 ) -> tuple[float, float | None, float | None]:
     """Training loss, held-out loss and held-out MAE of ``models`` (see :class:`PathPoint`)."""
-    train, loss, abs_sum, count, seen = 0.0, 0.0, 0.0, 0, False
+    train, loss, abs_sum, count = 0.0, 0.0, 0.0, 0
     for problem, model in zip(problems, models, strict=True):
         z = model.weight @ problem.kernel[model.support] + model.bias
         train += float(bce_terms(z, problem.target).mean() + 0.5 * l2 * model.weight @ model.weight)
         n = int(problem.val_target.numel())
         if n == 0:
             continue
-        seen = True
         phi = torch.sigmoid(model.weight @ problem.val_kernel[model.support] + model.bias)
         loss += float(F.binary_cross_entropy(phi, problem.val_target, reduction="mean"))
-        if problem.graph_node:
-            abs_sum += float((phi - problem.val_target).abs().sum())
-            count += n
-    if not seen:
+        abs_sum += float((phi - problem.val_target).abs().sum())
+        count += n
+    if not count:
         return train, None, None
-    return train, loss, (abs_sum / count if count else None)
+    return train, loss, abs_sum / count
 
 
 def forward_selection_path(
@@ -315,71 +311,3 @@ def forward_selection_path(
         if total < target:
             break
     return out
-
-
-@dataclass(frozen=True)
-class Pursuit:
-    """A sparse least-squares fit of a function by a subset of kernel columns.
-
-    Attributes:
-        support: ``(k,)`` indices of the chosen columns, in the order they were chosen.
-        weight: ``(k,)`` their least-squares weights (float64).
-        bias: the least-squares intercept.
-        max_error: largest ``|fit - target|`` over the samples.
-    """
-
-    support: torch.Tensor
-    weight: torch.Tensor
-    bias: float
-    max_error: float
-
-
-def matching_pursuit(kernel: torch.Tensor, target: torch.Tensor, k: int) -> Pursuit:
-    """Orthogonal matching pursuit: ``k`` columns and an intercept that reproduce ``target``.
-
-    Each step adds the column most correlated with the residual (correlation over the column's
-    norm) and projects the residual off the span of the chosen columns and the constant
-    (Gram-Schmidt, twice for stability); the weights are solved once at the end, by
-    back-substitution in that orthonormal basis. A column already in that span (to 1e-10 of
-    its norm) is passed over.
-
-    Args:
-        kernel: ``(N, n)`` the candidate columns at ``N`` samples.
-        target: ``(N,)`` the values to reproduce.
-        k: columns to choose (at most ``n``; fewer when the others are in the span).
-
-    Returns:
-        The chosen columns, their weights, the intercept and the largest error.
-    """
-    a, f = kernel.double(), target.double()
-    n_samples, n = a.shape
-    k = min(k, n)
-    full = torch.zeros(n_samples, k + 1, dtype=torch.float64)  # the constant, then the columns
-    full[:, 0] = n_samples**-0.5
-    residual = f - full[:, 0] * (full[:, 0] @ f)
-    norms = a.norm(dim=0).clamp_min(1e-300)
-    open_ = torch.ones(n, dtype=torch.bool)
-    chosen: list[int] = []
-    while len(chosen) < k and bool(open_.any()):
-        score = torch.where(open_, (a.T @ residual).abs() / norms, -1.0)
-        j = int(score.argmax())
-        open_[j] = False
-        basis = full[:, : len(chosen) + 1]
-        v = a[:, j].clone()
-        for _ in range(2):
-            v -= basis @ (basis.T @ v)
-        length = float(v.norm())
-        if length <= 1e-10 * float(norms[j]):
-            continue
-        q = v / length
-        full[:, len(chosen) + 1] = q
-        residual = residual - q * (q @ residual)
-        chosen.append(j)
-    basis = full[:, : len(chosen) + 1]
-    support = torch.tensor(chosen, dtype=torch.long)
-    design = torch.cat([torch.ones(n_samples, 1, dtype=torch.float64), a[:, support]], 1)
-    # design = basis @ r with r upper triangular: back-substitution, no LAPACK workspace
-    r = torch.triu(basis.T @ design)
-    coef = torch.linalg.solve_triangular(r, (basis.T @ f)[:, None], upper=True)[:, 0]
-    error = float((design @ coef - f).abs().max()) if n_samples else 0.0
-    return Pursuit(support, coef[1:].clone(), float(coef[0]), error)

@@ -29,7 +29,7 @@ from lightning.pytorch.utilities import _pytree as lightning_pytree
 
 from cpmp.config.trainer import TrainerConfig
 from cpmp.errors import ConfigError
-from cpmp.predictors.base import START_PREFIX, NodeData, ProgressPredictor
+from cpmp.predictors.base import NodeData, ProgressPredictor
 from cpmp.predictors.datamodule import ProgressDataModule
 from cpmp.predictors.lightning import HeldOutSums, ProgressModule, Solver
 from cpmp.predictors.newton import NewtonInfo
@@ -278,7 +278,7 @@ def fit_predictor(
     predictor.finalize(data, cfg.solver_options())
     with torch.no_grad():
         final = float(predictor.training_loss(data))
-    val_final = _held_out_mae(predictor, datamodule, module.graph_node)
+    val_final = _held_out_mae(predictor, datamodule)
     elapsed = time.perf_counter() - start
     history = module.history
     stopped_early = solver == "adam" and len(history.train_loss) < epochs
@@ -340,21 +340,16 @@ def _predictor_name(predictor: ProgressPredictor) -> str:
 
 
 def _node_count(data: list[NodeData]) -> str:
-    """``"6 nodes"``, or ``"6 nodes + 2 start heads"`` when the bank has start heads."""
-    heads = sum(node.key[1].startswith(START_PREFIX) for node in data)
-    nodes = f"{len(data) - heads} node{'s' if len(data) - heads != 1 else ''}"
-    return nodes if not heads else f"{nodes} + {heads} start head{'s' if heads != 1 else ''}"
+    """``"6 nodes"`` (``"1 node"``)."""
+    return f"{len(data)} node{'s' if len(data) != 1 else ''}"
 
 
-def _held_out_mae(
-    predictor: ProgressPredictor, datamodule: ProgressDataModule, graph_node: torch.Tensor
-) -> float | None:
+def _held_out_mae(predictor: ProgressPredictor, datamodule: ProgressDataModule) -> float | None:
     """``val/mae`` of the fitted bank (after ``finalize``), as a validation epoch computes it.
 
     Args:
         predictor: the fitted bank (on the CPU).
         datamodule: the fit's data (its validation batches).
-        graph_node: ``(K,)`` which heads count (the graph nodes, not the start heads).
 
     Returns:
         The held-out progress MAE, or ``None`` without validation data.
@@ -365,7 +360,7 @@ def _held_out_mae(
     with torch.no_grad():
         for batch in datamodule.val_dataloader():
             sums.add(predictor, datamodule.val, batch)
-    return float(sums.mae(graph_node.cpu()))
+    return float(sums.mae())
 
 
 def _newton_outcome(infos: list[NewtonInfo]) -> NewtonOutcome:

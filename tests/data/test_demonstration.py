@@ -10,10 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cpmp.data import START_PREFIX
 from cpmp.data.demonstration import Demonstration, DemonstrationLog, mp_sequences
 from cpmp.errors import CpmpError, DataError, UnknownMPError
-from cpmp.predictors import START_PREFIX as HEADS
 
 
 def make_demo(n: int = 12, d: int = 3, seed: int = 0, **kwargs: Any) -> Demonstration:
@@ -224,14 +222,9 @@ def test_the_record_module_is_apart_from_the_file_format() -> None:
     assert cpmp.data.load_demonstrations is cpmp.data.datafile.load_demonstrations
 
 
-def test_mp_named_like_a_start_head_is_refused() -> None:
-    """``start:<mp>`` names the sequencer's start heads; a demonstrated MP of that name would
-    collide with one (a raw KeyError deep in the fit before)."""
+def test_no_mp_name_prefix_is_reserved() -> None:
+    """``start:<mp>`` named the sequencer's start heads until they were removed (issue #32);
+    an MP may now be called so."""
     labels = {"v": ["start:a_go", "start:a_go", "b"]}
-    with pytest.raises(DataError, match=r"names MP 'start:a_go' at step 0; .* 'start:'"):
-        Demonstration([0.0, 1.0, 2.0], np.zeros((3, 1)), labels, name="demo_0")
-    assert Demonstration([0.0, 1.0], np.zeros((2, 1)), {"v": ["restart:a", "b"]}).labels
-
-
-def test_start_prefix_is_the_predictors_start_head_prefix() -> None:
-    assert START_PREFIX == HEADS
+    demo = Demonstration([0.0, 1.0, 2.0], np.zeros((3, 1)), labels, name="demo_0")
+    assert [s.mp for s in demo.segments("v")] == ["start:a_go", "b"]

@@ -8,8 +8,9 @@ import pytest
 import torch
 
 from cpmp.config import FitConfig, predictor_config
-from cpmp.errors import ConfigError
+from cpmp.errors import ConfigError, CpmpFileError
 from cpmp.evaluation.offline import activation_progress, progress_errors
+from cpmp.io import CHECKSUM_KEY, save_checkpoint
 from cpmp.sequencer.sequencer import ConcurrentSequencer
 
 # Held-out MAE on this data (seed 0 train / seed 1 test) as measured: klr 0.028, klr_sparse
@@ -46,7 +47,7 @@ def test_chosen_level_is_the_validation_mae_optimum_of_the_path(validated, test_
         best["level"],
         best["gamma_scale"],
     )
-    assert summary.predictor_facts["n_support_graph"] == best["n_support"]
+    assert summary.n_support_total == best["n_support"]
     # the bank's kernel is the chosen width
     assert float(validated.predictor.gamma) == pytest.approx(config.gamma * best["gamma_scale"])
     for scale in config.gamma_scales:  # each width's path grows with its level
@@ -62,7 +63,6 @@ def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, fitted_kl
     assert summary.predictor_facts["n_support_rule"] == klr_count
     assert summary.n_support_total == sum(summary.support_counts.values())
     assert summary.n_support_total <= 0.25 * klr_count  # the largest level
-    assert summary.predictor_facts["n_support_graph"] == summary.n_support_total
     assert all(n >= 1 for n in summary.support_counts.values())
     unvalidated = fit_on_train("klr_sparse")
     assert unvalidated.fit_summary.n_support_total <= 0.25 * klr_count
@@ -80,7 +80,7 @@ def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit
         summary.predictor_facts["sparsity_level"],
         summary.predictor_facts["n_support_rule"],
     )
-    assert summary.predictor_facts["n_support_graph"] == int(level * n_rule)
+    assert summary.n_support_total == int(level * n_rule)
 
 
 @pytest.mark.parametrize("validation", [True, False], ids=["validation", "held-out"])
@@ -95,7 +95,7 @@ def test_a_fixed_level_gives_that_count(train_demos, test_demos, validation):
     )
     summary = seq.fit_summary
     n_nodes = len(seq.node_keys)
-    assert summary.predictor_facts["n_support_graph"] == max(
+    assert summary.n_support_total == max(
         n_nodes, int(0.1 * summary.predictor_facts["n_support_rule"])
     )
     assert summary.predictor_facts["sparsity_level"] == 0.1
@@ -147,8 +147,6 @@ def test_summary_describes_the_path(validated):
         ("refine_samples", 0),
         ("refine_anchor", -0.1),
         ("refine_anchor", float("nan")),
-        ("start_share", 0.0),
-        ("start_share", 1.5),
     ],
 )
 def test_bad_options_are_config_errors_naming_the_option(option, value):
@@ -175,6 +173,44 @@ def test_the_removed_l1_variants_options_are_named_as_removed(option):
     # ConcurrentSequencer.fit's keyword form routes it to the predictor, which says so too
     with pytest.raises(ConfigError, match=rf"removed option\(s\) {option} for predictor"):
         FitConfig.from_options("klr_sparse", **{option: 1})
+
+
+def test_start_share_is_named_as_removed():
+    """``start_share`` distilled the isotropic start heads, removed with issue #32."""
+    message = r"removed option\(s\) start_share for predictor 'klr_sparse': start_share .*start"
+    with pytest.raises(ConfigError, match=message + r" heads, which were removed"):
+        predictor_config("klr_sparse", start_share=0.25)
+    with pytest.raises(ConfigError, match=message):
+        FitConfig.from_options("klr_sparse", start_share=1.0)
+    # only klr_sparse had it: another kind calls it unknown
+    with pytest.raises(ConfigError, match=r"unknown option\(s\) start_share for predictor 'klr'"):
+        predictor_config("klr", start_share=0.25)
+
+
+def _with_predictor_options(payload, **options):
+    """``payload`` (a loaded checkpoint) with ``options`` added to its predictor's."""
+    old = {k: v for k, v in payload.items() if k != CHECKSUM_KEY}
+    spec = {**old["predictor"]["spec"], "config": {**old["predictor"]["spec"]["config"], **options}}
+    return {**old, "predictor": {**old["predictor"], "spec": spec}}
+
+
+@pytest.mark.parametrize("share", [0.25, 1.0])
+def test_a_checkpoint_saved_with_start_share_loads_as_before(validated, tmp_path, share):
+    """Every klr_sparse checkpoint written before issue #32 holds ``start_share``. It acted
+    only in the fit, on start heads (a checkpoint with those is refused by its sequencer
+    option ``start_kernel``): it is dropped, whatever its value."""
+    payload = torch.load(validated.save(tmp_path / "now.pt"), weights_only=True)
+    assert "start_share" not in payload["predictor"]["spec"]["config"]
+    path = save_checkpoint(tmp_path / "old.pt", _with_predictor_options(payload, start_share=share))
+    loaded = ConcurrentSequencer.load(path)
+    assert not hasattr(loaded.predictor.config, "start_share")
+    assert loaded.predictor.config == validated.predictor.config
+    x = np.zeros((3, len(validated.feature_names)))
+    np.testing.assert_array_equal(loaded.progress(x), validated.progress(x))
+    # a removed option that shaped the model is still refused by name
+    path = save_checkpoint(tmp_path / "l1.pt", _with_predictor_options(payload, method="l1"))
+    with pytest.raises(CpmpFileError, match=r"removed option\(s\) method for predictor"):
+        ConcurrentSequencer.load(path)
 
 
 def test_forward_model_round_trips_through_a_checkpoint(validated, tmp_path, test_demos):

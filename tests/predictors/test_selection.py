@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from cpmp.predictors.newton import newton_solve
-from cpmp.predictors.selection import NodeProblem, forward_selection_path, matching_pursuit
+from cpmp.predictors.selection import NodeProblem, forward_selection_path
 
 
 def _problem(seed: int, n_candidates: int, n: int, n_val: int = 0) -> NodeProblem:
@@ -22,7 +22,7 @@ def _problem(seed: int, n_candidates: int, n: int, n_val: int = 0) -> NodeProble
     def kernel(z: torch.Tensor) -> torch.Tensor:
         return torch.exp(-20.0 * (centres[:, None] - z[None, :]) ** 2)
 
-    return NodeProblem(kernel(x), x.clone(), kernel(xv), xv.clone(), graph_node=True)
+    return NodeProblem(kernel(x), x.clone(), kernel(xv), xv.clone())
 
 
 def test_path_is_nested_and_reaches_the_full_newton_solution():
@@ -48,25 +48,3 @@ def test_candidates_running_out_end_the_path():
     points = forward_selection_path([_problem(0, 3, 100)], [2, 10, 20], l2=1e-4)
     assert [p.n_support for p in points] == [2, 3]
     assert points[-1].val_loss is None and points[-1].val_mae is None
-
-
-def test_matching_pursuit_recovers_a_sparse_combination():
-    gen = torch.Generator().manual_seed(0)
-    kernel = torch.rand(200, 50, generator=gen, dtype=torch.float64)
-    target = 2.0 * kernel[:, 3] - kernel[:, 17] + 0.5 * kernel[:, 40] + 0.3
-    fit = matching_pursuit(kernel, target, 3)
-    assert sorted(fit.support.tolist()) == [3, 17, 40]
-    weights = dict(zip(fit.support.tolist(), fit.weight.tolist(), strict=True))
-    assert weights == pytest.approx({3: 2.0, 17: -1.0, 40: 0.5})
-    assert fit.bias == pytest.approx(0.3) and fit.max_error < 1e-10
-
-
-def test_matching_pursuit_passes_over_columns_in_the_span():
-    gen = torch.Generator().manual_seed(1)
-    base = torch.rand(100, 2, generator=gen, dtype=torch.float64)
-    # columns 2 and 3 are combinations of the first two and the constant
-    kernel = torch.cat([base, base.sum(1, keepdim=True), 1.0 + base[:, :1]], 1)
-    fit = matching_pursuit(kernel, base[:, 0] + 3.0 * base[:, 1], 4)
-    assert len(fit.support) == 2 and fit.max_error < 1e-10
-    # more columns asked for than there are: every independent one, once
-    assert len(set(matching_pursuit(kernel, base[:, 0], 10).support.tolist())) <= 2
