@@ -245,15 +245,14 @@ def tick_costs(seq: ConcurrentSequencer, demo: Demonstration) -> dict[str, float
         :meth:`ConcurrentSequencer.step`.
     """
     x = torch.as_tensor(np.ascontiguousarray(demo.features))
-    heads = len(seq.node_keys)
     batch = x[torch.arange(BATCH) % x.shape[0]]
     stripped = copy.deepcopy(seq.predictor)
     mask = stripped.support_mask
     stripped.keep_supports(mask & (torch.cumsum(mask.long(), 1) == 1))
     out = {
-        "predictor_ms": _call_ms(seq.predictor, heads, list(x)),
-        "floor_ms": _call_ms(stripped, heads, list(x)),
-        "batch_ms": _call_ms(seq.predictor, heads, [batch] * len(x)),
+        "predictor_ms": _call_ms(seq.predictor, list(x)),
+        "floor_ms": _call_ms(stripped, list(x)),
+        "batch_ms": _call_ms(seq.predictor, [batch] * len(x)),
     }
     seq.reset(float(demo.time[0]), demo.features[0])
     start = time.perf_counter()
@@ -263,17 +262,17 @@ def tick_costs(seq: ConcurrentSequencer, demo: Demonstration) -> dict[str, float
     return out
 
 
-def _call_ms(predictor: torch.nn.Module, heads: int, inputs: list[torch.Tensor]) -> float:
-    """Mean wall time [ms] of ``predictor(v, heads)`` over ``inputs[1:]`` (the first warms up).
+def _call_ms(predictor: torch.nn.Module, inputs: list[torch.Tensor]) -> float:
+    """Mean wall time [ms] of ``predictor(v)`` over ``inputs[1:]`` (the first warms up).
 
     A 1-d input is one feature vector (called as ``(1, d)``).
     """
     batches = [v[None] if v.dim() == 1 else v for v in inputs]
     with torch.no_grad():
-        predictor(batches[0], heads)  # caches built
+        predictor(batches[0])  # caches built
         start = time.perf_counter()
         for v in batches[1:]:
-            predictor(v, heads)
+            predictor(v)
         return 1e3 * (time.perf_counter() - start) / max(len(batches) - 1, 1)
 
 

@@ -193,36 +193,23 @@ class ProgressPredictor(nn.Module):
         """The number of heads ``K``."""
         return len(self.node_keys)
 
-    def forward(self, x: torch.Tensor, heads: int | None = None) -> torch.Tensor:
-        """Progress of every node: ``x (..., d)`` raw features -> ``(..., K)`` in [0, 1].
-
-        ``heads``: evaluate only the first ``heads`` nodes (``(..., heads)``), e.g. a
-        sequencer's graph nodes without its start heads.
-        """
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Progress of every node: ``x (..., d)`` raw features -> ``(..., K)`` in [0, 1]."""
         if x.shape[-1] != self.n_features:
             raise DataError(
                 f"expected feature vectors with {self.n_features} entries, got shape "
                 f"{tuple(x.shape)}"
             )
-        if heads is not None and not 0 < heads <= self.n_nodes:
-            raise DataError(f"heads must be in 1..{self.n_nodes}, got {heads}")
         lead = x.shape[:-1]
         z = x.to(self.scaler.offset.device, self.dtype_).reshape(-1, self.n_features)
         if self.config.feature_scaling != "none":
             z = self.scaler(z)
-        out = torch.sigmoid(self.logits(z) if heads is None else self.head_logits(z, heads))
+        out = torch.sigmoid(self.logits(z))
         return out.reshape(*lead, out.shape[-1])
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
         """Logits of every node for scaled features ``z (B, d)`` -> ``(B, K)``."""
         raise NotImplementedError
-
-    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """Logits ``(B, heads)`` of the first ``heads`` nodes for scaled features ``z (B, d)``.
-
-        Banks override this to skip the other nodes' work.
-        """
-        return self.logits(z)[:, :heads]
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
         """Logits ``(B,)`` of node ``i`` alone for scaled features ``z (B, d)``.

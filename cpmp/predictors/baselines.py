@@ -123,9 +123,9 @@ class RegressionClipPredictor(KLRPredictor):
     config_class = RegressionClipConfig
     config: RegressionClipConfig
 
-    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """``logit(clip(K w + b, 0, 1))`` ``(B, heads)`` of the first ``heads`` nodes."""
-        return _clipped_logit(super().head_logits(z, heads))
+    def logits(self, z: torch.Tensor) -> torch.Tensor:
+        """``logit(clip(K w + b, 0, 1))`` ``(B, K)`` of every node."""
+        return _clipped_logit(super().logits(z))
 
     def node_logits(self, z: torch.Tensor, i: int) -> torch.Tensor:
         """``logit(clip(K w + b, 0, 1))`` ``(B,)`` of node ``i``."""

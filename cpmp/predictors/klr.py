@@ -52,10 +52,10 @@ _Number = TypeVar("_Number", int, float)
 _CacheKey: TypeAlias = tuple[tuple[int, int], ...]
 """The identity and version counter of every tensor a cached value derives from."""
 _PackedSupports: TypeAlias = tuple[
-    torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[int]
+    torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor
 ]
-"""Every node's real supports (:meth:`KLRPredictor._packed`, before taking the first heads):
-kernel weights ``a``, node index, ``a_n s_n``, ``a_n · s_n²``, weights, each node's end."""
+"""Every node's real supports (:meth:`KLRPredictor._packed`): kernel weights ``aᵀ (d, K)``,
+node index ``(N,)``, ``a_n s_n (N, d)``, ``a_n · s_n² (N,)`` and weights ``(N,)``."""
 
 POOL_CANDIDATES = 20
 """Pooling places every point of the rule first: a fit whose rule places more than this many
@@ -108,9 +108,7 @@ class KLRPredictor(ProgressPredictor):
         self.weight = nn.Parameter(torch.zeros(k, n_support, dtype=dt))
         self.bias = nn.Parameter(torch.zeros(k, dtype=dt), requires_grad=config.bias)
         self._cache: list[torch.Tensor] | None = None
-        self._packed_cache: (
-            tuple[_CacheKey, _PackedSupports, dict[int, tuple[torch.Tensor, ...]]] | None
-        ) = None
+        self._packed_cache: tuple[_CacheKey, _PackedSupports] | None = None
         self.chunk_size = _option(config, "chunk_size", CHUNK_SIZE, int)
         """Kernel entries (samples x supports) per block (:data:`CHUNK_SIZE`)."""
         self.support_cap = _option(config, "support_cap", SUPPORT_CAP, int)
@@ -155,46 +153,38 @@ class KLRPredictor(ProgressPredictor):
         return torch.exp(-sq) * self.support_mask
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        """Logits ``(B, K)`` of every node for scaled features ``z (B, d)``."""
-        return self.head_logits(z, self.n_nodes)
+        """Logits ``(B, K)`` of every node for scaled features ``z (B, d)``.
 
-    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """Logits ``(B, heads)`` of the first ``heads`` nodes over their packed supports.
-
-        The packed supports are the real ones, without padding.
-
-        With ``a_n`` the kernel weights of support ``n``'s node,
+        Over the packed supports: the real ones, without padding. With ``a_n`` the kernel
+        weights of support ``n``'s node,
         ``Σ_j a_nj (z_j - s_nj)² = a_n · z² - 2 z · (a_n s_n) + a_n · s_n²``: one small product
         for the per-node first term, one matrix product of ``z`` with the weighted supports,
         one exp over ``(B, N)`` and a per-node sum. Without gradients the packed tensors are
         cached until a parameter or buffer changes, so a control tick costs a handful of small
         tensor calls.
         """
-        packed = self._packed(heads)
+        packed = self._packed()
         rows = self.block_rows(int(packed[1].numel()))
         if z.shape[0] <= rows:
-            return self._head_block(z, heads, packed)
+            return self._logits_block(z, packed)
         return torch.cat(
-            [self._head_block(z[a:b], heads, packed) for a, b in block_bounds(z.shape[0], rows)]
+            [self._logits_block(z[a:b], packed) for a, b in block_bounds(z.shape[0], rows)]
         )
 
-    def _head_block(
-        self, z: torch.Tensor, heads: int, packed: tuple[torch.Tensor, ...]
-    ) -> torch.Tensor:
-        """:meth:`head_logits` of one block of rows ``z (B, d)`` -> ``(B, heads)``."""
+    def _logits_block(self, z: torch.Tensor, packed: _PackedSupports) -> torch.Tensor:
+        """:meth:`logits` of one block of rows ``z (B, d)`` -> ``(B, K)``."""
         a_t, node, weighted, s_term, w = packed
         x_term = torch.index_select((z * z) @ a_t, 1, node)
         sq = torch.addmm(s_term, z, weighted.T, alpha=-2.0) + x_term
         terms = torch.exp(-sq.clamp_min(0.0)) * w
-        out = torch.zeros(z.shape[0], heads, dtype=terms.dtype, device=terms.device)
-        return out.index_add(1, node, terms) + self.bias[:heads]
+        out = torch.zeros(z.shape[0], self.n_nodes, dtype=terms.dtype, device=terms.device)
+        return out.index_add(1, node, terms) + self.bias
 
-    def _packed(self, heads: int) -> tuple[torch.Tensor, ...]:
-        """The real (unpadded) supports of the first ``heads`` nodes, grouped by node.
+    def _packed(self) -> _PackedSupports:
+        """The real (unpadded) supports, grouped by node (:data:`_PackedSupports`).
 
-        Kernel weights ``a[:heads]ᵀ (d, heads)``, node index ``(N,)``, ``a_n s_n (N, d)``,
-        ``a_n · s_n² (N,)`` and weights ``(N,)``. Cached per ``heads`` while no gradient is
-        needed, keyed on the identity and version counter of every tensor they derive from.
+        Cached while no gradient is needed, keyed on the identity and version counter of
+        every tensor they derive from.
         """
         tensors = (self.gamma, self.feature_scale, self.support, self.support_mask, self.weight)
         extra = getattr(self, "log_feature_scale", None)
@@ -207,15 +197,17 @@ class KLRPredictor(ProgressPredictor):
             node, slot = torch.nonzero(self.support_mask, as_tuple=True)
             s = self.support[node, slot]
             weighted = a[node] * s
-            ends = torch.cumsum(self.support_mask.sum(1), 0).tolist()
-            full = (a, node, weighted, (weighted * s).sum(-1), self.weight[node, slot], ends)
+            packed = (
+                a.T.contiguous(),
+                node,
+                weighted,
+                (weighted * s).sum(-1),
+                self.weight[node, slot],
+            )
             if grad:
-                return self._first_heads(full, heads)
-            self._packed_cache = (key, full, {})
-        _, full, per_heads = self._packed_cache
-        if heads not in per_heads:
-            per_heads[heads] = self._first_heads(full, heads)
-        return per_heads[heads]
+                return packed
+            self._packed_cache = (key, packed)
+        return self._packed_cache[1]
 
     def clear_cache(self) -> None:
         """Drop the cached training kernels and packed supports; the next call rebuilds them.
@@ -226,12 +218,6 @@ class KLRPredictor(ProgressPredictor):
         """
         self._cache = None
         self._packed_cache = None
-
-    @staticmethod
-    def _first_heads(full: _PackedSupports, heads: int) -> tuple[torch.Tensor, ...]:
-        a, node, weighted, s_term, w, ends = full
-        n = ends[heads - 1]
-        return a[:heads].T.contiguous(), node[:n], weighted[:n], s_term[:n], w[:n]
 
     def _supports_for(self, node: NodeData) -> np.ndarray:
         rule = (*self._support_rule(), "none")  # node.paths: denoised already where asked

@@ -52,15 +52,14 @@ class MLPPredictor(ProgressPredictor):
                 b.zero_()
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        """Logits ``(B, K)`` of every node for scaled features ``z (B, d)``."""
-        return self.head_logits(z, self.n_nodes)
+        """Logits ``(B, K)`` of every node's MLP for scaled features ``z (B, d)``.
 
-    def head_logits(self, z: torch.Tensor, heads: int) -> torch.Tensor:
-        """Logits ``(B, heads)`` of the first ``heads`` MLPs (one batched einsum per layer)."""
-        h = z[:, None, :].expand(-1, heads, -1)
+        One batched einsum per layer.
+        """
+        h = z[:, None, :].expand(-1, self.n_nodes, -1)
         last = len(self.weights) - 1
         for layer, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.einsum("bki,kio->bko", h, w[:heads]) + b[:heads]
+            h = torch.einsum("bki,kio->bko", h, w) + b
             if layer < last:
                 h = self._act(h)
         return h[..., 0]

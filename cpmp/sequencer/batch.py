@@ -72,10 +72,6 @@ class FittedSequencer(Protocol):
     transition_model: TransitionModel
     """What each episode of the transition rule reads."""
 
-    def heads(self, x: np.ndarray, heads: int | None = None) -> np.ndarray:
-        """All predictor heads ``(N, H)`` for features ``x (N, d)``."""
-        ...
-
     def progress(self, x: np.ndarray) -> np.ndarray:
         """φ of every node ``(N, K)`` for features ``x (N, d)``."""
         ...
@@ -253,7 +249,7 @@ class BatchedSequencer(EpisodeBatch):
         finite = np.isfinite(xn).all(axis=1)
         self._held[finite] = xn[finite]
         if rows:
-            phi = seq.heads(np.where(finite[:, None], xn, self._held) if stateful else xn[rows])
+            phi = seq.progress(np.where(finite[:, None], xn, self._held) if stateful else xn[rows])
             for j, i in enumerate(rows):
                 self.episodes[i].start(ts[i], xn[i], phi[i if stateful else j])
         return self.active

@@ -343,26 +343,14 @@ class ConcurrentSequencer:
 
     # ----------------------------------------------------------------------------- inference
     def progress(self, x: np.ndarray | torch.Tensor) -> np.ndarray:
-        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order."""
-        return self.heads(x, len(self.nodes.keys))
-
-    def heads(self, x: np.ndarray | torch.Tensor, heads: int | None = None) -> np.ndarray:
-        """All predictor heads ``(..., H)``: the nodes' φ, then the start heads (if any).
-
-        Args:
-            x: features ``(..., d)``.
-            heads: keep only the first ``heads`` columns (and skip evaluating the others);
-                ``None``: all.
-
-        Returns:
-            φ ``(..., H)``.
+        """φ of every node for features ``x (..., d)``: ``(..., K)`` in :attr:`node_keys` order.
 
         Raises:
             DataError: the features do not match :attr:`feature_names` or are not finite.
         """
         xn = checked_features(x, self.feature_names)
         with torch.no_grad():
-            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn)), heads).numpy()
+            return self.predictor(torch.from_numpy(np.ascontiguousarray(xn))).numpy()
 
     @property
     def node_keys(self) -> list[tuple[str, str]]:
@@ -390,7 +378,7 @@ class ConcurrentSequencer:
         t = checked_time(t)
         self.predictor.reset_state(1)
         state = np.asarray(x, dtype=np.float64).reshape(-1)
-        phi = self.heads(state)
+        phi = self.progress(state)
         self._held = state
         return self._episode.start(t, state, phi)
 

@@ -23,6 +23,21 @@ def fitted(fit_on_train):
 
 
 @pytest.mark.parametrize("kind", ["klr", "klr_full", "klr_sparse", "mlp"])
+def test_the_banks_columns_are_its_nodes_own_logits(fitted, test_demos, kind):
+    """The batched call over every node (packed supports, one einsum per layer) gives each
+    column as the node's own logits do (as the fit scores it)."""
+    model = fitted[kind].predictor
+    x = torch.as_tensor(test_demos[0].features[:6])
+    with torch.no_grad():
+        z = model.scaler(x.to(model.dtype_))
+        logits = model.logits(z)
+        assert logits.shape == (6, model.n_nodes)
+        for i in range(model.n_nodes):
+            np.testing.assert_allclose(logits[:, i], model.node_logits(z, i), rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(model(x), torch.sigmoid(logits))
+
+
+@pytest.mark.parametrize("kind", ["klr", "klr_full", "klr_sparse", "mlp"])
 def test_held_out_progress_mae(fitted, test_demos, kind):
     errors = progress_errors(activation_progress(fitted[kind], test_demos))
     assert errors["n_activations"] == 30
@@ -122,20 +137,6 @@ def test_keep_supports_drops_exactly_the_other_terms(fit_on_train, test_demos):
     ]:
         with pytest.raises(DataError, match=match):
             model.keep_supports(bad)
-
-
-@pytest.mark.parametrize("kind", ["klr", "klr_sparse", "mlp"])
-def test_first_heads_equal_the_full_bank_columns(fitted, test_demos, kind):
-    model = fitted[kind].predictor
-    x = torch.as_tensor(test_demos[0].features[:6])
-    with torch.no_grad():
-        full = model(x)
-        for heads in (1, model.n_nodes // 2, model.n_nodes):
-            part = model(x, heads=heads)
-            assert part.shape == (6, heads)
-            np.testing.assert_allclose(part, full[:, :heads], rtol=0, atol=1e-12)
-        with pytest.raises(DataError, match="heads"):
-            model(x, heads=model.n_nodes + 1)
 
 
 def test_klr_gradients_flow_through_packed_logits(fitted, test_demos):

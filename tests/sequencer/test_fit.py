@@ -69,7 +69,7 @@ def test_fit_config_builds_the_sequencer_on_fit_parts(train_demos: list[Demonstr
     x = train_demos[1].features[::7]
     with torch.no_grad():
         phi = parts.predictor.eval()(torch.from_numpy(np.ascontiguousarray(x))).numpy()
-    np.testing.assert_array_equal(phi, seq.heads(x))  # the same seed: the same fit
+    np.testing.assert_array_equal(phi, seq.progress(x))  # the same seed: the same fit
     assert parts.summary.n_demos == seq.fit_summary.n_demos == len(train_demos)
     assert len(parts.demos) == len(train_demos)
 
@@ -117,12 +117,12 @@ def test_dtype_auto_fits_small_data_in_float64_and_large_data_in_float32(
     loaded = ConcurrentSequencer.load(seq.save(tmp_path / "model.pt"))
     assert loaded.predictor.config.dtype == "float32"
     x = train_demos[0].features[::9]
-    np.testing.assert_array_equal(loaded.heads(x), seq.heads(x))
+    np.testing.assert_array_equal(loaded.progress(x), seq.progress(x))
     # float32 and float64 fits of the same data agree to float32's rounding
     f64 = ConcurrentSequencer.fit(train_demos, logger=None, dtype="float64")
     assert f64.predictor.config.dtype == "float64"
-    assert not np.array_equal(seq.heads(x), f64.heads(x))
-    np.testing.assert_allclose(seq.heads(x), f64.heads(x), atol=2e-3)
+    assert not np.array_equal(seq.progress(x), f64.progress(x))
+    np.testing.assert_allclose(seq.progress(x), f64.progress(x), atol=2e-3)
     # an explicit type is kept whatever the size
     explicit = fit_parts(train_demos, FitConfig.from_options("klr", dtype="float64"))
     assert explicit.predictor.config.dtype == "float64"

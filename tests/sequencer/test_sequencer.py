@@ -461,8 +461,8 @@ def test_a_long_gap_between_measurements_is_read_at_most_max_between_times():
         rows.append(len(np.atleast_2d(x)))
         return progress(x)
 
-    seq.progress = counted
     seq.reset(0.0, np.array([0.0, 0.0]))
+    seq.progress = counted  # the steps' rows
     seq.step(0.01, np.array([0.0, 0.01]), stamp=0.01)
     assert rows == [1]  # 10 ms after the last: nothing in between
     seq.step(0.04, np.array([0.1, 0.04]), stamp=0.04)
