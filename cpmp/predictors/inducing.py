@@ -125,7 +125,10 @@ class _Objective:
         self.c = problem.sample_weight.double()
         self.mask = problem.mask.double()
         self.a0 = problem.base_weights.double()
-        self.unit = self.a0.sqrt()[:, None, :]  # (K, 1, d): a position step of one kernel width
+        # (K, 1, d): a position step of one kernel width. A feature the node's kernel weighs 0
+        # (a path weight of 0) has no width: it steps in its own units, and with a = 0 neither
+        # the loss nor its gradient reads it, so its coordinate stays where it started.
+        self.unit = torch.where(self.a0 > 0, self.a0.sqrt(), 1.0)[:, None, :]
         self.l2 = float(l2)
         self.fit_bias = fit_bias
         k, s, d = problem.support.shape
@@ -146,7 +149,7 @@ class _Objective:
         The positions are optimised in units of the starting kernel's width, ``u = s ⊙ √a₀``,
         so that a unit step moves a support as far in every feature (LBFGS converges in far
         fewer steps than on raw positions, whose features' widths differ by orders of
-        magnitude).
+        magnitude); a feature of ``a₀ = 0`` keeps its own units.
         """
         parts = (support.double() * self.unit, log_scale, weight, bias)
         return torch.cat([p.double().reshape(-1) for p in parts])

@@ -797,6 +797,11 @@ class SparseKLRPredictor(KLRPredictor):
             self.bias.detach().double(),
         )
         result = refine(problem, cfg.l2, cfg.refine_iter, cfg.bias, cfg.refine_anchor)
+        if not math.isfinite(result.loss_start):
+            log.warning(
+                "klr_sparse: the refinement's starting loss is not finite; the selected "
+                "supports are kept unrefined (check the features for non-finite values)"
+            )
         with torch.no_grad():
             self.support[:, :s] = result.support.to(self.dtype_)
             self.log_feature_scale += result.log_scale.to(self.dtype_)

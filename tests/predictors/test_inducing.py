@@ -3,6 +3,8 @@ never ends worse than it started, and what it leaves alone."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -43,7 +45,8 @@ def _reference_loss(problem, theta, l2, anchor):
     k, s, d = problem.support.shape
     sizes = [k * s * d, k * d, k * s, k]
     u, log_scale, weight, bias = torch.split(theta, sizes)
-    unit = problem.base_weights.sqrt()[:, None, :]
+    a0 = problem.base_weights
+    unit = torch.where(a0 > 0, a0.sqrt(), torch.ones_like(a0))[:, None, :]
     support = u.view(k, s, d) / unit
     a = problem.base_weights * torch.exp(log_scale.view(k, d))
     diff = problem.x[:, :, None, :] - support[:, None, :, :]  # (K, P, S, d)
@@ -86,6 +89,35 @@ def test_refinement_lowers_the_loss_and_leaves_padding_alone(problem):
     assert float(result.weight[1, 3]) == 0.0
     # the irrelevant second feature's kernel weight shrinks against the first's
     assert bool((result.log_scale[:, 1] < result.log_scale[:, 0]).all())
+
+
+def test_a_feature_weighed_zero_is_left_alone_and_the_rest_refined(problem):
+    """A path weight of 0 (a feature constant along a node's activations) gives that feature
+    no kernel width: the refinement still runs (it once divided by the width, 0, and its
+    loss was NaN from the start, so it silently kept the start) and leaves the feature's
+    support coordinates and kernel scale where they were."""
+    ignored = dataclasses.replace(
+        problem, base_weights=torch.tensor([[0.5, 0.0]] * 3, dtype=torch.float64)
+    )
+    objective = _Objective(ignored, l2=1e-3, fit_bias=True, anchor=0.3)
+    gen = torch.Generator().manual_seed(2)
+    theta = objective.pack(
+        ignored.support
+        + 0.1 * torch.randn(ignored.support.shape, generator=gen, dtype=torch.float64),
+        0.3 * torch.randn(3, 2, generator=gen, dtype=torch.float64),
+        torch.randn(3, 4, generator=gen, dtype=torch.float64) * ignored.mask,
+        torch.randn(3, generator=gen, dtype=torch.float64),
+    )
+    loss, grad = objective(theta)
+    leaf = theta.clone().requires_grad_(True)
+    (auto,) = torch.autograd.grad(_reference_loss(ignored, leaf, l2=1e-3, anchor=0.3), leaf)
+    assert bool(torch.isfinite(loss)) and bool(torch.isfinite(grad).all())
+    torch.testing.assert_close(grad, auto, rtol=1e-9, atol=1e-12)
+    result = refine(ignored, l2=1e-4, max_iter=40)
+    assert result.loss < 0.9 * result.loss_start  # refined, not the start kept
+    torch.testing.assert_close(result.support[..., 1], ignored.support[..., 1], rtol=0, atol=0)
+    assert torch.count_nonzero(result.log_scale[:, 1]) == 0
+    assert bool((result.support[..., 0] != ignored.support[..., 0]).any())
 
 
 def test_no_iterations_return_the_start(problem):
