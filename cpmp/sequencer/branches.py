@@ -31,6 +31,9 @@ something; the states at which a variable kept its MP then and through the next 
 them for the nodes where the progress predictor alone would have switched at one of them (a
 transition's ``p`` above the threshold), and the choice then has one more class: while
 :data:`STAY` is the most probable, no transition of that node fires (a ``hold`` note says so).
+What tells staying from going is often two features together (peg's holder goes once the
+peg's depth reaches the hole's), so a stay choice also keeps each feature by the separation it
+adds, to those that separate better, in telling staying from going (:func:`added_separation`).
 
 :class:`BranchChoices` holds one per such node. A fit stores it in the checkpoint; built from a
 coupling alone (:meth:`BranchChoices.learn` without stays), it has the branching nodes only.
@@ -66,7 +69,9 @@ of the starts (in the simulator box width decides one strategy and depth the oth
 choice's :data:`STAY` examples come from across the whole activation, so every feature the
 activation moves spreads widely within that class and separates little on its own: what tells
 staying from going is often a combination (at peg's ``hold``, the peg's depth against the
-hole's, which alone separates nothing).
+hole's, which alone separates nothing), and a stay choice also keeps each feature by the
+separation it adds to those that separate better (:func:`added_separation`, on staying against
+going).
 
 Every choice (the start, stay choices, branch choices among successors) leaves out the ambient
 features (:attr:`~cpmp.sequencer.switching.Coupling.ambient`, moving alike under every MP and
@@ -113,18 +118,28 @@ class LinearChoice(NamedTuple):
 
 
 def learn_choice(
-    states: np.ndarray, y: np.ndarray, k: int, feature_range: np.ndarray, power: float = 1.0
+    states: np.ndarray,
+    y: np.ndarray,
+    k: int,
+    feature_range: np.ndarray,
+    power: float = 1.0,
+    stay: int | None = None,
 ) -> LinearChoice:
     """Fit the choice among ``k`` classes from examples ``states (n, d)`` of classes ``y (n,)``.
 
     Features are put in units of their training range ``feature_range (d,)`` (range 0: left
-    out), weighted by how well each separates the classes (:func:`separability` to the power
-    ``power``), and a multinomial logistic regression (:func:`fit_softmax`) is fitted on them.
+    out), weighted by how well each separates the classes (:func:`separability`; with
+    ``stay``, the index of the :data:`STAY` class, the larger of that and the separation it
+    adds to telling staying from going, :func:`added_separation`) to the power ``power``, and
+    a multinomial logistic regression (:func:`fit_softmax`) is fitted on them.
     """
     r = np.asarray(feature_range, dtype=np.float64)
     scale = np.divide(1.0, r, out=np.zeros_like(r), where=r > 0)
     z = np.asarray(states, dtype=np.float64) * scale
-    weight = separability(z, y, k) ** power
+    weight = separability(z, y, k)
+    if stay is not None:
+        weight = np.maximum(weight, added_separation(z, (y != stay).astype(int), 2))
+    weight = weight**power
     z = z * weight
     center = z.mean(axis=0)
     weights, bias = fit_softmax(z - center, y, k)
@@ -300,6 +315,68 @@ def separability(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     return ratio / top if top > 0 else np.ones_like(ratio)
 
 
+def _fisher(z: np.ndarray, y: np.ndarray, k: int) -> float:
+    """The Fisher criterion ``trace(W⁻¹ B)`` of the features ``z (n, m)`` for classes ``y``.
+
+    ``B`` is the between-class scatter per degree of freedom, ``W`` the pooled within-class
+    covariance with :data:`MIN_SPREAD` squared added to its diagonal, as in
+    :func:`separability` (for one feature, ``sqrt`` of this is its unnormalised separability).
+    """
+    m = z.shape[1]
+    mean = z.mean(axis=0)
+    between = np.zeros((m, m))
+    within = np.zeros((m, m))
+    for i in range(k):
+        zi = z[y == i]
+        if not len(zi):
+            continue
+        offset = (zi.mean(axis=0) - mean)[:, None]
+        between += len(zi) * offset @ offset.T
+        centred = zi - zi.mean(axis=0)
+        within += centred.T @ centred
+    within = within / max(len(z) - k, 1) + MIN_SPREAD**2 * np.eye(m)
+    return float(np.trace(np.linalg.solve(within, between / max(k - 1, 1))))
+
+
+def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
+    """Per feature, the separation it adds to those that separate better (forward selection).
+
+    A feature that separates the classes only together with another (peg's depth against the
+    hole's depth: go where they are equal, stay where the peg is short of it) weighs about
+    nothing by :func:`separability`. Here the features enter one at a time (forward selection
+    by the Fisher criterion ``J`` of a feature set, :func:`_fisher`): first the one that
+    separates best alone (weight 1), then each time the one that adds most to ``J`` of those
+    in, weighing ``sqrt(ΔJ / J)`` at its entry (at most 1). A partner that completes a
+    combination enters early with a large weight; a feature that only repeats what the others
+    say, or jitter, enters late with a small one. Features constant over the examples weigh 0.
+
+    Args:
+        z: ``(n, d)`` features in training ranges.
+        y: ``(n,)`` class indices.
+        k: the number of classes.
+
+    Returns:
+        ``(d,)`` weights in ``[0, 1]``.
+    """
+    d = z.shape[1]
+    out = np.zeros(d)
+    alone = np.array([_fisher(z[:, [j]], y, k) for j in range(d)])
+    best = int(np.argmax(alone))
+    if alone[best] <= 0:
+        return out
+    chosen, current = [best], float(alone[best])
+    out[best] = 1.0
+    rest = [j for j in range(d) if j != best and np.ptp(z[:, j]) > 0]
+    while rest:
+        gains = [max(_fisher(z[:, [*chosen, j]], y, k) - current, 0.0) for j in rest]
+        i = int(np.argmax(gains))
+        j = rest.pop(i)
+        out[j] = min(1.0, float(np.sqrt(gains[i] / current)))
+        chosen.append(j)
+        current += gains[i]
+    return out
+
+
 def fit_softmax(z: np.ndarray, y: np.ndarray, k: int, l2: float = L2) -> tuple[np.ndarray, ...]:
     """L2-penalised multinomial logistic regression by Newton's method.
 
@@ -392,7 +469,8 @@ class BranchChoices:
                 continue
             y = np.array([targets.index(t) for t in labels])
             power = SOFT_POWER if kept else 1.0
-            model = learn_choice(np.stack(states), y, len(targets), ranges, power)
+            stay = targets.index(STAY) if kept else None
+            model = learn_choice(np.stack(states), y, len(targets), ranges, power, stay)
             counts = [int(np.sum(y == i)) for i in range(len(targets))]
             choices[(v, source)] = BranchChoice(v, source, targets, counts, model)
         return cls(choices, start, dict(entry_scale or {}))
@@ -528,6 +606,7 @@ __all__ = [
     "BranchChoices",
     "LinearChoice",
     "StartChoice",
+    "added_separation",
     "entry_scales",
     "fit_softmax",
     "learn_choice",

@@ -12,8 +12,10 @@ from cpmp.sequencer.branches import (
     STAY,
     BranchChoices,
     StartChoice,
+    added_separation,
     entry_scales,
     fit_softmax,
+    learn_choice,
     separability,
     stay_examples,
 )
@@ -100,12 +102,13 @@ def test_a_stay_choice_reads_a_combination_and_weighs_features_softly():
     assert choice.choose(np.array([0.21, 0.42, 0.5]), ["retreat"]) == STAY
     assert choice.choose(np.array([0.36, 0.36, 0.0]), ["retreat"]) == "retreat"
     assert choice.choose(np.array([0.15, 0.15, -0.5]), ["retreat"]) == "retreat"
-    # the stay choice weighs by the square root of separability, a branch choice by itself
+    # the stay choice weighs by the square root of separability or of the separation a feature
+    # adds to those that separate better, whichever is larger; a branch choice by separability
     z = np.stack(go + stays) / feature_range
     y = np.array([1] * len(go) + [0] * len(stays))
-    np.testing.assert_allclose(
-        choice.model.scale, separability(z, y, 2) ** SOFT_POWER / feature_range
-    )
+    weight = np.maximum(separability(z, y, 2), added_separation(z, y, 2))
+    np.testing.assert_allclose(choice.model.scale, weight**SOFT_POWER / feature_range)
+    assert weight[1] > 2 * separability(z, y, 2)[1]  # the hole's depth, read with the peg's
     # an ambient feature (x[2] drifting alike under every MP) is left out of the stay choice
     drifting = Coupling(instances=coupling.instances, ambient=np.array([False, False, True]))
     without = BranchChoices.learn(drifting, feature_range, {("holder", "hold"): stays})
@@ -129,6 +132,29 @@ def test_a_stay_choice_reads_a_combination_and_weighs_features_softly():
     np.testing.assert_allclose(
         branch.get("ladle", "pour").model.scale, separability(zc, yc, 2) / 2.0
     )
+
+
+def test_added_separation_keeps_a_partner_and_not_jitter_or_a_copy():
+    # go where x[0] (the peg's depth) reaches x[1] (the hole's), stay short of it; x[2] is
+    # jitter, x[3] a copy of x[0], x[4] constant.
+    rng = np.random.default_rng(3)
+    hole = rng.uniform(0.1, 0.45, 40)
+    going = np.arange(40) % 2 == 0
+    peg = np.where(going, hole, hole * rng.uniform(0.0, 0.6, 40))
+    z = np.stack([peg, hole, rng.uniform(-1, 1, 40), peg, np.full(40, 0.3)], axis=1)
+    y = going.astype(int)
+    alone = separability(z, y, 2)
+    added = added_separation(z, y, 2)
+    assert added[0] == 1.0 and alone[0] == 1.0  # the best alone
+    assert alone[1] < 0.3 and added[1] == 1.0  # the hole's depth: only with the peg's
+    assert max(added[2], added[3]) < 0.3 and added[4] == 0.0  # small beside the partner's 1
+    # a stay choice among several successors adds to telling staying from going only
+    target = np.where(going, np.arange(40) % 4 // 2 + 1, 0)  # stay 0, two successors 1 and 2
+    model = learn_choice(z, target, 3, np.ones(5), stay=0)
+    expected = np.maximum(separability(z, target, 3), added)
+    np.testing.assert_allclose(model.scale, expected)
+    # every feature constant: nothing separates
+    assert not added_separation(np.ones((4, 2)), np.array([0, 1, 0, 1]), 2).any()
 
 
 def test_choices_survive_to_dict():
