@@ -349,14 +349,8 @@ def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     in, weighing ``sqrt(ΔJ / J)`` at its entry (at most 1). A partner that completes a
     combination enters early with a large weight; a feature that only repeats what the others
     say, or jitter, enters late with a small one. Features constant over the examples weigh 0.
-
-    Args:
-        z: ``(n, d)`` features in training ranges.
-        y: ``(n,)`` class indices.
-        k: the number of classes.
-
-    Returns:
-        ``(d,)`` weights in ``[0, 1]``.
+    The arguments are :func:`separability`'s (features ``z (n, d)`` in training ranges, class
+    indices ``y (n,)`` of ``k`` classes), and so is the result: ``(d,)`` weights in ``[0, 1]``.
     """
     d = z.shape[1]
     out = np.zeros(d)
