@@ -315,17 +315,19 @@ def separability(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     return ratio / top if top > 0 else np.ones_like(ratio)
 
 
-def _fisher(z: np.ndarray, y: np.ndarray, k: int) -> float:
-    """The Fisher criterion ``trace(W⁻¹ B)`` of the features ``z (n, m)`` for classes ``y``.
+def _scatter(z: np.ndarray, y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The within- and between-class matrices ``(W, B)``, each ``(d, d)``, of ``z (n, d)``.
 
     ``B`` is the between-class scatter per degree of freedom, ``W`` the pooled within-class
     covariance with :data:`MIN_SPREAD` squared added to its diagonal, as in
-    :func:`separability` (for one feature, ``sqrt`` of this is its unnormalised separability).
+    :func:`separability`. The Fisher criterion of a feature set ``S`` is
+    ``trace(W[S, S]⁻¹ B[S, S])`` (for one feature, ``sqrt`` of it is its unnormalised
+    separability).
     """
-    m = z.shape[1]
+    d = z.shape[1]
     mean = z.mean(axis=0)
-    between = np.zeros((m, m))
-    within = np.zeros((m, m))
+    between = np.zeros((d, d))
+    within = np.zeros((d, d))
     for i in range(k):
         zi = z[y == i]
         if not len(zi):
@@ -334,8 +336,8 @@ def _fisher(z: np.ndarray, y: np.ndarray, k: int) -> float:
         between += len(zi) * offset @ offset.T
         centred = zi - zi.mean(axis=0)
         within += centred.T @ centred
-    within = within / max(len(z) - k, 1) + MIN_SPREAD**2 * np.eye(m)
-    return float(np.trace(np.linalg.solve(within, between / max(k - 1, 1))))
+    within = within / max(len(z) - k, 1) + MIN_SPREAD**2 * np.eye(d)
+    return within, between / max(k - 1, 1)
 
 
 def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
@@ -344,7 +346,7 @@ def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     A feature that separates the classes only together with another (peg's depth against the
     hole's depth: go where they are equal, stay where the peg is short of it) weighs about
     nothing by :func:`separability`. Here the features enter one at a time (forward selection
-    by the Fisher criterion ``J`` of a feature set, :func:`_fisher`): first the one that
+    by the Fisher criterion ``J`` of a feature set, :func:`_scatter`): first the one that
     separates best alone (weight 1), then each time the one that adds most to ``J`` of those
     in, weighing ``sqrt(ΔJ / J)`` at its entry (at most 1). A partner that completes a
     combination enters early with a large weight; a feature that only repeats what the others
@@ -354,7 +356,12 @@ def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     """
     d = z.shape[1]
     out = np.zeros(d)
-    alone = np.array([_fisher(z[:, [j]], y, k) for j in range(d)])
+    within, between = _scatter(z, y, k)
+
+    def fisher(s: list[int]) -> float:
+        return float(np.trace(np.linalg.solve(within[np.ix_(s, s)], between[np.ix_(s, s)])))
+
+    alone = np.array([fisher([j]) for j in range(d)])
     best = int(np.argmax(alone))
     if alone[best] <= 0:
         return out
@@ -362,7 +369,7 @@ def added_separation(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     out[best] = 1.0
     rest = [j for j in range(d) if j != best and np.ptp(z[:, j]) > 0]
     while rest:
-        gains = [max(_fisher(z[:, [*chosen, j]], y, k) - current, 0.0) for j in rest]
+        gains = [max(fisher([*chosen, j]) - current, 0.0) for j in rest]
         i = int(np.argmax(gains))
         j = rest.pop(i)
         out[j] = min(1.0, float(np.sqrt(gains[i] / current)))
