@@ -302,15 +302,8 @@ def separability(z: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
     Returns:
         ``(d,)`` weights in ``[0, 1]``.
     """
-    mean = z.mean(axis=0)
-    between = np.zeros(z.shape[1])
-    within = np.zeros(z.shape[1])
-    for i in range(k):
-        zi = z[y == i]
-        between += len(zi) * (zi.mean(axis=0) - mean) ** 2
-        within += ((zi - zi.mean(axis=0)) ** 2).sum(axis=0)
-    within = within / max(len(z) - k, 1) + MIN_SPREAD**2
-    ratio = np.sqrt(between / max(k - 1, 1) / within)
+    within, between = _scatter(z, y, k)
+    ratio = np.sqrt(np.diag(between) / np.diag(within))
     top = float(ratio.max(initial=0.0))
     return ratio / top if top > 0 else np.ones_like(ratio)
 
@@ -319,9 +312,9 @@ def _scatter(z: np.ndarray, y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarr
     """The within- and between-class matrices ``(W, B)``, each ``(d, d)``, of ``z (n, d)``.
 
     ``B`` is the between-class scatter per degree of freedom, ``W`` the pooled within-class
-    covariance with :data:`MIN_SPREAD` squared added to its diagonal, as in
-    :func:`separability`. The Fisher criterion of a feature set ``S`` is
-    ``trace(W[S, S]⁻¹ B[S, S])`` (for one feature, ``sqrt`` of it is its unnormalised
+    covariance with :data:`MIN_SPREAD` squared added to its diagonal. Their diagonals give
+    :func:`separability`; the Fisher criterion of a feature set ``S`` is
+    ``trace(W[S, S]⁻¹ B[S, S])`` (for one feature, the square of its unnormalised
     separability).
     """
     d = z.shape[1]
