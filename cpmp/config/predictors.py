@@ -261,8 +261,9 @@ class SparseKLRConfig(KLRConfig):
     rule's support points of the graph nodes to keep. It follows a *sparsity path*: greedy
     forward selection over all graph nodes (:mod:`cpmp.predictors.selection`), recorded at
     support totals that are fractions (*levels*) of the graph nodes' fixed-rule count, once per
-    kernel width in ``gamma_scales``. The level and width of least held-out progress MAE are
-    kept (then the loss, then fewer supports, break ties). The validation data are the fit's
+    kernel width in ``gamma_scales``. By default the path runs to ``level`` 1/4 and keeps that
+    point; with ``level: null`` the level and width of least held-out progress MAE are kept
+    (then the loss, then fewer supports, break ties). The validation data are the fit's
     (held-out demonstrations: the main job's test split, ``trainer.val_fraction``, or
     ``validation=`` of :meth:`~cpmp.sequencer.ConcurrentSequencer.fit`); without any,
     ``holdout_fraction`` of each node's activations (seeded by the fit's seed) is held out to
@@ -281,10 +282,13 @@ class SparseKLRConfig(KLRConfig):
     spent).
 
     Attributes:
-        level: ``None`` (default: choose the level on the validation data) or the share of
-            the fixed rule's support count to keep, in (0, 1]: the graph nodes then have
-            ``floor(level * n_support_rule)`` supports (at least one per node); the width is
-            still chosen on the validation data, and the path up to that level is reported.
+        level: the share of the fixed rule's support count to keep, in (0, 1] (default
+            0.25): the graph nodes then have ``floor(level * n_support_rule)`` supports (at
+            least one per node); the width is still chosen on the validation data, and the
+            path up to that level is reported with its held-out scores. ``None``: keep the
+            level of least held-out MAE among ``path_levels`` (on a few demonstrations that
+            MAE is measured on a handful of held-out activations, and the lower levels it
+            picked completed no more episodes than the top one: docs/benchmarks.md).
         path_levels: the levels at which the path is recorded and scored, each in (0, 1]
             (default 1/16, 1/8, 3/16, 1/4).
         gamma_scales: kernel widths tried along the path, as factors of ``gamma`` (> 0; 1: the
@@ -305,7 +309,7 @@ class SparseKLRConfig(KLRConfig):
         l2: as in :class:`KLRConfig`, and the same default.
     """
 
-    level: float | None = None
+    level: float | None = 0.25
     path_levels: tuple[float, ...] = (0.0625, 0.125, 0.1875, 0.25)
     gamma_scales: tuple[float, ...] = (1.0,)
     holdout_fraction: float = 0.25

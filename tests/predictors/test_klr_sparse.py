@@ -1,5 +1,6 @@
 """``klr_sparse`` (cpmp.predictors.klr.SparseKLRPredictor): the default model with the supports
-of a sparsity path, its level chosen on validation data, or fixed; and the L1 variant."""
+of a sparsity path, at a fixed level (a quarter by default) or the level chosen on validation
+data; and the L1 variant's removed options."""
 
 from __future__ import annotations
 
@@ -21,12 +22,13 @@ MAE_BOUND = 0.06
 
 @pytest.fixture(scope="module")
 def validated(train_demos, test_demos):
-    """``klr_sparse`` fitted with the held-out demonstrations as validation data."""
+    """``klr_sparse`` choosing its level (``level=None``) on the held-out demonstrations."""
     return ConcurrentSequencer.fit(
         train_demos,
         "klr_sparse",
         seed=0,
         logger=None,
+        level=None,
         validation=test_demos,
     )
 
@@ -69,7 +71,7 @@ def test_supports_are_at_most_the_fixed_rules(validated, fit_on_train, fitted_kl
 
 
 def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit_on_train):
-    summary = fit_on_train("klr_sparse").fit_summary
+    summary = fit_on_train("klr_sparse", level=None).fit_summary
     assert summary.predictor_facts["sparsity_validation"] == "held-out activations"
     path = summary.predictor_facts["sparsity_path"]
     assert all(p["val_loss"] is not None and p["val_mae"] is not None for p in path)
@@ -81,6 +83,23 @@ def test_without_validation_data_the_level_is_chosen_on_held_out_activations(fit
         summary.predictor_facts["n_support_rule"],
     )
     assert summary.n_support_total == int(level * n_rule)
+
+
+def test_by_default_a_quarter_of_the_rules_supports_is_kept(fit_on_train, validated):
+    """The default keeps the path's last point, 1/4, whatever the held-out MAE prefers; the
+    path before it is still scored and reported."""
+    seq = fit_on_train("klr_sparse")
+    facts = seq.fit_summary.predictor_facts
+    assert facts["sparsity_level"] == 0.25
+    assert seq.fit_summary.n_support_total == max(
+        len(seq.node_keys), int(0.25 * facts["n_support_rule"])
+    )
+    path = facts["sparsity_path"]
+    assert sorted({p["level"] for p in path}) == list(seq.predictor.config.path_levels)
+    assert all(p["val_mae"] is not None for p in path)
+    assert [p["level"] for p in path if p["chosen"]] == [0.25]
+    # choosing on the held-out demonstrations can keep fewer
+    assert validated.fit_summary.n_support_total <= seq.fit_summary.n_support_total
 
 
 @pytest.mark.parametrize("validation", [True, False], ids=["validation", "held-out"])
@@ -158,7 +177,7 @@ def test_defaults_are_the_default_models():
     sparse, default = predictor_config("klr_sparse"), predictor_config("klr")
     for name in ("gamma", "feature_weighting", "feature_scaling", "path_noise", "support_scale"):
         assert getattr(sparse, name) == getattr(default, name), name
-    assert sparse.level is None
+    assert sparse.level == 0.25
 
 
 @pytest.mark.parametrize("option", ["method", "l1", "learn_positions", "epochs", "refit"])
