@@ -3,24 +3,27 @@
 Forward selection (:mod:`cpmp.predictors.selection`) keeps a subset of the fixed rule's
 support points at their places and with the default kernel. A quarter of the supports placed
 along the activations then leaves gaps the default kernel width was never meant to bridge.
-Here every node's kept supports are *moved* and its kernel's per-feature weights are
-*rescaled* (one factor ``exp(ℓ_kj)`` per node and feature, an ARD kernel) together with the
-weights and bias, by LBFGS on the same loss as the fit's (mean soft-label BCE + ``½ l2 ||w||²``
-per node), as inducing points of a sparse Gaussian process are optimised (Snelson &
-Ghahramani 2006). The loss is no longer convex in the positions; the forward path's supports
+Here every node's kept supports are *moved* together with the weights and bias, by LBFGS on
+the same loss as the fit's (mean soft-label BCE + ``½ l2 ||w||²`` per node), as inducing
+points of a sparse Gaussian process are optimised (Snelson & Ghahramani 2006). The kernel's
+per-feature weights stay the fixed rule's (γ times the node's path weights): learning one
+factor per node and feature as well (an ARD kernel, until session 32) fitted a few
+demonstrations' contexts. At peg D = 6 the holder's ``hold`` came to weigh the inserter's
+``x`` 12 times more, so its φ read 0.44 at a hole position just outside the demonstrated
+ones; without the factors ``klr_sparse`` completes peg as the default does
+(docs/benchmarks.md). The loss is no longer convex in the positions; the forward path's supports
 are the starting point, and the trainer's convex solver then re-solves the weights on every
 sample with the moved supports fixed.
 
 All nodes are refined in one batched problem: ``K`` nodes, their samples padded to ``P`` and
 their supports to ``S``. The loss and its gradient are written out (no autograd graph), which
 keeps an evaluation to a dozen tensor calls: the problems are small and an evaluation's cost
-is mostly per call. With ``a = a₀ ⊙ exp(ℓ)`` a node's kernel weights, ``q_ps = Σ_j a_j (x_pj -
+is mostly per call. With ``a`` a node's kernel weights, ``q_ps = Σ_j a_j (x_pj -
 s_sj)²``, ``k_ps = exp(-q_ps)``, ``z_p = Σ_s w_s k_ps + b`` and ``r_p = c_p (σ(z_p) - y_p)``
 (``c_p`` the sample weights), ``G_ps = r_p w_s k_ps`` gives
 
 ``∂f/∂w_s = Σ_p r_p k_ps + l2 w_s``, ``∂f/∂b = Σ_p r_p``,
-``∂f/∂s_sj = 2 a_j (Σ_p G_ps x_pj - s_sj Σ_p G_ps)``,
-``∂f/∂ℓ_j = -a_j Σ_ps G_ps (x_pj - s_sj)²``.
+``∂f/∂s_sj = 2 a_j (Σ_p G_ps x_pj - s_sj Σ_p G_ps)``.
 """
 
 from __future__ import annotations
@@ -44,8 +47,8 @@ class RefineProblem:
             mean; 0 on padded rows).
         support: ``(K, S, d)`` the starting supports; padded slots are 0.
         mask: ``(K, S)`` real supports.
-        base_weights: ``(K, d)`` the kernel's per-feature weights before rescaling (γ times
-            the node's path weights).
+        base_weights: ``(K, d)`` the kernel's per-feature weights (γ times the node's path
+            weights).
         weight: ``(K, S)`` starting weights (0 on padded slots).
         bias: ``(K,)`` starting intercepts.
     """
@@ -66,7 +69,6 @@ class RefineResult:
 
     Attributes:
         support: ``(K, S, d)`` the moved supports (padded slots unchanged).
-        log_scale: ``(K, d)`` ``ℓ``: the kernel weights are ``base_weights * exp(ℓ)``.
         weight: ``(K, S)`` weights.
         bias: ``(K,)`` intercepts.
         loss_start: Σ over nodes of the penalised loss at the start.
@@ -75,7 +77,6 @@ class RefineResult:
     """
 
     support: torch.Tensor
-    log_scale: torch.Tensor
     weight: torch.Tensor
     bias: torch.Tensor
     loss_start: float
@@ -132,30 +133,24 @@ class _Objective:
         self.l2 = float(l2)
         self.fit_bias = fit_bias
         k, s, d = problem.support.shape
-        self.shapes = ((k, s, d), (k, d), (k, s), (k,))
+        self.shapes = ((k, s, d), (k, s), (k,))
         self.sizes = [math.prod(shape) for shape in self.shapes]
         self.anchor = float(anchor)
         self.u0 = (problem.support.double() * self.unit).reshape(-1)
 
-    def pack(
-        self,
-        support: torch.Tensor,
-        log_scale: torch.Tensor,
-        weight: torch.Tensor,
-        bias: torch.Tensor,
-    ) -> torch.Tensor:
-        """The flat vector ``(u, ℓ, weight, bias)``.
+    def pack(self, support: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+        """The flat vector ``(u, weight, bias)``.
 
         The positions are optimised in units of the starting kernel's width, ``u = s ⊙ √a₀``,
         so that a unit step moves a support as far in every feature (LBFGS converges in far
         fewer steps than on raw positions, whose features' widths differ by orders of
         magnitude); a feature of ``a₀ = 0`` keeps its own units.
         """
-        parts = (support.double() * self.unit, log_scale, weight, bias)
+        parts = (support.double() * self.unit, weight, bias)
         return torch.cat([p.double().reshape(-1) for p in parts])
 
     def unpack(self, theta: torch.Tensor) -> list[torch.Tensor]:
-        """The four parameter tensors of a flat vector: supports (in feature units), ℓ, w, b."""
+        """The three parameter tensors of a flat vector: supports (in feature units), w, b."""
         out, start = [], 0
         for shape, size in zip(self.shapes, self.sizes, strict=True):
             out.append(theta[start : start + size].view(shape))
@@ -165,8 +160,8 @@ class _Objective:
 
     def __call__(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Loss (a 0-d tensor) and gradient (flat, in :meth:`pack`'s units) at ``theta``."""
-        support, log_scale, weight, bias = self.unpack(theta)
-        a = self.a0 * torch.exp(log_scale)  # (K, d)
+        support, weight, bias = self.unpack(theta)
+        a = self.a0  # (K, d)
         w = weight * self.mask
         weighted = support * a[:, None, :]  # (K, S, d)
         s_term = (weighted * support).sum(-1)  # (K, S)
@@ -183,20 +178,12 @@ class _Objective:
         col = big_g.sum(1)  # (K, S)
         gx = torch.bmm(big_g.transpose(1, 2), self.x)  # (K, S, d)
         g_s = 2.0 * a[:, None, :] * (gx - support * col[:, :, None]) / self.unit
-        row = big_g.sum(2)  # (K, P)
-        # Σ_ps G (x - s)² = Σ_p row x² - 2 Σ_s s ⊙ gx + Σ_s col s²
-        spread = (
-            torch.bmm(row[:, None, :], self.x_sq)[:, 0]
-            - 2.0 * (support * gx).sum(1)
-            + (col[:, :, None] * support * support).sum(1)
-        )
-        g_l = -a * spread
         g_u = g_s.reshape(-1)
         if self.anchor > 0.0:  # ½·2λ: the pull back to the starting points, in kernel widths
             du = theta[: self.sizes[0]] - self.u0
             loss = loss + self.anchor * (du * du).sum()
             g_u = g_u + 2.0 * self.anchor * du
-        return loss, torch.cat([g_u, g_l.reshape(-1), g_w.reshape(-1), g_b])
+        return loss, torch.cat([g_u, g_w.reshape(-1), g_b])
 
 
 def refine(
@@ -206,7 +193,7 @@ def refine(
     fit_bias: bool = True,
     anchor: float = 0.0,
 ) -> RefineResult:
-    """Move the supports and rescale the kernels of every node (LBFGS, strong Wolfe).
+    """Move the supports of every node, with its weights and bias (LBFGS, strong Wolfe).
 
     Args:
         problem: the nodes' samples and starting models.
@@ -222,9 +209,7 @@ def refine(
         accepts decreases).
     """
     objective = _Objective(problem, l2, fit_bias, anchor)
-    k, _, d = problem.support.shape
-    log_scale = torch.zeros(k, d, dtype=torch.float64)
-    theta = objective.pack(problem.support, log_scale, problem.weight, problem.bias)
+    theta = objective.pack(problem.support, problem.weight, problem.bias)
     start, _ = objective(theta)
     param = torch.nn.Parameter(theta.clone())
     opt = torch.optim.LBFGS(
@@ -248,14 +233,13 @@ def refine(
     if not bool(torch.isfinite(loss)) or float(loss) >= float(start):  # the start, exactly
         return RefineResult(
             problem.support.double().clone(),
-            log_scale,
             problem.weight.double() * objective.mask,
             problem.bias.double().clone(),
             float(start),
             float(start),
             evaluations,
         )
-    support, log_scale, weight, bias = (t.clone() for t in objective.unpack(param.detach()))
+    support, weight, bias = (t.clone() for t in objective.unpack(param.detach()))
     return RefineResult(
-        support, log_scale, weight * objective.mask, bias, float(start), float(loss), evaluations
+        support, weight * objective.mask, bias, float(start), float(loss), evaluations
     )

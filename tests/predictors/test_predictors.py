@@ -92,13 +92,13 @@ def test_packed_logits_equal_padded_kernel(fitted, test_demos, kind):
 
 
 def test_packed_cache_follows_parameter_changes(fit_on_train, test_demos):
-    seq = fit_on_train("klr_sparse")  # refined: moved supports, per-node feature scales
+    seq = fit_on_train("klr_sparse")  # refined: moved supports
     model = seq.predictor
     z = torch.as_tensor(test_demos[0].features[:5])
     before = seq.progress(z.numpy())
     with torch.no_grad():
         model.weight.mul_(-1.0)
-        model.log_feature_scale.add_(0.3)
+        model.log_feature_scale.add_(0.3)  # an older checkpoint's per-feature factors
         np.testing.assert_allclose(model.logits(z), _padded_logits(model, z), atol=1e-10)
     assert not np.allclose(seq.progress(z.numpy()), before)
     with torch.no_grad():  # edits through .data bypass the version counter: clear_cache
