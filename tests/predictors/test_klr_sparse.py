@@ -269,3 +269,20 @@ def test_refined_model_predicts_held_out_progress(validated, fit_on_train, test_
     # measured on this data: default 0.028, kept in place 0.035, refined 0.019
     assert moved_mae < kept_mae
     assert moved_mae < 1.1 * default
+
+
+def test_a_checkpoint_with_per_feature_kernel_factors_loads_them(
+    fit_on_train, tmp_path, test_demos
+):
+    """Before session 32 the refinement learned a kernel factor per node and feature; a model
+    saved then predicts with its factors after loading."""
+    seq = fit_on_train("klr_sparse")
+    x = test_demos[0].features
+    plain = seq.progress(x)
+    with torch.no_grad():
+        seq.predictor.log_feature_scale[:, 0] = 0.5  # as an older refinement left them
+    seq.predictor.clear_cache()
+    loaded = ConcurrentSequencer.load(seq.save(tmp_path / "old.pt"))
+    assert float(loaded.predictor.log_feature_scale[0, 0]) == 0.5
+    np.testing.assert_array_equal(loaded.progress(x), seq.progress(x))
+    assert not np.allclose(loaded.progress(x), plain)
