@@ -269,9 +269,10 @@ class SparseKLRConfig(KLRConfig):
     ``holdout_fraction`` of each node's activations (seeded by the fit's seed) is held out to
     choose, and the chosen level and width are then selected again on every activation. The
     kept supports are then *refined* (inducing points, :mod:`cpmp.predictors.inducing`):
-    positions, weights and bias optimised together by LBFGS on the training loss, each
-    support anchored to its path point, the kernel the fixed rule's; the convex solver then
-    solves the weights on every sample.
+    positions, one kernel factor per node and feature that may widen the kernel but never
+    narrow it, weights and bias optimised together by LBFGS on the training loss, each
+    support anchored to its path point; the convex solver then solves the weights on every
+    sample.
     Why each piece is there, measured: docs/benchmarks.md and docs/history.md.
 
     The fit summary reports the path: ``sparsity_path`` (one record per width and level:

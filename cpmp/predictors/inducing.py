@@ -3,27 +3,28 @@
 Forward selection (:mod:`cpmp.predictors.selection`) keeps a subset of the fixed rule's
 support points at their places and with the default kernel. A quarter of the supports placed
 along the activations then leaves gaps the default kernel width was never meant to bridge.
-Here every node's kept supports are *moved* together with the weights and bias, by LBFGS on
-the same loss as the fit's (mean soft-label BCE + ``½ l2 ||w||²`` per node), as inducing
-points of a sparse Gaussian process are optimised (Snelson & Ghahramani 2006). The kernel's
-per-feature weights stay the fixed rule's (γ times the node's path weights): learning one
-factor per node and feature as well (an ARD kernel, until session 32) fitted a few
-demonstrations' contexts. At peg D = 6 the holder's ``hold`` came to weigh the inserter's
-``x`` 12 times more, so its φ read 0.44 at a hole position just outside the demonstrated
-ones; without the factors ``klr_sparse`` completes peg as the default does
-(docs/benchmarks.md). The loss is no longer convex in the positions; the forward path's supports
-are the starting point, and the trainer's convex solver then re-solves the weights on every
-sample with the moved supports fixed.
+Here every node's kept supports are *moved* and its kernel's per-feature weights are
+*widened* (one factor ``exp(ℓ_kj)``, ``ℓ_kj ≤ 0``, per node and feature: an ARD kernel that
+may only widen) together with the weights and bias, by LBFGS on the same loss as the fit's
+(mean soft-label BCE + ``½ l2 ||w||²`` per node), as inducing points of a sparse Gaussian
+process are optimised (Snelson & Ghahramani 2006). Widening bridges the gaps between few
+supports. Narrowing is not allowed: on a few demonstrations it fitted their contexts (at peg
+D = 6 the holder's ``hold`` came to weigh the inserter's ``x`` 12 times more, and its φ read
+0.44 at a hole just outside the demonstrated ones; docs/benchmarks.md). The factors enter as
+``ℓ = min(θ, 0)``: a ``θ`` the loss pushes above 0 stops there. The loss is no longer convex
+in the positions; the forward path's supports are the starting point, and the trainer's
+convex solver then re-solves the weights on every sample with the moved supports fixed.
 
 All nodes are refined in one batched problem: ``K`` nodes, their samples padded to ``P`` and
 their supports to ``S``. The loss and its gradient are written out (no autograd graph), which
 keeps an evaluation to a dozen tensor calls: the problems are small and an evaluation's cost
-is mostly per call. With ``a`` a node's kernel weights, ``q_ps = Σ_j a_j (x_pj -
-s_sj)²``, ``k_ps = exp(-q_ps)``, ``z_p = Σ_s w_s k_ps + b`` and ``r_p = c_p (σ(z_p) - y_p)``
-(``c_p`` the sample weights), ``G_ps = r_p w_s k_ps`` gives
+is mostly per call. With ``a = a₀ ⊙ exp(ℓ)`` a node's kernel weights,
+``q_ps = Σ_j a_j (x_pj - s_sj)²``, ``k_ps = exp(-q_ps)``, ``z_p = Σ_s w_s k_ps + b`` and
+``r_p = c_p (σ(z_p) - y_p)`` (``c_p`` the sample weights), ``G_ps = r_p w_s k_ps`` gives
 
 ``∂f/∂w_s = Σ_p r_p k_ps + l2 w_s``, ``∂f/∂b = Σ_p r_p``,
-``∂f/∂s_sj = 2 a_j (Σ_p G_ps x_pj - s_sj Σ_p G_ps)``.
+``∂f/∂s_sj = 2 a_j (Σ_p G_ps x_pj - s_sj Σ_p G_ps)``,
+``∂f/∂θ_j = -a_j Σ_ps G_ps (x_pj - s_sj)²`` where ``θ_j ≤ 0``, else 0.
 """
 
 from __future__ import annotations
@@ -47,8 +48,8 @@ class RefineProblem:
             mean; 0 on padded rows).
         support: ``(K, S, d)`` the starting supports; padded slots are 0.
         mask: ``(K, S)`` real supports.
-        base_weights: ``(K, d)`` the kernel's per-feature weights (γ times the node's path
-            weights).
+        base_weights: ``(K, d)`` the kernel's per-feature weights before rescaling (γ times
+            the node's path weights).
         weight: ``(K, S)`` starting weights (0 on padded slots).
         bias: ``(K,)`` starting intercepts.
     """
@@ -69,6 +70,7 @@ class RefineResult:
 
     Attributes:
         support: ``(K, S, d)`` the moved supports (padded slots unchanged).
+        log_scale: ``(K, d)`` ``ℓ ≤ 0``: the kernel weights are ``base_weights * exp(ℓ)``.
         weight: ``(K, S)`` weights.
         bias: ``(K,)`` intercepts.
         loss_start: Σ over nodes of the penalised loss at the start.
@@ -77,6 +79,7 @@ class RefineResult:
     """
 
     support: torch.Tensor
+    log_scale: torch.Tensor
     weight: torch.Tensor
     bias: torch.Tensor
     loss_start: float
@@ -133,24 +136,30 @@ class _Objective:
         self.l2 = float(l2)
         self.fit_bias = fit_bias
         k, s, d = problem.support.shape
-        self.shapes = ((k, s, d), (k, s), (k,))
+        self.shapes = ((k, s, d), (k, d), (k, s), (k,))
         self.sizes = [math.prod(shape) for shape in self.shapes]
         self.anchor = float(anchor)
         self.u0 = (problem.support.double() * self.unit).reshape(-1)
 
-    def pack(self, support: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
-        """The flat vector ``(u, weight, bias)``.
+    def pack(
+        self,
+        support: torch.Tensor,
+        log_scale: torch.Tensor,
+        weight: torch.Tensor,
+        bias: torch.Tensor,
+    ) -> torch.Tensor:
+        """The flat vector ``(u, ℓ, weight, bias)``.
 
         The positions are optimised in units of the starting kernel's width, ``u = s ⊙ √a₀``,
         so that a unit step moves a support as far in every feature (LBFGS converges in far
         fewer steps than on raw positions, whose features' widths differ by orders of
         magnitude); a feature of ``a₀ = 0`` keeps its own units.
         """
-        parts = (support.double() * self.unit, weight, bias)
+        parts = (support.double() * self.unit, log_scale, weight, bias)
         return torch.cat([p.double().reshape(-1) for p in parts])
 
     def unpack(self, theta: torch.Tensor) -> list[torch.Tensor]:
-        """The three parameter tensors of a flat vector: supports (in feature units), w, b."""
+        """The four parameter tensors of a flat vector: supports (in feature units), ℓ, w, b."""
         out, start = [], 0
         for shape, size in zip(self.shapes, self.sizes, strict=True):
             out.append(theta[start : start + size].view(shape))
@@ -160,8 +169,8 @@ class _Objective:
 
     def __call__(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Loss (a 0-d tensor) and gradient (flat, in :meth:`pack`'s units) at ``theta``."""
-        support, weight, bias = self.unpack(theta)
-        a = self.a0  # (K, d)
+        support, log_scale, weight, bias = self.unpack(theta)
+        a = self.a0 * torch.exp(log_scale.clamp_max(0.0))  # (K, d): ℓ = min(θ, 0)
         w = weight * self.mask
         weighted = support * a[:, None, :]  # (K, S, d)
         s_term = (weighted * support).sum(-1)  # (K, S)
@@ -178,12 +187,20 @@ class _Objective:
         col = big_g.sum(1)  # (K, S)
         gx = torch.bmm(big_g.transpose(1, 2), self.x)  # (K, S, d)
         g_s = 2.0 * a[:, None, :] * (gx - support * col[:, :, None]) / self.unit
+        row = big_g.sum(2)  # (K, P)
+        # Σ_ps G (x - s)² = Σ_p row x² - 2 Σ_s s ⊙ gx + Σ_s col s²
+        spread = (
+            torch.bmm(row[:, None, :], self.x_sq)[:, 0]
+            - 2.0 * (support * gx).sum(1)
+            + (col[:, :, None] * support * support).sum(1)
+        )
+        g_l = -a * spread * (log_scale <= 0.0)
         g_u = g_s.reshape(-1)
         if self.anchor > 0.0:  # ½·2λ: the pull back to the starting points, in kernel widths
             du = theta[: self.sizes[0]] - self.u0
             loss = loss + self.anchor * (du * du).sum()
             g_u = g_u + 2.0 * self.anchor * du
-        return loss, torch.cat([g_u, g_w.reshape(-1), g_b])
+        return loss, torch.cat([g_u, g_l.reshape(-1), g_w.reshape(-1), g_b])
 
 
 def refine(
@@ -193,7 +210,7 @@ def refine(
     fit_bias: bool = True,
     anchor: float = 0.0,
 ) -> RefineResult:
-    """Move the supports of every node, with its weights and bias (LBFGS, strong Wolfe).
+    """Move the supports and widen the kernels of every node (LBFGS, strong Wolfe).
 
     Args:
         problem: the nodes' samples and starting models.
@@ -209,7 +226,9 @@ def refine(
         accepts decreases).
     """
     objective = _Objective(problem, l2, fit_bias, anchor)
-    theta = objective.pack(problem.support, problem.weight, problem.bias)
+    k, _, d = problem.support.shape
+    log_scale = torch.zeros(k, d, dtype=torch.float64)
+    theta = objective.pack(problem.support, log_scale, problem.weight, problem.bias)
     start, _ = objective(theta)
     param = torch.nn.Parameter(theta.clone())
     opt = torch.optim.LBFGS(
@@ -233,13 +252,20 @@ def refine(
     if not bool(torch.isfinite(loss)) or float(loss) >= float(start):  # the start, exactly
         return RefineResult(
             problem.support.double().clone(),
+            log_scale,
             problem.weight.double() * objective.mask,
             problem.bias.double().clone(),
             float(start),
             float(start),
             evaluations,
         )
-    support, weight, bias = (t.clone() for t in objective.unpack(param.detach()))
+    support, theta_l, weight, bias = (t.clone() for t in objective.unpack(param.detach()))
     return RefineResult(
-        support, weight * objective.mask, bias, float(start), float(loss), evaluations
+        support,
+        theta_l.clamp_max(0.0),
+        weight * objective.mask,
+        bias,
+        float(start),
+        float(loss),
+        evaluations,
     )

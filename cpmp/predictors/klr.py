@@ -690,8 +690,8 @@ class SparseKLRPredictor(KLRPredictor):
         n_support: int = 1,
     ) -> None:
         super().__init__(node_keys, n_features, config, n_support)
-        # per-node, per-feature kernel factors: 0 since session 32, whose refinement no longer
-        # learns them; kept so that a checkpoint saved before it loads with its factors
+        # per-node, per-feature kernel factors, set by the refinement (widening only since
+        # session 32; an older checkpoint's may narrow), not by the trainer
         self.log_feature_scale = nn.Parameter(
             torch.zeros(self.n_nodes, n_features, dtype=self.dtype_), requires_grad=False
         )
@@ -710,8 +710,8 @@ class SparseKLRPredictor(KLRPredictor):
     def feature_weights(self) -> torch.Tensor:
         """Per-node, per-feature kernel weights ``(K, d)``.
 
-        γ (times the chosen width factor) times the path weights (times the per-node,
-        per-feature factors a refinement learned before session 32, in an older checkpoint).
+        γ (times the chosen width factor) times the path weights, times the refinement's
+        per-node, per-feature factors (at most 1 since session 32).
         """
         return self.gamma * self.feature_scale * torch.exp(self.log_feature_scale)
 
@@ -776,7 +776,7 @@ class SparseKLRPredictor(KLRPredictor):
         log.info("%s", self.describe_path())
 
     def _refine(self, data: list[NodeData]) -> None:
-        """Move the kept supports on every sample.
+        """Move the kept supports and widen every node's kernel on every sample.
 
         See :mod:`cpmp.predictors.inducing`; the trainer's convex solver then re-solves the
         weights on every sample.
@@ -805,6 +805,7 @@ class SparseKLRPredictor(KLRPredictor):
             )
         with torch.no_grad():
             self.support[:, :s] = result.support.to(self.dtype_)
+            self.log_feature_scale += result.log_scale.to(self.dtype_)
             self.weight[:, :s] = result.weight.to(self.dtype_)
             self.bias.copy_(result.bias.to(self.dtype_))
         self._cache = None
@@ -940,7 +941,7 @@ class SparseKLRPredictor(KLRPredictor):
         if self.refine_summary:
             r = self.refine_summary
             lines.append(
-                f"then refined (supports moved) on every training activation: "
+                f"then refined (supports moved, kernels widened) on every training activation: "
                 f"training loss {r['loss_start']:.5f} -> {r['loss']:.5f} in "
                 f"{r['evaluations']} evaluations"
             )

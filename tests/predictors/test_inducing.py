@@ -43,12 +43,12 @@ def problem() -> RefineProblem:
 def _reference_loss(problem, theta, l2, anchor):
     """The penalised loss written independently in torch (differences, torch's BCE)."""
     k, s, d = problem.support.shape
-    sizes = [k * s * d, k * s, k]
-    u, weight, bias = torch.split(theta, sizes)
+    sizes = [k * s * d, k * d, k * s, k]
+    u, log_scale, weight, bias = torch.split(theta, sizes)
     a0 = problem.base_weights
     unit = torch.where(a0 > 0, a0.sqrt(), torch.ones_like(a0))[:, None, :]
     support = u.view(k, s, d) / unit
-    a = problem.base_weights
+    a = problem.base_weights * torch.exp(log_scale.view(k, d).clamp_max(0.0))  # widen only
     diff = problem.x[:, :, None, :] - support[:, None, :, :]  # (K, P, S, d)
     kern = torch.exp(-(a[:, None, None, :] * diff * diff).sum(-1)) * problem.mask[:, None, :]
     w = weight.view(k, s) * problem.mask
@@ -73,6 +73,7 @@ def test_gradient_is_the_loss_derivative(problem, weights):
     theta = objective.pack(
         problem.support
         + 0.1 * torch.randn(problem.support.shape, generator=gen, dtype=torch.float64),
+        0.3 * torch.randn(3, 2, generator=gen, dtype=torch.float64),
         torch.randn(3, 4, generator=gen, dtype=torch.float64) * problem.mask,
         torch.randn(3, generator=gen, dtype=torch.float64),
     )
@@ -92,19 +93,42 @@ def test_refinement_lowers_the_loss_and_leaves_padding_alone(problem):
     # the padded slot keeps its place and a zero weight
     assert torch.equal(result.support[1, 3], problem.support[1, 3])
     assert float(result.weight[1, 3]) == 0.0
+    # the irrelevant second feature's kernel widens, more than the first's
+    assert bool((result.log_scale[:, 1] < result.log_scale[:, 0]).all())
+    assert bool((result.log_scale <= 0.0).all())
+
+
+def test_a_kernel_is_widened_but_never_narrowed(problem):
+    """With a kernel far too wide for the progress along the first feature, the loss asks to
+    narrow it: the factor stays at 1 (ℓ = 0) and the supports and weights learn instead."""
+    wide = dataclasses.replace(
+        problem, base_weights=torch.tensor([[0.005, 0.5]] * 3, dtype=torch.float64)
+    )
+    objective = _Objective(wide, l2=1e-4, fit_bias=True)
+    k, s, d = wide.support.shape
+    log_scale = torch.zeros(k, d, dtype=torch.float64)
+    weight = torch.full((k, s), 0.5, dtype=torch.float64) * wide.mask
+    _, grad = objective(objective.pack(wide.support, log_scale, weight, wide.bias))
+    g_l = grad[k * s * d : k * s * d + k * d].view(k, d)
+    assert bool((g_l[:, 0] < 0).all())  # a narrower kernel in the first feature lowers the loss
+    result = refine(wide, l2=1e-4, max_iter=40)
+    assert result.loss < result.loss_start
+    assert torch.count_nonzero(result.log_scale[:, 0]) == 0  # held at the fixed rule's width
+    assert bool((result.log_scale <= 0.0).all())
 
 
 def test_a_feature_weighed_zero_is_left_alone_and_the_rest_refined(problem):
     """A path weight of 0 (a feature constant along a node's activations) gives that feature
     no kernel width: the refinement still runs (it once divided by the width, 0, and its
     loss was NaN from the start, so it silently kept the start) and leaves the feature's
-    support coordinates where they were."""
+    support coordinates and kernel scale where they were."""
     ignored = dataclasses.replace(
         problem, base_weights=torch.tensor([[0.5, 0.0]] * 3, dtype=torch.float64)
     )
     result = refine(ignored, l2=1e-4, max_iter=40)
     assert result.loss < 0.9 * result.loss_start  # refined, not the start kept
     torch.testing.assert_close(result.support[..., 1], ignored.support[..., 1], rtol=0, atol=0)
+    assert torch.count_nonzero(result.log_scale[:, 1]) == 0
     assert bool((result.support[..., 0] != ignored.support[..., 0]).any())
 
 
@@ -112,6 +136,7 @@ def test_no_iterations_return_the_start(problem):
     result = refine(problem, l2=1e-4, max_iter=0)
     assert result.evaluations == 0 and result.loss == result.loss_start
     assert torch.equal(result.support, problem.support)
+    assert torch.count_nonzero(result.log_scale) == 0
 
 
 def test_fixed_bias_stays(problem):
@@ -136,4 +161,4 @@ def test_anchor_pulls_the_supports_back(problem):
     moved_free = (free.support - problem.support).abs().max()
     moved_held = (held.support - problem.support).abs().max()
     assert moved_held < 0.1 * moved_free
-    assert held.loss < held.loss_start  # the weights still learn
+    assert held.loss < held.loss_start  # the weights and scales still learn

@@ -240,8 +240,9 @@ def test_forward_model_round_trips_through_a_checkpoint(validated, tmp_path, tes
 
 def test_refinement_moves_the_supports_and_lowers_the_loss(fit_on_train, validated):
     """``refine_iter`` 0 keeps the path's supports on the fixed rule's points; the default
-    moves them, at a lower training loss, and keeps the fixed rule's kernel (per-feature
-    factors learned on a few demonstrations fitted their contexts: docs/benchmarks.md)."""
+    moves them, at a lower training loss, and widens some node's kernel in some feature, never
+    narrows one (narrowing factors learned on a few demonstrations fitted their contexts:
+    docs/benchmarks.md)."""
     kept = fit_on_train("klr_sparse", refine_iter=0)
     moved = fit_on_train("klr_sparse")
     assert "refine" not in kept.fit_summary.predictor_facts
@@ -257,8 +258,7 @@ def test_refinement_moves_the_supports_and_lowers_the_loss(fit_on_train, validat
     mask = a.support_mask
     assert not torch.allclose(a.support[mask], b.support[mask])
     assert torch.count_nonzero(a.log_feature_scale) == 0
-    assert torch.count_nonzero(b.log_feature_scale) == 0
-    torch.testing.assert_close(a.feature_weights(), b.feature_weights(), rtol=0, atol=0)
+    assert bool((b.log_feature_scale < 0).any()) and bool((b.log_feature_scale <= 0).all())
 
 
 def test_refined_model_predicts_held_out_progress(validated, fit_on_train, test_demos):
@@ -274,8 +274,8 @@ def test_refined_model_predicts_held_out_progress(validated, fit_on_train, test_
 def test_a_checkpoint_with_per_feature_kernel_factors_loads_them(
     fit_on_train, tmp_path, test_demos
 ):
-    """Before session 32 the refinement learned a kernel factor per node and feature; a model
-    saved then predicts with its factors after loading."""
+    """Before session 32 the refinement's per-node, per-feature kernel factors could narrow a
+    kernel; a model saved then predicts with its factors after loading."""
     seq = fit_on_train("klr_sparse")
     x = test_demos[0].features
     plain = seq.progress(x)
