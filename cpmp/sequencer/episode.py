@@ -35,6 +35,7 @@ from cpmp.sequencer.model import TransitionModel
 from cpmp.sequencer.motion import SpeedLimit, SpeedMeter, without_ambient
 from cpmp.sequencer.switching import (
     Candidate,
+    Coupling,
     JointPartner,
     StallDetector,
     make_rule,
@@ -167,6 +168,29 @@ def _partner_p(
     if partner.target not in row.successors:
         return None
     return row.p[row.successors.index(partner.target)]
+
+
+def _with_partners_demonstrated(
+    candidates: Sequence[Candidate], coupling: Coupling, active: Mapping[str, str]
+) -> list[Candidate]:
+    """``candidates``, each marked not demonstrated where a joint partner it takes is not.
+
+    A joint switch was always made together with its partners, so a recovery takes them along;
+    when a partner's own switch is not the demonstrator's here (another variable's jammed
+    ``try``, whose nearest demonstrated state went to ``undo``, carried into ``next`` by the
+    holder's ``hold -> retreat``), the pair was not demonstrated here either.
+    """
+    made = {(c.variable, c.target): c.demonstrated for c in candidates}
+    out = []
+    for cand in candidates:
+        partners = coupling.joint.get((cand.variable, cand.source, cand.target), {})
+        ok = all(
+            made.get((u, partner.target), True)
+            for u, partner in partners.items()
+            if active.get(u) in partner.sources
+        )
+        out.append(cand if ok else cand._replace(demonstrated=False))
+    return out
 
 
 class SequencerEpisode:
@@ -708,6 +732,8 @@ class SequencerEpisode:
                     row.successors, row.p, row.inconsistent, plan_row.unseen, strict=True
                 )
             ]
+        if self._coupled and c.joint:
+            candidates = _with_partners_demonstrated(candidates, model.coupling, self.active)
         choice = recovery_choice(candidates, c.recovery_threshold)
         if choice is not None:
             v = choice.variable

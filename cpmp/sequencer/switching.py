@@ -67,8 +67,11 @@ switches out of the same MP in this context, the one in the state nearest the cu
 ``recovery_threshold``, 0 by default: a stall is a state nothing will change, so a low ``p``
 will not rise — a re-align that starts where an align ends reads "done"), the one with the
 fewest other variables less far than at any demonstrated switch (a stall is often an MP that
-cannot go further: fingers closed on an object), then the most probable, fires. When none
-may, the
+cannot go further: fingers closed on an object), then the most probable, fires. A joint switch
+takes its partners along, so it may resolve a stall only if each partner's own switch is the
+demonstrator's here too (a holder's ``hold -> retreat``, always made as the other arm's try
+succeeded, does not carry a jammed try into ``next``: that try's nearest demonstrated state went
+to ``undo``). When none may, the
 sequencer gives up (a ``give_up`` note; it switches no more) — unless every variable's node is
 *final* in the current context (no successor demonstrated with the other variables' current
 MPs): that is the task's demonstrated end, and nothing happens.

@@ -19,6 +19,7 @@ from cpmp.sequencer.sequencer import ConcurrentSequencer
 from cpmp.sequencer.switching import (
     Candidate,
     Coupling,
+    JointPartner,
     PaperRule,
     PeakRule,
     recovery_choice,
@@ -480,3 +481,69 @@ def test_recovery_goes_where_the_demonstrator_went_from_the_nearest_state():
         _run_to(seq, [0.5, 0.2, 0.4, amount], 1.0)  # p_B = 0.4 > p_C = 0.3: both below 0.65
         (event,) = seq.events
         assert (event.target, event.kind) == (want, "recovery")
+
+
+def _retry_with_holder() -> ConcurrentSequencer:
+    """v tries (T), undoes after a jam (U) and tries again, then goes on (N); u holds (H) and
+    retreats (R) in the sample v's try succeeds (T -> N), in every demonstration: a joint
+    switch. Features: the five nodes' φ (H, R, N, T, U: sorted per variable, the predictor's
+    order), then a force that rises in a jam."""
+    demos = []
+    for v_labels, jam in (("TTTUUTTTNNNN", (2, 5)), ("TTTTNNN", None)):
+        n = len(v_labels)
+        first_n = v_labels.index("N")
+        features = np.zeros((n, 6))
+        if jam is not None:
+            features[jam[0] : jam[1], 5] = 1.0
+        demos.append(
+            Demonstration(
+                time=np.arange(n) * DT,
+                features=features,
+                labels={
+                    "u": np.array(["H"] * first_n + ["R"] * (n - first_n)),
+                    "v": np.array(list(v_labels)),
+                },
+                feature_names=["h", "r", "n", "t", "u", "force"],
+            )
+        )
+    graphs = chain_graphs({"u": ("H", "R"), "v": ("T", "N")})
+    graphs["v"].add_node("U")
+    graphs["v"].edges |= {("T", "U"), ("U", "T")}
+    keys = [("u", "H"), ("u", "R"), ("v", "N"), ("v", "T"), ("v", "U")]
+    model = FirstColumnsAreProgress(keys, 6, PredictorConfig())
+    coupling = Coupling.learn(demos, ["u", "v"])
+    assert coupling.joint[("u", "H", "R")] == {"v": JointPartner(("T",), "N")}
+    return ConcurrentSequencer(
+        graphs,
+        model,
+        ["h", "r", "n", "t", "u", "force"],
+        SequencerConfig(stall_time=0.5),
+        None,
+        None,
+        coupling,
+    )
+
+
+def test_a_recovery_never_carries_a_joint_partner_the_demonstrator_did_not_make_here():
+    """Jammed (force 1), v's nearest demonstrated state went T -> U. u's H -> R is the most
+    probable switch, but it was always made with v's T -> N, which is not what the
+    demonstrator did here: the recovery takes v's T -> U, not the pair."""
+    seq = _retry_with_holder()
+    seq.reset(0.0, [0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    # p(u: H -> R) = 0.5; p(v: T -> N) = 0.03; p(v: T -> U) = 0.09: none fires, a stall
+    _run_to(seq, [0.5, 0.0, 0.9, 0.3, 0.7, 1.0], 1.0)
+    (event,) = seq.events
+    assert (event.variable, event.target, event.kind) == ("v", "U", "recovery")
+    assert seq.active == {"u": "H", "v": "U"}
+
+
+def test_a_recovery_carries_its_joint_partner_where_the_demonstrator_made_both():
+    """Not jammed (force 0): the nearest demonstrated state of v went T -> N, so the
+    recovery takes u's H -> R with v's T -> N along, as demonstrated."""
+    seq = _retry_with_holder()
+    seq.reset(0.0, [0.0] * 6)
+    _run_to(seq, [0.5, 0.0, 0.9, 0.3, 0.7, 0.0], 1.0)
+    assert [(e.variable, e.target, e.kind) for e in seq.events] == [
+        ("u", "R", "recovery"),
+        ("v", "N", "recovery"),
+    ]
