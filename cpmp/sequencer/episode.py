@@ -36,6 +36,7 @@ from cpmp.sequencer.motion import SpeedLimit, SpeedMeter, without_ambient
 from cpmp.sequencer.switching import (
     Candidate,
     Coupling,
+    Edge,
     JointPartner,
     StallDetector,
     make_rule,
@@ -172,25 +173,60 @@ def _partner_p(
 
 def _with_partners_demonstrated(
     candidates: Sequence[Candidate], coupling: Coupling, active: Mapping[str, str]
-) -> list[Candidate]:
+) -> tuple[list[Candidate], dict[Edge, str]]:
     """``candidates``, each marked not demonstrated where a joint partner it takes is not.
 
     A joint switch was always made together with its partners, so a recovery takes them along;
     when a partner's own switch is not the demonstrator's here (another variable's jammed
     ``try``, whose nearest demonstrated state went to ``undo``, carried into ``next`` by the
     holder's ``hold -> retreat``), the pair was not demonstrated here either.
+
+    Returns:
+        The candidates, and for each one newly marked (by its switch) the partner switch that
+        was not the demonstrator's (``"u: a -> b"``).
     """
     made = {(c.variable, c.target): c.demonstrated for c in candidates}
-    out = []
+    out, passed = [], {}
     for cand in candidates:
         partners = coupling.joint.get((cand.variable, cand.source, cand.target), {})
-        ok = all(
-            made.get((u, partner.target), True)
-            for u, partner in partners.items()
-            if active.get(u) in partner.sources
-        )
-        out.append(cand if ok else cand._replace(demonstrated=False))
-    return out
+        bad = [
+            f"{u}: {active[u]} -> {partner.target}"
+            for u, partner in sorted(partners.items())
+            if active.get(u) in partner.sources and not made.get((u, partner.target), True)
+        ]
+        if bad and cand.demonstrated:
+            passed[_edge(cand)] = bad[0]
+            cand = cand._replace(demonstrated=False)
+        out.append(cand)
+    return out, passed
+
+
+def _passed_over(
+    candidates: Sequence[Candidate],
+    passed: Mapping[Edge, str],
+    choice: Candidate | None,
+    threshold: float,
+) -> str:
+    """A note's clause on the joint switch a recovery would have taken but for a partner.
+
+    Empty unless, with the switches in ``passed`` counted as demonstrated, the recovery would
+    have taken one of them instead of ``choice``.
+    """
+    first = recovery_choice(
+        [x._replace(demonstrated=True) if _edge(x) in passed else x for x in candidates],
+        threshold,
+    )
+    if first is None or _edge(first) not in passed or (choice and _edge(choice) == _edge(first)):
+        return ""
+    return (
+        f"; not {first.variable}: {first.source} -> {first.target} (p={first.p:.2f}), which "
+        f"would take {passed[_edge(first)]} along, not the demonstrator's switch here"
+    )
+
+
+def _edge(candidate: Candidate) -> Edge:
+    """The switch of ``candidate``: ``(variable, source, target)``."""
+    return candidate.variable, candidate.source, candidate.target
 
 
 class SequencerEpisode:
@@ -732,9 +768,13 @@ class SequencerEpisode:
                     row.successors, row.p, row.inconsistent, plan_row.unseen, strict=True
                 )
             ]
+        passed: dict[Edge, str] = {}
         if self._coupled and c.joint:
-            candidates = _with_partners_demonstrated(candidates, model.coupling, self.active)
+            candidates, passed = _with_partners_demonstrated(
+                candidates, model.coupling, self.active
+            )
         choice = recovery_choice(candidates, c.recovery_threshold)
+        over = _passed_over(candidates, passed, choice, c.recovery_threshold)
         if choice is not None:
             v = choice.variable
             context = dict(self.active)
@@ -750,7 +790,9 @@ class SequencerEpisode:
                         self._switch(t, m, u, b, q, state, phi, "recovery")
                         text += f" with {u}: {context[u]} -> {b} (p={q:.2f}, demonstrated together)"
             self.notes.append(
-                SequencerNote(t, "recovery", v, f"stall of {c.stall_time:g} s resolved: {text}")
+                SequencerNote(
+                    t, "recovery", v, f"stall of {c.stall_time:g} s resolved: {text}{over}"
+                )
             )
             return
         open_rows = [row for row in plan if 0 in row.unseen]
@@ -770,7 +812,7 @@ class SequencerEpisode:
                 "",
                 f"stall of {c.stall_time:g} s that no demonstrated switch resolves (made by the "
                 f"demonstrator here{floor}); demonstrated in this context: {waiting}; every MP "
-                "kept from now on",
+                f"kept from now on{over}",
             )
         )
 

@@ -483,7 +483,7 @@ def test_recovery_goes_where_the_demonstrator_went_from_the_nearest_state():
         assert (event.target, event.kind) == (want, "recovery")
 
 
-def _retry_with_holder() -> ConcurrentSequencer:
+def _retry_with_holder(**config) -> ConcurrentSequencer:
     """v tries (T), undoes after a jam (U) and tries again, then goes on (N); u holds (H) and
     retreats (R) in the sample v's try succeeds (T -> N), in every demonstration: a joint
     switch. Features: the five nodes' φ (H, R, N, T, U: sorted per variable, the predictor's
@@ -517,7 +517,7 @@ def _retry_with_holder() -> ConcurrentSequencer:
         graphs,
         model,
         ["h", "r", "n", "t", "u", "force"],
-        SequencerConfig(stall_time=0.5),
+        SequencerConfig(stall_time=0.5, **config),
         None,
         None,
         coupling,
@@ -535,6 +535,11 @@ def test_a_recovery_never_carries_a_joint_partner_the_demonstrator_did_not_make_
     (event,) = seq.events
     assert (event.variable, event.target, event.kind) == ("v", "U", "recovery")
     assert seq.active == {"u": "H", "v": "U"}
+    (note,) = seq.notes  # it says which pair it passed over, and why
+    assert note.kind == "recovery" and note.text.endswith(
+        "resolved: v: T -> U (p=0.09); not u: H -> R (p=0.50), which would take v: T -> N "
+        "along, not the demonstrator's switch here"
+    )
 
 
 def test_a_recovery_carries_its_joint_partner_where_the_demonstrator_made_both():
@@ -547,3 +552,19 @@ def test_a_recovery_carries_its_joint_partner_where_the_demonstrator_made_both()
         ("u", "R", "recovery"),
         ("v", "N", "recovery"),
     ]
+    (note,) = seq.notes
+    assert "not u:" not in note.text and "with v: T -> N" in note.text
+
+
+def test_a_give_up_says_which_joint_switch_it_passed_over():
+    """With a recovery threshold above v's p(T -> U) = 0.09, nothing demonstrated resolves the
+    jam: the give-up note names the pair it did not take, and why."""
+    seq = _retry_with_holder(recovery_threshold=0.3)
+    seq.reset(0.0, [0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    _run_to(seq, [0.5, 0.0, 0.9, 0.3, 0.7, 1.0], 1.0)
+    assert not seq.events
+    (note,) = seq.notes
+    assert note.kind == "give_up" and note.text.endswith(
+        "not u: H -> R (p=0.50), which would take v: T -> N along, not the demonstrator's "
+        "switch here"
+    )
