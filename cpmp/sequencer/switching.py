@@ -797,7 +797,8 @@ class Candidate(NamedTuple):
             contexts of this switch (an MP never seen there, or one less far than there).
         demonstrated: whether the demonstrator made this switch here: every other variable
             runs an MP seen at it, and of the demonstrated switches out of ``source`` in this
-            context, the one in the state nearest the current one goes to ``target``.
+            context, the one in the state nearest the current one goes to ``target`` (a
+            recovery also asks it of each joint partner the switch would take along).
     """
 
     variable: str
