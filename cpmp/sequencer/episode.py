@@ -202,20 +202,13 @@ def _with_partners_demonstrated(
 
 
 def _passed_over(
-    candidates: Sequence[Candidate],
-    passed: Mapping[Edge, str],
-    choice: Candidate | None,
-    threshold: float,
+    first: Candidate | None, choice: Candidate | None, passed: Mapping[Edge, str]
 ) -> str:
     """A note's clause on the joint switch a recovery would have taken but for a partner.
 
-    Empty unless, with the switches in ``passed`` counted as demonstrated, the recovery would
-    have taken one of them instead of ``choice``.
+    Empty unless ``first``, the recovery's pick before the partners were checked, is one of
+    the switches in ``passed`` and differs from ``choice``, its pick after.
     """
-    first = recovery_choice(
-        [x._replace(demonstrated=True) if _edge(x) in passed else x for x in candidates],
-        threshold,
-    )
     if first is None or _edge(first) not in passed or (choice and _edge(choice) == _edge(first)):
         return ""
     return (
@@ -768,13 +761,14 @@ class SequencerEpisode:
                     row.successors, row.p, row.inconsistent, plan_row.unseen, strict=True
                 )
             ]
+        checked: list[Candidate] = candidates
         passed: dict[Edge, str] = {}
         if self._coupled and c.joint:
-            candidates, passed = _with_partners_demonstrated(
-                candidates, model.coupling, self.active
-            )
-        choice = recovery_choice(candidates, c.recovery_threshold)
-        over = _passed_over(candidates, passed, choice, c.recovery_threshold)
+            checked, passed = _with_partners_demonstrated(candidates, model.coupling, self.active)
+        choice = recovery_choice(checked, c.recovery_threshold)
+        over = ""
+        if passed:
+            over = _passed_over(recovery_choice(candidates, c.recovery_threshold), choice, passed)
         if choice is not None:
             v = choice.variable
             context = dict(self.active)
