@@ -314,7 +314,11 @@ class Coupling:
         contexts: ``(variable, source, target)`` -> other variable -> MPs it ran at that switch.
         progress: ``(variable, source, target)`` -> other variable -> MP -> the lowest expected
             progress (eq. 1) that MP had reached at a demonstrated switch, for other variables
-            that kept running the same MP through the switch.
+            that kept running the same MP through the switch. It is read on the state the
+            demonstrator decided on: the last sample under ``source``, not the first under
+            ``target``, which already holds one step of ``target`` (a gripper's first opening
+            step drops the object, and the arm's progress jumps with the contact and the
+            load).
         instances: ``(variable, source)`` -> every demonstrated switch of ``variable`` out of
             ``source``: its target, the features at it and the other variables' MPs around
             it (what a recovery reads: :meth:`nearest_target`).
@@ -424,8 +428,11 @@ class Coupling:
                         if before != after:
                             switched[u] = (before, after)
                         else:
+                            # the demonstrator decided on sample i - 1 (the last under the
+                            # source); sample i already holds one step of the new MP, whose
+                            # own effect (an object let go: contact, a load) moves u's progress
                             seen = prog.setdefault(u, {})
-                            seen[after] = min(seen.get(after, 1.0), float(done[u][i]))
+                            seen[after] = min(seen.get(after, 1.0), float(done[u][i - 1]))
                     together.setdefault(edge, []).append(switched)
                     instances.setdefault(edge[:2], []).append(
                         SwitchInstance(edge[2], demo.features[i].copy(), around)

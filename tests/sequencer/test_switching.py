@@ -164,11 +164,29 @@ def test_coupling_learns_contexts_of_switches():
     assert Coupling.from_dict(coupling.to_dict()) == coupling
 
 
+def test_coupling_progress_is_read_before_the_switch_acts():
+    """A switch's first sample already holds one step of its new MP. Here w's first W2 sample
+    moves u's feature by a jump (a gripper's first opening step drops the object: the arm's
+    contact and load features jump): the demonstrator decided on the sample before, at a
+    third of U2's path, and that is what a w switch asks of U2, not the whole path."""
+    demo = _labels_demo(
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 6 + ["W2"] * 1 + ["W3"] * 2}
+    )
+    demo.features[3:7, 0] = [0.0, 0.5, 1.0, 3.0]  # the jump in sample 6, w's first under W2
+    demo.features[7:, 0] = 3.0
+    coupling = Coupling.learn([demo], ["u", "w"])
+    assert coupling.progress[("w", "W1", "W2")] == {"u": {"U2": pytest.approx(1 / 3)}}
+    edge, active = ("w", "W1", "W2"), {"u": "U2", "w": "W1"}
+    # u's U2 as far as when the demonstrator let go: consistent, with no margin at all
+    assert coupling.inconsistent(edge, active, {"u": 0.34}, margin=0.0) == []
+
+
 def test_coupling_progress_is_in_the_predictors_label_units():
     """The thresholds use the predictor's label kind: with time labels, w switched when U2 had
-    run 1 of its 3 intervals, whatever distance u's feature had covered by then."""
+    run 1 of its 3 intervals, whatever distance u's feature had covered by then (w decided on
+    sample 4, its last under W1)."""
     demo = _labels_demo(
-        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 5 + ["W2"] * 2 + ["W3"] * 2}
     )
     demo.features[3:7, 0] = [0.0, 2.5, 2.8, 3.0]  # most of the distance in the first step
     demo.features[7:, 0] = 3.0
@@ -179,10 +197,11 @@ def test_coupling_progress_is_in_the_predictors_label_units():
 
 
 def test_coupling_learns_how_far_the_others_had_progressed():
-    # u's feature moves 0 -> 1 during U2 (4 samples); w switched when U2 was 1/3 done, so a
-    # w switch needs U2 at >= 1/3 - margin; U1 -> U2 and the simultaneous end carry no progress
+    # u's feature moves 0 -> 1 during U2 (4 samples); w switched when U2 was 1/3 done (on
+    # sample 4, its last under W1), so a w switch needs U2 at >= 1/3 - margin; U1 -> U2 and
+    # the simultaneous end carry no progress
     demo = _labels_demo(
-        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 4 + ["W2"] * 3 + ["W3"] * 2}
+        {"u": ["U1"] * 3 + ["U2"] * 4 + ["U3"] * 2, "w": ["W1"] * 5 + ["W2"] * 2 + ["W3"] * 2}
     )
     demo.features[3:7, 0] = [0.0, 1.0, 2.0, 3.0]
     demo.features[7:, 0] = 3.0
@@ -207,11 +226,11 @@ def test_coupling_learns_how_far_the_others_had_progressed():
 
 def _two_chains(**config):
     """Variables u: U1 -> U2 and w: W1 -> W2; features are (φ_U1, φ_U2, φ_W1, φ_W2); w's switch
-    was demonstrated only while u ran U2."""
+    was demonstrated only while u ran U2, decided when U2 had run a third of its time."""
     graphs = chain_graphs({"u": ("U1", "U2"), "w": ("W1", "W2")})
     keys = [("u", "U1"), ("u", "U2"), ("w", "W1"), ("w", "W2")]
     model = FeatureIsProgress(keys, 4, PredictorConfig())
-    demo = _labels_demo({"u": ["U1"] * 3 + ["U2"] * 4, "w": ["W1"] * 4 + ["W2"] * 3})
+    demo = _labels_demo({"u": ["U1"] * 3 + ["U2"] * 4, "w": ["W1"] * 5 + ["W2"] * 2})
     coupling = Coupling.learn([demo], ["u", "w"])
     return ConcurrentSequencer(
         graphs, model, ["a", "b", "c", "d"], SequencerConfig(**config), None, None, coupling
