@@ -43,7 +43,8 @@ older than the last measurement (a stamp that goes back) are ignored.
 demonstrated switch ``source -> target`` of a variable, the MPs every *other* variable was
 running when it happened (the labels one sample before and at the switch, so that switches made
 in the same tick in either order are both allowed), and how far each of those MPs had
-progressed (the least expected progress, eq. 1, over the demonstrations). A transition whose
+progressed (the least expected progress, eq. 1, over the demonstrations, on the sample before
+the switch: the state the demonstrator decided on). A transition whose
 context — the other variables' current MPs — contains an MP never seen for that switch, or an
 MP whose predicted progress φ is more than a margin below the least demonstrated one, is held
 back. It is learned from the labels alone (nothing task-specific), per other variable (a
