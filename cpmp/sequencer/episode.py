@@ -257,6 +257,9 @@ class SequencerEpisode:
         self._speed = SpeedMeter(model.feature_range)
         self._since: dict[str, float] = {}
         """Per variable, the measurement time [s] at which its active MP became active."""
+        self._top: dict[str, np.ndarray] = {}
+        """Per variable, each feature's top speed ``(d,)`` [ranges/s] since then (what the
+        speed envelopes' second bound reads)."""
         self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
         self._armed: dict[str, str] = {}
@@ -364,6 +367,7 @@ class SequencerEpisode:
         self._stall.reset(m, state)
         self._speed.reset(m, state)
         self._since = dict.fromkeys(model.graphs, m)
+        self._top = {v: np.zeros(state.size) for v in model.graphs}
         self._last_t = t
         self._nonfinite = False
         self.gave_up = None
@@ -479,6 +483,7 @@ class SequencerEpisode:
         self._observe_entry(v, m, phi)
         self._stall.switched(m)
         self._since[v] = m
+        self._top[v] = np.zeros_like(self._top[v])
 
     def _between(
         self,
@@ -514,6 +519,8 @@ class SequencerEpisode:
         if fresh:
             self._stall.observe(m, state)
             self._speed.observe(m, state)
+            if self._coupled:
+                self._observe_top_speeds()
         if self._plan is None:
             context = dict(self.active)
             self._plan = TransitionPlan(context, self._transition_plan(context))
@@ -535,6 +542,13 @@ class SequencerEpisode:
         active = dict(self.active)
         self._pending = _PendingTick(t, phi, probs.rows, active, held)
         return dict(active)
+
+    def _observe_top_speeds(self) -> None:
+        """Raise each variable's top speeds to its speeds now, since its MP became active."""
+        for v, top in self._top.items():
+            speed = self._speed.speed(self._since[v])
+            if speed is not None:
+                np.maximum(top, speed, out=top)
 
     def _note_clock_step(self, t: float, step: float) -> None:
         """Note a jump of ``step`` [s] beyond the tick period at ``t`` [s] (one tick)."""
@@ -582,7 +596,7 @@ class SequencerEpisode:
                 speed = self._speed.speed(self._since[v])
             if speed is not None:
                 for k, limit in enumerate(limits):
-                    if limit is not None and limit.exceeded(speed).size:
+                    if limit is not None and limit.exceeded(speed, self._top[v]).size:
                         bad = list(bad) if bad is unseen else bad
                         bad[k] += 1
             rows.append(TickRow(v, current, names, p, bad))
@@ -931,11 +945,24 @@ class SequencerEpisode:
         if limit is None or speed is None:
             return []
         name = self.model.feature_name
-        return [
-            f"{name(int(limit.features[i]))} moves at {speed[limit.features[i]]:.3g} ranges/s "
-            f"(demonstrated switches allow {limit.limit[i]:.3g})"
-            for i in limit.exceeded(speed)
-        ]
+        top = self._top[edge[0]]
+        fast, for_pace = limit.too_fast(speed), limit.too_fast_for_pace(speed, top)
+        why = []
+        for i in np.flatnonzero(fast | for_pace).tolist():
+            j = int(limit.features[i])
+            if fast[i]:
+                why.append(
+                    f"{name(j)} moves at {speed[j]:.3g} ranges/s "
+                    f"(demonstrated switches allow {limit.limit[i]:.3g})"
+                )
+            else:
+                assert limit.share is not None  # for_pace is all false without it
+                share = speed[j] / max(top[j], speed[j])
+                why.append(
+                    f"{name(j)} moves at {share:.0%} of its top speed under {edge[1]} "
+                    f"(demonstrated switches allow {limit.share[i]:.0%})"
+                )
+        return why
 
     def _note_joint(
         self,

@@ -12,7 +12,20 @@ switch is inconsistent while a watched feature is more than :data:`SPEED_FACTOR`
 than that (with a floor of :data:`SPEED_FLOOR` times the feature's top speed under ``A``),
 measured since ``A`` became active when that is less than :data:`SPEED_WINDOW` ago (a re-align
 that starts from rest moves fast at once, while a window reaching back into the still retract
-before it would read half that). A
+before it would read half that).
+
+The same switch is also inconsistent while a watched feature moves at a larger *share of its
+own top speed since* ``A`` *became active* than :data:`SPEED_FACTOR` times the largest share
+seen at a demonstrated instance (the top speed measured the same way, over windows cut at the
+activation's start). A speed in ranges per second says how close a first-order attractor is to
+its goal only at the pace it was demonstrated at: a robot that runs the MP at half the pace
+arrives twice as slowly, so at a demonstrated arrival's speed it is still twice as far away
+(the paced relay's receiver, demonstrated and run at x0.5-2, let go of the object 10-18 cm
+short of the shelf). Its speed over its top speed is the share of the move still ahead at any
+pace. Neither bound replaces the other: an arm stopped by a jam was demonstrated at rest in
+ranges per second, but over a 50 ms window its stop still reads as a sizeable share of its top
+speed, so that switch is timed by the first bound (with the second alone, peg's inserter
+retracted from unjammed insertions). A
 feature is watched when it moves in ``A`` (its path under ``A`` is at least
 :data:`MOVING_SHARE` of the longest feature path under ``A``) and had settled at every
 demonstrated instance of the switch (at most :data:`SETTLED_SHARE` of its mean speed under
@@ -98,25 +111,59 @@ class SpeedLimit(NamedTuple):
     Attributes:
         features: ``(k,)`` the indices of the features its source MP moves.
         limit: ``(k,)`` the fastest each may move for the switch to be consistent [ranges/s].
+        share: ``(k,)`` the largest share of its top speed since the source MP became active
+            each may move at (``None``: no such bound, as in checkpoints saved before it).
+        slack: ``(k,)`` what that bound always allows on top [ranges/s]: the floor
+            (:data:`SPEED_FLOOR`) and the noise allowance (:data:`NOISE_Z`), so that a feature
+            at rest with a top speed of 0 is not held.
     """
 
     features: np.ndarray
     limit: np.ndarray
+    share: np.ndarray | None = None
+    slack: np.ndarray | None = None
 
-    def exceeded(self, speed: np.ndarray) -> np.ndarray:
-        """The positions in :attr:`features` moving faster than their limit at ``speed (d,)``."""
-        return np.flatnonzero(speed[self.features] > self.limit)
+    def exceeded(self, speed: np.ndarray, top: np.ndarray | None = None) -> np.ndarray:
+        """The positions in :attr:`features` too fast at ``speed (d,)`` [ranges/s].
+
+        Args:
+            speed: each feature's speed now.
+            top: ``(d,)`` each feature's top speed since the source MP became active (the
+                speed now included) [ranges/s]; ``None``: the first bound only.
+        """
+        return np.flatnonzero(self.too_fast(speed) | self.too_fast_for_pace(speed, top))
+
+    def too_fast(self, speed: np.ndarray) -> np.ndarray:
+        """``(k,)`` bool: faster than :attr:`limit` at ``speed (d,)`` [ranges/s]."""
+        return speed[self.features] > self.limit
+
+    def too_fast_for_pace(self, speed: np.ndarray, top: np.ndarray | None) -> np.ndarray:
+        """``(k,)`` bool: a larger share of ``top (d,)`` than :attr:`share` (plus the slack)."""
+        if top is None or self.share is None or self.slack is None:
+            return np.zeros(self.features.size, dtype=bool)
+        return speed[self.features] > self.share * top[self.features] + self.slack
 
     def to_dict(self) -> dict[str, JsonValue]:
         """JSON/checkpoint-friendly form."""
-        return {"features": self.features.tolist(), "limit": self.limit.tolist()}
+        row: dict[str, JsonValue] = {
+            "features": self.features.tolist(),
+            "limit": self.limit.tolist(),
+        }
+        if self.share is not None and self.slack is not None:
+            row["share"] = self.share.tolist()
+            row["slack"] = self.slack.tolist()
+        return row
 
     @classmethod
     def from_dict(cls, row: Mapping[str, JsonValue]) -> SpeedLimit:
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict` (a checkpoint saved without the second bound has none)."""
         features = np.asarray(row["features"], dtype=np.int64).reshape(-1)
         limit = np.asarray(row["limit"], dtype=np.float64).reshape(-1)
-        return cls(features, limit)
+        if row.get("share") is None or row.get("slack") is None:
+            return cls(features, limit)
+        share = np.asarray(row["share"], dtype=np.float64).reshape(-1)
+        slack = np.asarray(row["slack"], dtype=np.float64).reshape(-1)
+        return cls(features, limit, share, slack)
 
 
 class MotionData(NamedTuple):
@@ -223,6 +270,7 @@ def learn_speed_limits(
     path, duration = _mp_paths(demos, variables, d)
     top: dict[tuple[str, str], np.ndarray] = {}
     at: dict[Edge, np.ndarray] = {}
+    shares: dict[Edge, np.ndarray] = {}
     noise = np.zeros(d)
     for demo in demos:
         x, t = demo.features, demo.time
@@ -235,11 +283,14 @@ def learn_speed_limits(
                 step = np.abs(np.diff(x[a:b], axis=0)) * inv
                 fastest = (step / np.diff(t[a:b])[:, None]).max(axis=0)
                 top[(v, mp)] = np.maximum(top.get((v, mp), np.zeros(d)), fastest)
-            for (_, _, source), (a, _, target) in pairwise(segments):
+            for (start, _, source), (a, _, target) in pairwise(segments):
                 speed = window_speed(x, t, a, inv)
                 if speed is not None:
                     edge = (v, source, target)
                     at[edge] = np.maximum(at.get(edge, np.zeros(d)), speed)
+                    fastest = _top_speed_since(x, t, start, a, inv)
+                    share = np.divide(speed, fastest, out=np.zeros(d), where=fastest > 0)
+                    shares[edge] = np.maximum(shares.get(edge, np.zeros(d)), share)
     allowance = NOISE_Z * np.sqrt(2.0) * noise * inv / SPEED_WINDOW
     limits = {}
     for (v, source, target), speed in sorted(at.items()):
@@ -251,8 +302,26 @@ def learn_speed_limits(
         limits[(v, source, target)] = SpeedLimit(
             moving.astype(np.int64),
             (np.maximum(SPEED_FACTOR * speed, floor) + allowance)[moving],
+            (SPEED_FACTOR * shares[(v, source, target)])[moving],
+            (floor + allowance)[moving],
         )
     return limits
+
+
+def _top_speed_since(
+    x: np.ndarray, t: np.ndarray, start: int, stop: int, inv_range: np.ndarray
+) -> np.ndarray:
+    """``(d,)`` each feature's top speed [ranges/s] over samples ``start + 1 .. stop``.
+
+    Each speed over the newest sample at least :data:`SPEED_WINDOW` older, cut at ``start``
+    (where the MP became active), as :meth:`SpeedMeter.speed` measures it at run time.
+    """
+    i = np.arange(start + 1, stop + 1)
+    if i.size == 0:
+        return np.zeros(x.shape[1])
+    j = np.searchsorted(t, t[i] - SPEED_WINDOW + 1e-9, side="right") - 1
+    j = np.maximum(j, start)
+    return (np.abs(x[i] - x[j]) / (t[i] - t[j])[:, None] * inv_range).max(axis=0)
 
 
 def ambient_features(

@@ -641,7 +641,10 @@ class Coupling:
                 shown = ", ".join(names[:4]) + (
                     f" and {len(names) - 4} more" if len(names) > 4 else ""
                 )
-                parts.append(f"{shown} at most {SPEED_FACTOR:g}x as fast as demonstrated")
+                pace = ""
+                if limit.share is not None:
+                    pace = f", in ranges/s and as a share of their top speed under {source}"
+                parts.append(f"{shown} at most {SPEED_FACTOR:g}x as fast as demonstrated{pace}")
             lines.append(f"  {source} -> {target} when " + ("; ".join(parts) or "always"))
         return lines
 

@@ -96,6 +96,89 @@ def test_speed_since_an_mp_began_is_its_own_motion():
     np.testing.assert_allclose(meter.speed(since=0.1), meter.speed())  # began before the window
 
 
+def _attractor(rate: float, n: int, x0: float = 0.0) -> np.ndarray:
+    """A first-order attractor to 1 from ``x0`` at ``rate`` [1/s], ``n`` samples ``DT`` apart."""
+    return 1.0 - (1.0 - x0) * np.exp(-rate * DT * np.arange(n))
+
+
+def test_a_switch_demonstrated_at_one_pace_waits_for_the_same_share_of_the_move_at_another():
+    """Demonstrated at rate 4/s, switched 3 % of the move short of the goal. A robot running
+    the MP 4x slower passes the demonstrated speed in ranges/s 12 % short of it: the first
+    bound alone lets it switch there; the share of its own top speed holds it until it is as
+    close as demonstrated (within the factor of 2)."""
+    n_go = int(np.ceil(np.log(1 / 0.03) / (4.0 * DT)))  # 3 % of the move left
+    go = _attractor(4.0, n_go + 1)
+    x = np.concatenate([go, np.full(50, go[-1])])[:, None]
+    labels = {"arm": ["go"] * (n_go + 1) + ["back"] * 50}
+    limit = learn_speed_limits(motion_data([_demo(x, labels)]), ["arm"], np.array([1.0]))[
+        ("arm", "go", "back")
+    ]
+    assert limit.share is not None and limit.slack is not None
+    robot = _attractor(1.0, 600)
+    meter, top, first_only, both = SpeedMeter(np.array([1.0])), np.zeros(1), None, None
+    meter.reset(0.0, robot[:1])
+    for k in range(1, len(robot)):
+        meter.observe(k * DT, robot[k : k + 1])
+        speed = meter.speed(since=0.0)
+        if speed is None:  # not a window old yet
+            continue
+        top = np.maximum(top, speed)
+        left = 1.0 - robot[k]
+        if first_only is None and limit.exceeded(speed).size == 0:
+            first_only = left
+        if both is None and limit.exceeded(speed, top).size == 0:
+            both = left
+    assert first_only is not None and both is not None
+    assert first_only > 0.1  # the demonstrated speed, reached 4x further out
+    assert 0.03 <= both <= 2 * 0.03 * 1.1  # the demonstrated share of the move, x2
+    # a faster robot is held by the first bound: at the same share it moves 4x faster
+    fast = np.array([4.0 * 4.0 * 0.05])
+    assert limit.exceeded(fast, np.array([16.0 * 0.9])).tolist() == [0]
+
+
+def test_a_speed_limit_keeps_its_share_bound_through_its_checkpoint_form():
+    limit = SpeedLimit(np.array([1, 3]), np.array([0.5, 0.2]), np.array([0.1, 0.2]), np.zeros(2))
+    back = SpeedLimit.from_dict(limit.to_dict())
+    for a, b in zip(back, limit, strict=True):
+        np.testing.assert_array_equal(a, b)
+    speed, top = np.array([0.0, 0.3, 0.0, 0.1]), np.array([0.0, 1.0, 0.0, 1.0])
+    assert limit.exceeded(speed, top).tolist() == [0]  # 30 % of its top speed, 10 % allowed
+    old = SpeedLimit.from_dict({"features": [1, 3], "limit": [0.5, 0.2]})  # saved before it
+    assert old.share is None and old.exceeded(speed, top).size == 0
+
+
+def test_a_switch_waits_until_its_source_has_slowed_to_the_demonstrated_share_of_its_pace():
+    """v: A -> B with φ(A) = 0.9 from the start; x follows an attractor at 2/s. The envelope
+    allows any speed in ranges/s but only 10 % of x's top speed under A: the switch comes once
+    x has slowed to that (about 1.1 s), and the hold note says why."""
+    g = SequenceGraph("v")
+    for mp in "AB":
+        g.add_node(mp)
+    g.initial_nodes = {"A"}
+    g.edges = {("A", "B")}
+    limit = SpeedLimit(np.array([2]), np.array([100.0]), np.array([0.1]), np.zeros(1))
+    order = g.ordered_nodes()
+    model = FirstColumnsAreProgress([("v", mp) for mp in order], 3, PredictorConfig())
+    names = [mp.lower() for mp in order] + ["x"]
+
+    def run(speed_limit: SpeedLimit) -> ConcurrentSequencer:
+        coupling = Coupling(speed={("v", "A", "B"): speed_limit})
+        seq = ConcurrentSequencer({"v": g}, model, names, SequencerConfig(), None, None, coupling)
+        seq.reset(0.0, [0.9, 0.0, 0.0])
+        t = 0.0
+        while t < 3.0 - 1e-9 and seq.active["v"] == "A":
+            t = round(t + DT, 10)
+            seq.step(t, [0.9, 0.0, 1.0 - np.exp(-2.0 * t)], stamp=t)
+        return seq
+
+    (switch,) = run(limit).events
+    slowed = np.log(1 / 0.1) / 2.0  # the speed is 10 % of the first one's
+    assert slowed <= switch.t <= slowed + 0.2
+    assert any("of its top speed under A" in n.text for n in run(limit).notes)
+    (early,) = run(SpeedLimit(limit.features, limit.limit)).events  # the first bound only
+    assert early.t < 0.2
+
+
 def test_a_feature_moving_alike_under_every_mp_is_ambient():
     n = 200
     t = np.arange(n) * DT
