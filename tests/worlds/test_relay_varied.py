@@ -112,8 +112,11 @@ def test_paced_world_face_scores_every_episode():
 
 def test_a_fitted_sequencer_scores_as_it_does_one_episode_at_a_time(one_at_a_time):
     torch.set_num_threads(1)
-    world = paced_relay(0, 2, relay=RelayTask(max_time=6.0))  # short: a few time out
-    seq = ConcurrentSequencer.fit(world.demonstrations, seed=0, logger=None)
+    demonstrated = paced_relay(0, 2, relay=RelayTask(max_time=6.0))
+    seq = ConcurrentSequencer.fit(demonstrated.demonstrations, seed=0, logger=None)
+    # run with a limit short enough that one started episode times out (the others take
+    # 3.7 s or start wrong): every outcome goes through both paths
+    world = paced_relay(0, 2, relay=RelayTask(max_time=4.5))
     batched = world.evaluate(seq, 6, 9)  # all six episodes at once (seq.batched)
     assert batched == world.evaluate(one_at_a_time(seq), 6, 9)
     assert {s.outcome for s in batched} == {"complete", "incomplete", "wrong_start"}
