@@ -260,6 +260,10 @@ class SequencerEpisode:
         self._top: dict[str, np.ndarray] = {}
         """Per variable, each feature's top speed ``(d,)`` [ranges/s] since then (what the
         speed envelopes' second bound reads)."""
+        self._moving: dict[str, np.ndarray | None] = {}
+        """Per variable, each feature's speed ``(d,)`` [ranges/s] since then, as of the last
+        measurement (``None`` before one a window old, or taken after it): what the speed
+        envelopes read, measured once per measurement."""
         self._clock = MeasurementClock(c.stale_time)
         self._holding: dict[str, str | None] = {}
         self._armed: dict[str, str] = {}
@@ -368,6 +372,7 @@ class SequencerEpisode:
         self._speed.reset(m, state)
         self._since = dict.fromkeys(model.graphs, m)
         self._top = {v: np.zeros(state.size) for v in model.graphs}
+        self._moving = dict.fromkeys(model.graphs)
         self._last_t = t
         self._nonfinite = False
         self.gave_up = None
@@ -484,6 +489,7 @@ class SequencerEpisode:
         self._stall.switched(m)
         self._since[v] = m
         self._top[v] = np.zeros_like(self._top[v])
+        self._moving[v] = None  # nothing measured after m yet
 
     def _between(
         self,
@@ -520,7 +526,7 @@ class SequencerEpisode:
             self._stall.observe(m, state)
             self._speed.observe(m, state)
             if self._coupled:
-                self._observe_top_speeds()
+                self._observe_speeds()
         if self._plan is None:
             context = dict(self.active)
             self._plan = TransitionPlan(context, self._transition_plan(context))
@@ -543,10 +549,14 @@ class SequencerEpisode:
         self._pending = _PendingTick(t, phi, probs.rows, active, held)
         return dict(active)
 
-    def _observe_top_speeds(self) -> None:
-        """Raise each variable's top speeds to its speeds now, since its MP became active."""
+    def _observe_speeds(self) -> None:
+        """At a new measurement, each variable's speeds since its MP became active.
+
+        They are kept for the tick's rule (:attr:`_moving`), and its top speeds raised to them.
+        """
         for v, top in self._top.items():
             speed = self._speed.speed(self._since[v])
+            self._moving[v] = speed
             if speed is not None:
                 np.maximum(top, speed, out=top)
 
@@ -593,7 +603,7 @@ class SequencerEpisode:
             # variables with a speed envelope on a successor
             speed = None
             if self._coupled and any(limit is not None for limit in limits):
-                speed = self._speed.speed(self._since[v])
+                speed = self._moving[v]
             if speed is not None:
                 for k, limit in enumerate(limits):
                     if limit is not None and limit.exceeded(speed, self._top[v]).size:
