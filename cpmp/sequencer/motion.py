@@ -288,8 +288,8 @@ def learn_speed_limits(
                 if speed is not None:
                     edge = (v, source, target)
                     at[edge] = np.maximum(at.get(edge, np.zeros(d)), speed)
-                    fastest = _top_speed_since(x, t, start, a, inv)
-                    share = np.divide(speed, fastest, out=np.zeros(d), where=fastest > 0)
+                    so_far = _top_speed_since(x, t, start, a, inv)
+                    share = np.divide(speed, so_far, out=np.zeros(d), where=so_far > 0)
                     shares[edge] = np.maximum(shares.get(edge, np.zeros(d)), share)
     allowance = NOISE_Z * np.sqrt(2.0) * noise * inv / SPEED_WINDOW
     limits = {}
